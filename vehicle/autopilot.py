@@ -1,0 +1,407 @@
+"""The simulated flight controller: arming, modes and the AUTO mission, as ArduPilot behaves.
+
+It turns mode and command requests into a wanted velocity and heading for the
+body each step. Requests answer with a MAVLink result code (MAV_RESULT_*), so
+the MAVLink endpoint can pass them straight into COMMAND_ACK. Positions are
+scene metres; mission items carry latitude/longitude, converted with the datum.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from vehicle.avoidance import ObstacleDatabase
+from vehicle.geodesy import Datum, heading_of, wrap_pi
+from vehicle.modes import (
+    DO_CHANGE_SPEED,
+    MODES,
+    NAV_LAND,
+    NAV_LOITER_UNLIM,
+    NAV_RETURN_TO_LAUNCH,
+    NAV_TAKEOFF,
+    NAV_WAYPOINT,
+    Kind,
+    MissionItem,
+    mav,
+)
+from vehicle.physics import Body
+
+ACCEPTED = mav.MAV_RESULT_ACCEPTED
+TEMPORARILY_REJECTED = mav.MAV_RESULT_TEMPORARILY_REJECTED
+DENIED = mav.MAV_RESULT_DENIED
+UNSUPPORTED = mav.MAV_RESULT_UNSUPPORTED
+FAILED = mav.MAV_RESULT_FAILED
+
+TURN_FIRST = math.radians(12)  # heading error above which the vehicle turns in place before moving
+ARRIVED = 0.15  # m: a position target closer than this is reached
+VELOCITY_TIMEOUT = 3.0  # s: GUIDED velocity commands expire, as in ArduPilot
+LANDING_SPEED = 0.7  # m/s
+
+
+@dataclass
+class Event:
+    """Something a ground station should hear about: a message, a reached item, a new current item."""
+
+    kind: str  # "text" | "reached" | "current"
+    text: str = ""
+    severity: int = mav.MAV_SEVERITY_INFO
+    seq: int = -1
+
+
+class Autopilot:
+    def __init__(self, kind: Kind, body: Body, home: tuple[float, float, float], datum: Datum,
+                 cruise_speed: float = 2.5, wp_radius: float = 1.0, avoidance: ObstacleDatabase | None = None):
+        self.kind = kind
+        self.body = body
+        self.home = home  # x, y and ground height of the start
+        self.datum = datum
+        self.cruise_speed = cruise_speed
+        self.wp_radius = wp_radius
+        self.avoidance = avoidance
+        self.armed = False
+        self.mode = "GUIDED" if kind is Kind.COPTER else "HOLD"
+        self.mode_source = "boot"
+        self.mode_changes = 0
+        self.speed = cruise_speed
+        self.mission: list[MissionItem] = [self.home_item()]
+        self.current = 1
+        self.mission_running = False
+        self.events: list[Event] = []
+        self.time = 0.0
+        self._target: tuple[float, float, float] | None = None  # GUIDED position
+        self._velocity: tuple[float, float, float, float] | None = None  # vx, vy, vz, expiry
+        self._yaw: float | None = None
+        self._hold: tuple[float, float, float] | None = None
+        self._altitude_goal: float | None = None  # copter take-off
+        self._item_timer: float | None = None
+        self._rtl_done = False
+        self._descending = False
+        self.ground_now = home[2]  # ground height under the vehicle, set each step
+        self.hold_here()
+
+    # ---- state -------------------------------------------------------------------------------
+    @property
+    def flying(self) -> bool:
+        return self.kind is Kind.COPTER and self.body.pose.z > self.body.rest_height(self.ground_now) + 0.05
+
+    @property
+    def altitude(self) -> float:
+        """Height of the body above the start's ground (what GLOBAL_POSITION_INT calls relative_alt)."""
+        return self.body.pose.z - self.home[2]
+
+    def home_item(self) -> MissionItem:
+        lat, lon = self.datum.to_global(self.home[0], self.home[1])
+        return MissionItem(NAV_WAYPOINT, lat, lon, 0.0)
+
+    def _say(self, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
+        self.events.append(Event("text", text, severity))
+
+    def hold_here(self) -> None:
+        pose = self.body.pose
+        self._hold = (pose.x, pose.y, pose.z)
+
+    # ---- requests (each returns a MAV_RESULT) ------------------------------------------------
+    def arm(self, force: bool = False) -> int:
+        if self.armed:
+            return ACCEPTED
+        if not force and self.kind is Kind.COPTER and self.mode in ("RTL", "LAND"):
+            self._say(f"Arm: mode {self.mode} not armable", mav.MAV_SEVERITY_CRITICAL)
+            return FAILED
+        self.armed = True
+        self.hold_here()
+        self._say("Arming motors")
+        return ACCEPTED
+
+    def disarm(self, force: bool = False) -> int:
+        if not self.armed:
+            return ACCEPTED
+        if self.flying and not force:
+            self._say("Disarm: vehicle is flying", mav.MAV_SEVERITY_CRITICAL)
+            return FAILED
+        self.armed = False
+        self.mission_running = False
+        self._say("Disarming motors" + (" (forced)" if force else ""))
+        return ACCEPTED
+
+    def set_mode(self, name: str, source: str = "gcs") -> int:
+        name = name.upper()
+        if name not in MODES[self.kind]:
+            return UNSUPPORTED
+        if name == self.mode:
+            self.mode_source = source
+            return ACCEPTED
+        self.mode = name
+        self.mode_source = source
+        self.mode_changes += 1
+        self._target = self._velocity = self._yaw = None
+        self._rtl_done = False
+        self._item_timer = None
+        self.hold_here()
+        if name == "AUTO":
+            # a rover starts its mission on entering AUTO; a copter on the ground waits for MISSION_START
+            self.mission_running = self.armed and (self.kind is Kind.ROVER or self.flying)
+        else:
+            self.mission_running = False
+        return ACCEPTED
+
+    def takeoff(self, altitude: float) -> int:
+        if self.kind is not Kind.COPTER or self.mode != "GUIDED" or not self.armed:
+            return TEMPORARILY_REJECTED if self.kind is Kind.COPTER else UNSUPPORTED
+        if altitude <= 0:
+            return DENIED
+        if self.flying:
+            return FAILED
+        self._altitude_goal = self.home[2] + altitude
+        pose = self.body.pose
+        self._hold = (pose.x, pose.y, self._altitude_goal)
+        self._say(f"Takeoff to {altitude:.1f} m")
+        return ACCEPTED
+
+    def _guided_ready(self) -> int | None:
+        if self.mode != "GUIDED":
+            return TEMPORARILY_REJECTED
+        if not self.armed:
+            return TEMPORARILY_REJECTED
+        return None
+
+    def goto(self, x: float, y: float, altitude: float | None = None) -> int:
+        """GUIDED position target in scene metres; altitude above the start's ground (None keeps the current)."""
+        if (refused := self._guided_ready()) is not None:
+            return refused
+        z = self.body.pose.z if altitude is None or self.kind is Kind.ROVER else self.home[2] + altitude
+        self._target = (x, y, z)
+        self._velocity = None
+        self._yaw = None
+        return ACCEPTED
+
+    def set_velocity(self, vx: float, vy: float, vz: float = 0.0) -> int:
+        if (refused := self._guided_ready()) is not None:
+            return refused
+        self._velocity = (vx, vy, vz, self.time + VELOCITY_TIMEOUT)
+        self._target = None
+        return ACCEPTED
+
+    def set_yaw(self, heading: float, relative: bool = False) -> int:
+        """Turn to a compass heading (radians); with ``relative``, by that angle (clockwise positive)."""
+        if (refused := self._guided_ready()) is not None:
+            return refused
+        base = self.body.pose.yaw if relative else 0.0
+        self._yaw = (base + heading) % (2 * math.pi)
+        if self._target is None and self._velocity is None:
+            self.hold_here()
+        return ACCEPTED
+
+    def set_speed(self, speed: float) -> int:
+        if speed <= 0 or speed > self.body.limits.max_speed:
+            return DENIED
+        self.speed = speed
+        return ACCEPTED
+
+    def set_mission(self, items: list[MissionItem]) -> None:
+        """Replace the AUTO mission (item 0 is home and is kept)."""
+        self.mission = [self.home_item(), *items[1:]] if items else [self.home_item()]
+        self.current = min(1, len(self.mission) - 1) or 1
+        self.mission_running = False
+
+    def start_mission(self, first: int = 0) -> int:
+        """MAV_CMD_MISSION_START: run the AUTO mission from ``first`` (0 = resume at the current item)."""
+        if self.mode != "AUTO" or not self.armed:
+            return DENIED
+        if len(self.mission) <= 1:
+            self._say("Mission: no items", mav.MAV_SEVERITY_WARNING)
+            return FAILED
+        if first > 0:
+            self.set_current(first)
+        if self.current >= len(self.mission):
+            self.set_current(1)
+        self.mission_running = True
+        self._item_timer = None
+        self._say(f"Mission: {self.current} started")
+        return ACCEPTED
+
+    def set_current(self, seq: int) -> bool:
+        if not 1 <= seq < len(self.mission):
+            return False
+        self.current = seq
+        self._item_timer = None
+        self.events.append(Event("current", seq=seq))
+        return True
+
+    # ---- the step ---------------------------------------------------------------------------
+    def step(self, dt: float, ground: float, ground_normal=(0.0, 0.0, 1.0)) -> None:
+        self.time += dt
+        self.ground_now = ground
+        if not self.armed:
+            falling = self.kind is Kind.COPTER and self.body.pose.z > self.body.rest_height(ground) + 1e-6
+            self.body.step(dt, 0.0, 0.0, 0.0, None, ground, ground_normal, falling=falling)
+            return
+        self._descending = False
+        vx, vy, vz, yaw = self._navigate(dt)
+        if self.avoidance is not None and (vx or vy):
+            pose = self.body.pose
+            limit = self.avoidance.speed_limit(pose.x, pose.y, vx, vy, self.time)
+            wanted = math.hypot(vx, vy)
+            limit = max(0.0, limit - self.body.speed * dt)  # one step of reaction time
+            if wanted > limit:
+                vx, vy = vx * limit / wanted, vy * limit / wanted
+        self.body.step(dt, vx, vy, vz, yaw, ground, ground_normal)
+        if self._descending and not self.flying:
+            self._touchdown()
+
+    def _touchdown(self) -> None:
+        """A copter that was landing is on the ground: finish the item and disarm, as ArduPilot does."""
+        if self.mode == "AUTO" and self.mission_running:
+            self._advance()
+        self.armed = False
+        self.mission_running = False
+        self._say("Landed; disarming")
+
+    def _navigate(self, dt: float) -> tuple[float, float, float, float | None]:
+        if self._altitude_goal is not None:  # GUIDED take-off: climb straight up first
+            if abs(self.body.pose.z - self._altitude_goal) < 0.1:
+                self._altitude_goal = None
+            else:
+                return self._fly_to(self._hold[0], self._hold[1], self._altitude_goal, dt)[:4]
+        mode = self.mode
+        if mode == "GUIDED":
+            return self._guided(dt)
+        if mode == "AUTO":
+            if self.mission_running:
+                return self._auto(dt)
+            return self._hold_position(dt)
+        if mode == "RTL":
+            return self._return_home(dt)
+        if mode == "LAND":
+            return self._land_here(dt)
+        return self._hold_position(dt)  # HOLD, LOITER, BRAKE, MANUAL without a pilot
+
+    def _hold_position(self, dt):
+        x, y, z = self._hold
+        return self._fly_to(x, y, z, dt, turn_first=False)[:4]
+
+    def _guided(self, dt):
+        if self._velocity is not None:
+            vx, vy, vz, expiry = self._velocity
+            if self.time > expiry:
+                self._velocity = None
+                self.hold_here()
+                return self._hold_position(dt)
+            heading = heading_of(vx, vy) if math.hypot(vx, vy) > 0.05 else None
+            if heading is not None and abs(wrap_pi(heading - self.body.pose.yaw)) > TURN_FIRST:
+                return 0.0, 0.0, vz, heading
+            return vx, vy, vz, heading
+        if self._target is not None:
+            x, y, z = self._target
+            vx, vy, vz, yaw, arrived = self._fly_to(x, y, z, dt)
+            if arrived:
+                self._target = None
+                self._hold = (x, y, z)
+            return vx, vy, vz, yaw
+        vx, vy, vz, _ = self._hold_position(dt)
+        return vx, vy, vz, self._yaw
+
+    def _fly_to(self, x: float, y: float, z: float, dt: float, speed: float | None = None,
+                turn_first: bool = True):
+        """Velocity and heading that bring the body to (x, y, z): turn first, then move, braking to arrive."""
+        pose = self.body.pose
+        dx, dy = x - pose.x, y - pose.y
+        distance = math.hypot(dx, dy)
+        vz = 0.0
+        if self.kind is Kind.COPTER:
+            vz = max(-self.body.limits.climb_rate, min(self.body.limits.climb_rate, 2.0 * (z - pose.z)))
+        arrived = distance < ARRIVED and abs(z - pose.z) < 0.2 if self.kind is Kind.COPTER else distance < ARRIVED
+        if distance < ARRIVED:
+            return 0.0, 0.0, vz, None, arrived
+        heading = heading_of(dx, dy)
+        if turn_first and distance > 0.5 and abs(wrap_pi(heading - pose.yaw)) > TURN_FIRST:
+            return 0.0, 0.0, vz, heading, False
+        cruise = self.speed if speed is None else speed
+        wanted = min(cruise, math.sqrt(2 * self.body.limits.accel * distance) * 0.9, distance / dt)
+        if self.kind is Kind.ROVER and distance <= 0.5 and abs(wrap_pi(heading - pose.yaw)) > math.pi / 2:
+            return 0.0, 0.0, 0.0, None, True  # close enough: a rover cannot back up onto the point
+        return wanted * dx / distance, wanted * dy / distance, vz, heading if distance > 0.5 else None, False
+
+    def _return_home(self, dt):
+        hx, hy, _ = self.home
+        z = self.body.pose.z
+        if self._rtl_done:
+            return self._land_here(dt) if self.kind is Kind.COPTER else self._hold_position(dt)
+        vx, vy, vz, yaw, arrived = self._fly_to(hx, hy, z, dt)
+        if arrived or math.hypot(self.body.pose.x - hx, self.body.pose.y - hy) < 0.3:
+            self._rtl_done = True
+            self._say("Reached home")
+            self.hold_here()
+        return vx, vy, vz, yaw
+
+    def _land_here(self, dt):
+        x, y, _ = self._hold
+        vx, vy, _, _ = self._fly_to(x, y, self.body.pose.z, dt, turn_first=False)[:4]
+        self._descending = True
+        return vx, vy, -LANDING_SPEED, None
+
+    # ---- AUTO --------------------------------------------------------------------------------
+    def _advance(self) -> None:
+        self.events.append(Event("reached", seq=self.current))
+        self._item_timer = None
+        self._rtl_done = False
+        if self.current + 1 < len(self.mission):
+            self.set_current(self.current + 1)
+        else:
+            self.current = len(self.mission)
+            self.mission_running = False
+            self.hold_here()
+            self._say("Mission complete")
+
+    def _auto(self, dt):
+        for _ in range(len(self.mission)):  # do-commands complete at once; stop at the first nav item
+            if self.current >= len(self.mission):
+                return self._hold_position(dt)
+            item = self.mission[self.current]
+            if item.command == DO_CHANGE_SPEED:
+                if item.param2 > 0:
+                    self.set_speed(item.param2)
+                self._advance()
+                continue
+            if item.command == NAV_TAKEOFF and (self.kind is Kind.ROVER or self.flying and
+                                                self.body.pose.z >= self.home[2] + item.alt - 0.1):
+                self._advance()
+                continue
+            if item.command not in (NAV_TAKEOFF, NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LAND, NAV_RETURN_TO_LAUNCH):
+                self._say(f"Mission: skipping unsupported command {item.command}", mav.MAV_SEVERITY_WARNING)
+                self._advance()
+                continue
+            break
+        if not self.mission_running:
+            return self._hold_position(dt)
+        item = self.mission[self.current]
+        pose = self.body.pose
+        if item.command == NAV_TAKEOFF:
+            return self._fly_to(pose.x, pose.y, self.home[2] + item.alt, dt)[:4]
+        if item.command == NAV_RETURN_TO_LAUNCH:
+            result = self._return_home(dt)
+            if self._rtl_done and self.kind is Kind.ROVER:
+                self._advance()
+            return result
+        x, y = self.datum.to_local(item.lat, item.lon) if item.has_position else (pose.x, pose.y)
+        z = self.home[2] + item.alt if self.kind is Kind.COPTER and item.command != NAV_LAND else pose.z
+        if self.kind is Kind.COPTER and not self.flying and item.command != NAV_LAND:
+            return self._fly_to(pose.x, pose.y, max(z, self.home[2] + 1.0), dt)[:4]  # take off first
+        if item.command == NAV_LAND:
+            if math.hypot(x - pose.x, y - pose.y) > ARRIVED:
+                return self._fly_to(x, y, pose.z, dt)[:4]
+            if self.kind is Kind.ROVER:
+                self._advance()
+                return self._hold_position(dt)
+            self._hold = (x, y, pose.z)
+            return self._land_here(dt)
+        radius = item.param2 if item.param2 > 0 else self.wp_radius
+        vx, vy, vz, yaw, arrived = self._fly_to(x, y, z, dt)
+        if math.hypot(x - pose.x, y - pose.y) <= radius or arrived:
+            if item.command == NAV_LOITER_UNLIM:
+                return self._fly_to(x, y, z, dt, turn_first=False)[:4]
+            if self._item_timer is None:
+                self._item_timer = self.time
+            if self.time - self._item_timer >= item.param1:
+                self._advance()
+        return vx, vy, vz, yaw

@@ -1,0 +1,53 @@
+"""Stop before obstacles the sensors saw: the autopilot's last line of defence.
+
+Like ArduPilot's simple avoidance with a proximity database (AP_OADatabase),
+the autopilot remembers recent sonar hits near its operating height and caps
+its speed towards any of them so that it can always brake to a stop ``margin``
+short of the obstacle. Missions decide where to go; this only decides how fast
+the body may go there.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class ObstacleDatabase:
+    def __init__(self, margin: float, accel: float, capacity: int = 512, lifetime: float = 60.0,
+                 body_radius: float = 0.3):
+        self.margin = margin
+        self.accel = accel
+        self.body_radius = body_radius
+        self.lifetime = lifetime
+        self._points = np.zeros((capacity, 2))
+        self._times = np.full(capacity, -np.inf)
+        self._next = 0
+
+    def add(self, x: float, y: float, time: float) -> None:
+        self._points[self._next] = (x, y)
+        self._times[self._next] = time
+        self._next = (self._next + 1) % len(self._times)
+
+    def clear(self) -> None:
+        self._times[:] = -np.inf
+
+    def speed_limit(self, x: float, y: float, vx: float, vy: float, now: float) -> float:
+        """Highest speed along (vx, vy) from (x, y) that can still stop short of every known obstacle."""
+        speed = math.hypot(vx, vy)
+        if speed < 1e-9:
+            return 0.0
+        live = self._times > now - self.lifetime
+        if not live.any():
+            return math.inf
+        ux, uy = vx / speed, vy / speed
+        rel = self._points[live] - (x, y)
+        ahead = rel[:, 0] * ux + rel[:, 1] * uy
+        lateral = np.abs(rel[:, 0] * uy - rel[:, 1] * ux)
+        corridor = self.body_radius + self.margin
+        in_way = (ahead > 0) & (lateral < corridor)
+        if not in_way.any():
+            return math.inf
+        gap = float(ahead[in_way].min()) - corridor
+        return math.sqrt(2 * self.accel * gap) if gap > 0 else 0.0

@@ -1,0 +1,159 @@
+"""The memory map: a 2D occupancy grid at the operating height, centred on home.
+
+Cells hold log-odds in small integers (int8): a hit adds evidence of an
+obstacle, a ray passing through a cell adds evidence of free space, so every
+cell is unknown, free or occupied and objects that move away fade. Integers
+keep the map exact when it is streamed: a ground station applying the same
+cell values holds the same map, cell for cell. Rows run along +y (north),
+columns along +x (east), as an image of the map seen from above with row 0 south.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+UNKNOWN, FREE, OCCUPIED = 0, 1, 2
+
+
+class MemoryMap:
+    HIT = 9  # evidence added to the cell a reading ends in
+    MISS = 3  # evidence removed from each cell a reading passes through
+    LIMIT = 30  # saturation, so a long-seen wall can still fade within a few passes
+    OCCUPIED_AT = 6  # at or above: occupied
+    FREE_AT = -3  # at or below: free
+
+    def __init__(self, center: tuple[float, float], space_size: float = 100.0, resolution: float = 10.0,
+                 band: float = 1.0):
+        if space_size <= 0 or resolution <= 0:
+            raise ValueError("space_size and resolution must be positive")
+        self.center = (float(center[0]), float(center[1]))
+        self.space_size = float(space_size)
+        self.resolution = float(resolution)
+        self.band = band  # hits further than this above or below the sensor are ground or ceiling
+        self.size = max(1, int(round(2 * space_size * resolution)))
+        self.origin = (self.center[0] - space_size, self.center[1] - space_size)  # south-west corner
+        self.grid = np.zeros((self.size, self.size), dtype=np.int8)
+        self.ever_hit = np.zeros((self.size, self.size), dtype=bool)
+        self._changed: list[np.ndarray] = []
+
+    # ---- geometry ----------------------------------------------------------------------------
+    def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
+        """(row, col) of the cell containing the point, or None outside the map."""
+        col = math.floor((x - self.origin[0]) * self.resolution)
+        row = math.floor((y - self.origin[1]) * self.resolution)
+        if 0 <= row < self.size and 0 <= col < self.size:
+            return row, col
+        return None
+
+    def center_of(self, row: float, col: float) -> tuple[float, float]:
+        return (self.origin[0] + (col + 0.5) / self.resolution, self.origin[1] + (row + 0.5) / self.resolution)
+
+    def contains(self, x: float, y: float) -> bool:
+        return self.cell_of(x, y) is not None
+
+    # ---- evidence ----------------------------------------------------------------------------
+    def add_reading(self, origin: np.ndarray, direction: np.ndarray, distance: float | None,
+                    max_range: float) -> bool:
+        """Project one reading into the map; True when it marked an obstacle."""
+        length = max_range if distance is None else distance
+        end = origin + direction * length
+        vertical = direction[2] * length
+        if abs(vertical) > self.band:  # the ray leaves the band: only its part inside it is evidence
+            length = length * self.band / abs(vertical)
+            end = origin + direction * length
+            distance = None
+        cells = self._cells_along(origin[0], origin[1], end[0], end[1])
+        hit_cell = None
+        if distance is not None:
+            hit_cell = self.cell_of(end[0], end[1])
+            if hit_cell is not None:
+                hit_flat = hit_cell[0] * self.size + hit_cell[1]
+                cells = cells[cells != hit_flat]
+        flat = self.grid.reshape(-1)
+        if len(cells):
+            flat[cells] = np.maximum(flat[cells].astype(np.int16) - self.MISS, -self.LIMIT)
+            self._changed.append(cells)
+        if hit_cell is None:
+            return False
+        row, col = hit_cell
+        self.grid[row, col] = min(int(self.grid[row, col]) + self.HIT, self.LIMIT)
+        self.ever_hit[row, col] = True
+        self._changed.append(np.array([row * self.size + col]))
+        return True
+
+    def _cells_along(self, x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
+        """Flat indices of the cells the 2D segment passes through (inside the map), in no order."""
+        length = math.hypot(x1 - x0, y1 - y0)
+        samples = max(2, int(length * self.resolution * 2) + 2)
+        t = np.linspace(0.0, 1.0, samples)
+        cols = np.floor((x0 + (x1 - x0) * t - self.origin[0]) * self.resolution).astype(np.int64)
+        rows = np.floor((y0 + (y1 - y0) * t - self.origin[1]) * self.resolution).astype(np.int64)
+        inside = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
+        return np.unique(rows[inside] * self.size + cols[inside])
+
+    def take_changes(self) -> np.ndarray:
+        """Flat indices of cells changed since the last call (for streaming deltas)."""
+        if not self._changed:
+            return np.zeros(0, dtype=np.int64)
+        changed = np.unique(np.concatenate(self._changed))
+        self._changed.clear()
+        return changed
+
+    # ---- views -------------------------------------------------------------------------------
+    @property
+    def occupied(self) -> np.ndarray:
+        return self.grid >= self.OCCUPIED_AT
+
+    @property
+    def free(self) -> np.ndarray:
+        return self.grid <= self.FREE_AT
+
+    def states(self) -> np.ndarray:
+        """Per cell UNKNOWN (0), FREE (1) or OCCUPIED (2)."""
+        out = np.zeros(self.grid.shape, dtype=np.uint8)
+        out[self.free] = FREE
+        out[self.occupied] = OCCUPIED
+        return out
+
+    @property
+    def detections(self) -> int:
+        """Cells occupied now (the thesis's memory-map count)."""
+        return int(np.count_nonzero(self.occupied))
+
+    @property
+    def cells_ever_hit(self) -> int:
+        return int(np.count_nonzero(self.ever_hit))
+
+    def occupied_points(self) -> np.ndarray:
+        """(n, 2) scene x, y of the centres of occupied cells."""
+        rows, cols = np.nonzero(self.occupied)
+        return np.column_stack([self.origin[0] + (cols + 0.5) / self.resolution,
+                                self.origin[1] + (rows + 0.5) / self.resolution])
+
+    def image(self) -> np.ndarray:
+        """RGBA picture, north up: unknown transparent, free pale, occupied dark red."""
+        return state_image(self.states())
+
+    def save_npy(self, path: str | Path) -> None:
+        np.save(path, self.grid)
+
+    def save_png(self, path: str | Path) -> None:
+        from PIL import Image
+
+        rgba = self.image()
+        background = np.full(rgba.shape, (60, 60, 66, 255), dtype=np.uint8)
+        alpha = rgba[..., 3:4].astype(np.float32) / 255
+        blended = (rgba * alpha + background * (1 - alpha)).astype(np.uint8)
+        blended[..., 3] = 255
+        Image.fromarray(blended).save(path)
+
+
+STATE_COLOURS = np.array([[0, 0, 0, 0], [235, 240, 245, 110], [200, 30, 40, 255]], dtype=np.uint8)
+
+
+def state_image(states: np.ndarray) -> np.ndarray:
+    """RGBA image (north up) of a grid of UNKNOWN/FREE/OCCUPIED states (row 0 south)."""
+    return STATE_COLOURS[states[::-1]]

@@ -1,0 +1,170 @@
+"""Simulated distance sensors (ultrasonic sonar) and the servo that can sweep one.
+
+The model follows the thesis and the HC-SR04 datasheet: readings between a
+minimum and a maximum range, a beam that is a cone rather than a single ray
+(sampled with a centre ray and rings around it, the nearest echo wins), no
+echo from surfaces hit beyond a critical angle of incidence, and optional
+seeded Gaussian noise. Sensors are mounted with a yaw (and pitch) relative to
+the body, optionally on a servo driven by PWM.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vehicle.physics import Pose
+from vehicle.raycast import RayCaster
+
+
+@dataclass
+class Servo:
+    """A hobby servo: PWM pulse width (microseconds) maps linearly onto an angle (degrees)."""
+
+    pwm_min: int = 1000
+    pwm_max: int = 2000
+    angle_min: float = -90.0
+    angle_max: float = 90.0
+    pwm: int = 1500
+
+    def angle(self) -> float:
+        span = (self.pwm - self.pwm_min) / (self.pwm_max - self.pwm_min)
+        return self.angle_min + span * (self.angle_max - self.angle_min)
+
+    def pwm_for(self, angle: float) -> int:
+        angle = min(self.angle_max, max(self.angle_min, angle))
+        span = (angle - self.angle_min) / (self.angle_max - self.angle_min)
+        return round(self.pwm_min + span * (self.pwm_max - self.pwm_min))
+
+    def set_angle(self, angle: float) -> None:
+        self.pwm = self.pwm_for(angle)
+
+
+@dataclass
+class Sonar:
+    """An ultrasonic range finder. Angles in degrees; yaw clockwise from the nose, pitch up."""
+
+    name: str = "front"
+    mount_yaw: float = 0.0
+    mount_pitch: float = 0.0
+    min_range: float = 0.02
+    max_range: float = 40.0
+    beam_angle: float = 15.0  # half-angle of the cone
+    rings: int = 1  # rings of rays around the centre ray (6 rays per ring)
+    critical_angle: float = 60.0  # no echo from surfaces hit more obliquely than this
+    noise: float = 0.0  # standard deviation in metres
+    servo: Servo | None = None
+    _local_rays: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        self._local_rays = cone_rays(math.radians(self.beam_angle), self.rings)
+        self._cos_critical = math.cos(math.radians(self.critical_angle))
+        self._mount_key: float | None = None
+        self._mount = np.eye(3)
+
+    @property
+    def yaw_offset(self) -> float:
+        """Current yaw of the sensor relative to the nose, in degrees (mount plus servo)."""
+        return self.mount_yaw + (self.servo.angle() if self.servo else 0.0)
+
+    def axis(self, pose: Pose) -> np.ndarray:
+        """Unit vector of the beam's centre in the scene frame."""
+        return self._to_world(pose) @ np.array([1.0, 0.0, 0.0])
+
+    def _to_world(self, pose: Pose, body: np.ndarray | None = None) -> np.ndarray:
+        """Rotation from the sensor frame (x forward, y left, z up) to the scene frame."""
+        return (body_to_world(pose) if body is None else body) @ self._mount_rotation()
+
+    def _mount_rotation(self) -> np.ndarray:
+        yaw = self.yaw_offset
+        if yaw != self._mount_key:  # only a servo moves it; cached because every step asks
+            self._mount = rotation_zy(-math.radians(yaw), math.radians(self.mount_pitch))
+            self._mount_key = yaw
+        return self._mount
+
+
+@dataclass
+class Reading:
+    """One sonar measurement: where the beam started, where it pointed, what it measured."""
+
+    time: float
+    sensor: int
+    origin: np.ndarray  # (3,) scene metres
+    direction: np.ndarray  # (3,) unit vector of the beam's centre
+    distance: float | None  # metres, None when nothing echoed within range
+    max_range: float
+    yaw_offset: float  # degrees, sensor relative to the nose (for DISTANCE_SENSOR orientation)
+
+    @property
+    def hit(self) -> np.ndarray | None:
+        return None if self.distance is None else self.origin + self.direction * self.distance
+
+
+class SonarArray:
+    """Reads every sensor on the vehicle with one batched ray cast."""
+
+    def __init__(self, sensors: list[Sonar], caster: RayCaster, seed: int = 0):
+        self.sensors = sensors
+        self.caster = caster
+        self.rng = np.random.default_rng(seed)
+
+    def read(self, pose: Pose, time: float) -> list[Reading]:
+        origin = np.array(pose.xyz())
+        body = body_to_world(pose)
+        rotations = [s._to_world(pose, body) for s in self.sensors]
+        directions = np.concatenate([s._local_rays @ r.T for s, r in zip(self.sensors, rotations, strict=True)])
+        distance, faces = self.caster.cast(np.broadcast_to(origin, directions.shape), directions)
+        echo = self.caster.incidence_cos(directions, faces)
+        readings = []
+        start = 0
+        for index, (sensor, rotation) in enumerate(zip(self.sensors, rotations, strict=True)):
+            end = start + len(sensor._local_rays)
+            d = distance[start:end]
+            usable = (echo[start:end] >= sensor._cos_critical) & (d >= sensor.min_range) & (d <= sensor.max_range)
+            value = float(d[usable].min()) if usable.any() else None
+            if value is not None and sensor.noise > 0:
+                value = float(np.clip(value + self.rng.normal(0.0, sensor.noise), sensor.min_range, sensor.max_range))
+            readings.append(Reading(time, index, origin, rotation[:, 0].copy(), value, sensor.max_range,
+                                    sensor.yaw_offset))
+            start = end
+        return readings
+
+
+def cone_rays(half_angle: float, rings: int, per_ring: int = 6) -> np.ndarray:
+    """Unit rays in the sensor frame (x forward): the centre plus ``rings`` rings spread over the cone."""
+    rays = [(1.0, 0.0, 0.0)]
+    for ring in range(1, rings + 1):
+        tilt = half_angle * ring / rings
+        for k in range(per_ring):
+            around = 2 * math.pi * (k + 0.5 * (ring % 2)) / per_ring
+            rays.append((math.cos(tilt), math.sin(tilt) * math.cos(around), math.sin(tilt) * math.sin(around)))
+    return np.array(rays)
+
+
+def rotation_zy(yaw_left: float, pitch_up: float) -> np.ndarray:
+    """Rotation by ``pitch_up`` about -y (nose up) then ``yaw_left`` about z, in a frame with x forward, z up."""
+    cy, sy = math.cos(yaw_left), math.sin(yaw_left)
+    cp, sp = math.cos(pitch_up), math.sin(pitch_up)
+    yaw = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    pitch = np.array([[cp, 0.0, -sp], [0.0, 1.0, 0.0], [sp, 0.0, cp]])
+    return yaw @ pitch
+
+
+def body_to_world(pose: Pose) -> np.ndarray:
+    """Rotation from the body frame (x forward, y left, z up) to the scene frame (x east, y north, z up).
+
+    Applies roll, then pitch, then yaw (the aerospace order the thesis uses), with
+    MAVLink's signs: yaw a compass heading, pitch nose up, roll right side down.
+    """
+    heading = math.pi / 2 - pose.yaw  # counter-clockwise angle from east: forward maps to (sin yaw, cos yaw)
+    ch, sh = math.cos(heading), math.sin(heading)
+    cp, sp = math.cos(pose.pitch), math.sin(pose.pitch)
+    cr, sr = math.cos(pose.roll), math.sin(pose.roll)
+    # Rz(heading) @ R(pitch nose up) @ Rx(roll, left side up), multiplied out
+    return np.array([
+        [ch * cp, -ch * sp * sr - sh * cr, sh * sr - ch * sp * cr],
+        [sh * cp, ch * cr - sh * sp * sr, -sh * sp * cr - ch * sr],
+        [sp, cp * sr, cp * cr],
+    ])

@@ -1,0 +1,104 @@
+"""Mission parameters: one validated model, set from defaults, a TOML file, ``--set`` and MAVLink.
+
+Each setting has a unit, a default, a help text and the short MAVLink parameter
+id (at most 16 characters) under which standard parameter editors see it.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+
+def _setting(default: float, unit: str, help: str, param_id: str, **bounds) -> float:
+    return Field(default, description=help, json_schema_extra={"unit": unit, "param_id": param_id}, **bounds)
+
+
+class Settings(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    altitude: float = _setting(4.0, "m", "operating height above the start's ground (copter)", "SCN_ALTITUDE",
+                               gt=0, le=120)
+    speed: float = _setting(2.5, "m/s", "cruise speed", "SCN_SPEED", gt=0, le=20)
+    space_size: float = _setting(100.0, "m", "half-width of the memory map and of the allowed space around home",
+                                 "SCN_SPACE_SIZE", gt=0, le=1000)
+    resolution: float = _setting(10.0, "cells/m", "memory-map resolution", "SCN_RESOLUTION", gt=0, le=50)
+    padding: float = _setting(0.5, "m", "clearance kept between the vehicle body and obstacles when planning",
+                              "SCN_PADDING", ge=0, le=20)
+    closeness: float = _setting(2.0, "m", "distance at which a waypoint counts as reached and an obstacle as "
+                                "too close", "SCN_CLOSENESS", gt=0, le=50)
+    farness: float = _setting(100.0, "m", "readings beyond this are ignored", "SCN_FARNESS", gt=0, le=1000)
+    yaw_step: float = _setting(10.0, "deg", "yaw increment while scanning", "SCN_YAW_STEP", gt=0, le=180)
+    monitor_period: float = _setting(0.25, "s", "how often the monitor and the mission step", "SCN_MON_PERIOD",
+                                     ge=0.05, le=5)
+    time_limit: float = _setting(600.0, "s", "simulated time limit of a headless run", "SCN_TIME_LIMIT",
+                                 gt=0, le=86400)
+
+    @classmethod
+    def describe(cls) -> list[tuple[str, float, str, str, str]]:
+        """(name, default, unit, help, param_id) for every setting, in declaration order."""
+        rows = []
+        for name, info in cls.model_fields.items():
+            extra = info.json_schema_extra or {}
+            rows.append((name, info.default, extra["unit"], info.description, extra["param_id"]))
+        return rows
+
+    @classmethod
+    def param_ids(cls) -> dict[str, str]:
+        """MAVLink parameter id -> setting name."""
+        return {param_id: name for name, _, _, _, param_id in cls.describe()}
+
+    def updated(self, values: dict[str, object]) -> Settings:
+        """A copy with some settings changed; unknown names or bad values raise SettingsError."""
+        unknown = sorted(set(values) - set(type(self).model_fields))
+        if unknown:
+            raise SettingsError(f"unknown setting {', '.join(unknown)}; known: {', '.join(type(self).model_fields)}")
+        try:
+            return type(self).model_validate({**self.model_dump(), **values})
+        except ValidationError as error:
+            raise SettingsError(_explain(error)) from None
+
+    def with_config(self, path: str | Path) -> Settings:
+        """Settings from a TOML file: ``name = value`` at the top level or under ``[settings]``."""
+        try:
+            data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
+            raise SettingsError(f"{path}: {error}") from None
+        data = data.get("settings", data)
+        return self.updated(data)
+
+    def with_assignments(self, assignments: list[str]) -> Settings:
+        """Apply ``name=value`` strings as given with ``--set``."""
+        values: dict[str, object] = {}
+        for text in assignments:
+            name, sep, value = text.partition("=")
+            if not sep or not name.strip():
+                raise SettingsError(f"--set wants name=value, not {text!r}")
+            values[name.strip()] = value.strip()
+        return self.updated(values)
+
+
+class SettingsError(ValueError):
+    pass
+
+
+def _explain(error: ValidationError) -> str:
+    parts = []
+    for item in error.errors():
+        where = ".".join(str(p) for p in item["loc"])
+        parts.append(f"{where}: {item['msg']} (got {item.get('input')!r})")
+    return "; ".join(parts)
+
+
+def load_settings(config: str | Path | None = None, assignments: list[str] | None = None,
+                  **explicit: float | None) -> Settings:
+    """Defaults, then the TOML file, then ``--set`` pairs, then explicit options that were given."""
+    settings = Settings()
+    if config:
+        settings = settings.with_config(config)
+    if assignments:
+        settings = settings.with_assignments(assignments)
+    given = {name: value for name, value in explicit.items() if value is not None}
+    return settings.updated(given) if given else settings

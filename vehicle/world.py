@@ -1,0 +1,118 @@
+"""The simulated world: a scene, one vehicle in it, its sensors, and the simulated clock.
+
+Everything here runs on simulated time in fixed steps, so a run is a pure
+function of its inputs and seed. ``World.step()`` moves the vehicle one step,
+checks the swept body against the scene, and returns the sonar readings taken.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vehicle.autopilot import Autopilot
+from vehicle.avoidance import ObstacleDatabase
+from vehicle.collision import Collider, Contact
+from vehicle.geodesy import Datum
+from vehicle.modes import Kind
+from vehicle.physics import Body, Limits, Pose
+from vehicle.raycast import RayCaster
+from vehicle.scene import Scene
+from vehicle.sensors import Reading, Sonar, SonarArray
+from vehicle.settings import Settings
+
+DEFAULT_STEP = 0.05  # s
+STEP_HEIGHT = 0.5  # m: a rover climbs onto surfaces at most this far above its wheels
+
+
+class PlacementError(ValueError):
+    """The vehicle cannot start where it was asked to."""
+
+
+class World:
+    def __init__(self, scene: Scene, kind: Kind | str = Kind.COPTER, settings: Settings | None = None,
+                 start: tuple[float, float] | None = None, heading: float | None = None, seed: int = 0,
+                 dt: float = DEFAULT_STEP, sensors: list[Sonar] | None = None, datum: Datum | None = None,
+                 limits: Limits | None = None, backend: str = "auto"):
+        self.scene = scene
+        self.kind = Kind(kind)
+        self.settings = settings or Settings()
+        self.dt = dt
+        self.time = 0.0
+        self.steps = 0
+        self.datum = datum or Datum()
+        self.caster = RayCaster(scene.mesh, backend)
+        self.limits = limits or Limits()
+        x, y = start if start is not None else (scene.start or (0.0, 0.0))
+        heading = heading if heading is not None else (scene.start_heading or 0.0)
+        ground = self.caster.ground_height(x, y)
+        self.body = Body(self.kind, self.limits, Pose(x, y, 0.0, yaw=math.radians(heading) % (2 * math.pi)))
+        self.body.pose.z = self.body.rest_height(ground)
+        self.collider = Collider(scene.mesh, self.limits.radius, ignore_walkable=self.kind is Kind.ROVER)
+        if self.collider.touches(np.array(self.body.pose.xyz())):
+            raise PlacementError(f"the start x={x:g} y={y:g} is inside an obstacle")
+        margin = min(max(self.settings.padding, 0.1), 0.5)
+        self.avoidance = ObstacleDatabase(margin=margin, accel=self.limits.accel, body_radius=self.limits.radius)
+        self.autopilot = Autopilot(self.kind, self.body, (x, y, ground), self.datum,
+                                   cruise_speed=self.settings.speed, wp_radius=self.settings.closeness,
+                                   avoidance=self.avoidance)
+        self.sonars = SonarArray(sensors if sensors is not None else [Sonar()], self.caster, seed)
+        self.collision: Contact | None = None
+        self.distance_travelled = 0.0
+        self._ground = (ground, (0.0, 0.0, 1.0))
+
+    @property
+    def pose(self) -> Pose:
+        return self.body.pose
+
+    @property
+    def home(self) -> tuple[float, float, float]:
+        return self.autopilot.home
+
+    def ground_under(self, x: float, y: float, z: float) -> tuple[float, tuple[float, float, float]]:
+        """Height and normal of the surface below a point (a rover's wheels may climb a small step)."""
+        origin = np.array([[x, y, z + STEP_HEIGHT]])
+        distance, face = self.caster.cast(origin, np.array([[0.0, 0.0, -1.0]]))
+        if not np.isfinite(distance[0]):
+            return self._ground[0], (0.0, 0.0, 1.0)
+        normal = self.caster.face_normals[face[0]]
+        if normal[2] < 0:
+            normal = -normal
+        return float(origin[0, 2] - distance[0]), (float(normal[0]), float(normal[1]), float(normal[2]))
+
+    def step(self) -> list[Reading]:
+        """Advance one fixed step; returns the sonar readings taken at the end of it."""
+        if self.collision is not None:
+            return []
+        pose = self.body.pose
+        bottom = pose.z - self.limits.radius - self.limits.ground_clearance
+        self._ground = self.ground_under(pose.x, pose.y, bottom)
+        before = np.array(pose.xyz())
+        self.autopilot.step(self.dt, *self._ground)
+        after = np.array(pose.xyz())
+        self.steps += 1
+        self.time = self.steps * self.dt
+        contact = self.collider.sweep(before, after)
+        if contact is not None:
+            pose.x, pose.y, pose.z = contact.point
+            self.body.stop()
+            self.collision = contact
+            self.autopilot.armed = False
+            return []
+        self.distance_travelled += float(np.linalg.norm(after - before))
+        readings = self.sonars.read(pose, self.time)
+        for reading in readings:
+            hit = reading.hit
+            if hit is not None and abs(hit[2] - pose.z) <= 1.0:
+                self.avoidance.add(hit[0], hit[1], self.time)
+        return readings
+
+    def run_for(self, seconds: float) -> list[Reading]:
+        """Step for a span of simulated time; returns every reading taken."""
+        readings: list[Reading] = []
+        for _ in range(max(1, round(seconds / self.dt))):
+            readings.extend(self.step())
+            if self.collision is not None:
+                break
+        return readings
