@@ -1,0 +1,228 @@
+import numpy as np
+import pyastar2d
+import pytest
+import scipy.ndimage as ndi
+
+from vehicle.planning import (
+    GOAL_BLOCKED,
+    START_BLOCKED,
+    UNREACHABLE,
+    NoPath,
+    astar,
+    corner_cuts,
+    inflate,
+    line_is_clear,
+    plan,
+    smooth,
+)
+
+
+def crossed_cells(path, grid):
+    """Cells met by dense samples along every segment (2**12 per segment: never exactly on a cell edge)."""
+    path = np.asarray(path, dtype=float)
+    t = (np.arange(2**12) + 0.5) / 2**12
+    cells = []
+    for p, q in zip(path[:-1], path[1:], strict=True):
+        pts = np.rint(p + t[:, None] * (q - p)).astype(int)
+        cells.append(pts)
+    return np.concatenate(cells) if cells else np.zeros((0, 2), int)
+
+
+def assert_clear(path, grid):
+    cells = crossed_cells(path, grid)
+    assert not grid[cells[:, 0], cells[:, 1]].any()
+
+
+def length(path):
+    return float(np.linalg.norm(np.diff(np.asarray(path, float), axis=0), axis=1).sum())
+
+
+def random_grid(n, seed, fraction=0.05):
+    rng = np.random.default_rng(seed)
+    g = np.zeros((n, n), bool)
+    while g.mean() < fraction:
+        h, w = rng.integers(2, 12, size=2)
+        r, c = rng.integers(0, n, size=2)
+        g[r : r + h, c : c + w] = True
+    g[:6, :6] = g[-6:, -6:] = False
+    return g
+
+
+@pytest.mark.parametrize("radius", [0, 0.5, 1, 1.5, 2, 3, 3.6, 7])
+def test_inflate_is_a_disc_dilation(radius):
+    g = np.random.default_rng(3).random((40, 57)) < 0.03
+    R = int(radius)
+    yy, xx = np.mgrid[-R : R + 1, -R : R + 1]
+    expected = ndi.binary_dilation(g, yy**2 + xx**2 <= radius**2)
+    assert (inflate(g, radius) == expected).all()
+
+
+def test_path_around_a_wall():
+    g = np.zeros((40, 40), bool)
+    g[0:30, 20] = True  # wall from the south edge, open to the north
+    path = plan(g, (5, 5), (5, 35), radius_cells=2)
+    assert tuple(path[0]) == (5, 5) and tuple(path[-1]) == (5, 35)
+    assert path[:, 0].max() >= 30 + 2  # went round the end of the wall with clearance
+    assert_clear(path, inflate(g, 2))
+
+
+@pytest.mark.parametrize("gap, passes", [(4, False), (5, True), (7, True)])
+def test_gap_only_when_wider_than_the_clearance(gap, passes):
+    g = np.zeros((41, 40), bool)
+    g[:, 20] = True
+    g[18 : 18 + gap, 20] = False
+    if passes:
+        path = plan(g, (20, 5), (20, 35), radius_cells=2)
+        assert_clear(path, inflate(g, 2))
+    else:
+        with pytest.raises(NoPath) as err:
+            plan(g, (20, 5), (20, 35), radius_cells=2)
+        assert err.value.reason == UNREACHABLE
+
+
+def test_enclosed_goal_has_no_path():
+    g = np.zeros((40, 40), bool)
+    g[25:36, 25] = g[25:36, 35] = g[25, 25:36] = g[35, 25:36] = True
+    with pytest.raises(NoPath) as err:
+        plan(g, (2, 2), (30, 30), radius_cells=1)
+    assert err.value.reason == UNREACHABLE and str(err.value) == "no path"
+
+
+def test_start_inside_inflated_obstacle_escapes():
+    g = np.zeros((30, 30), bool)
+    g[0:20, 10] = True
+    start = (5, 11)  # right next to the wall, well inside the 3-cell clearance
+    inflated = inflate(g, 3)
+    assert inflated[start] and not g[start]
+    path = plan(g, start, (5, 25), radius_cells=3)
+    assert tuple(path[0]) == start and tuple(path[-1]) == (5, 25)
+    assert not inflated[tuple(path[1])]
+    assert_clear(path[:2], g)  # the escape leg never crosses a real obstacle
+    assert_clear(path[1:], inflated)
+    assert path[1][1] >= 14  # stepped away from the wall, not through it
+
+
+def test_start_boxed_in_by_obstacles_has_no_path():
+    g = np.zeros((20, 20), bool)
+    g[8:13, 8] = g[8:13, 12] = g[8, 8:13] = g[12, 8:13] = True
+    with pytest.raises(NoPath) as err:
+        plan(g, (10, 10), (2, 2), radius_cells=3)
+    assert err.value.reason == UNREACHABLE
+
+
+def test_start_or_goal_in_an_obstacle():
+    g = np.zeros((20, 20), bool)
+    g[10, 10] = True
+    with pytest.raises(NoPath) as err:
+        plan(g, (10, 10), (2, 2), radius_cells=1)
+    assert err.value.reason == START_BLOCKED
+    with pytest.raises(NoPath) as err:
+        plan(g, (2, 2), (10, 10), radius_cells=1)
+    assert err.value.reason == GOAL_BLOCKED
+    with pytest.raises(NoPath) as err:  # too close to an obstacle counts as inside
+        plan(g, (2, 2), (10, 11), radius_cells=1.5)
+    assert err.value.reason == GOAL_BLOCKED
+    with pytest.raises(NoPath) as err:
+        astar(g, (2, 2), (10, 10))
+    assert err.value.reason == GOAL_BLOCKED
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_smoothed_path_is_clear_and_no_longer(seed):
+    g = random_grid(80, seed)
+    inflated = inflate(g, 1.5)
+    raw = astar(inflated, (0, 0), (79, 79))
+    assert_clear(raw, inflated)
+    smoothed = smooth(raw, inflated)
+    assert (smoothed[0] == raw[0]).all() and (smoothed[-1] == raw[-1]).all()
+    assert len(smoothed) < len(raw)
+    assert_clear(smoothed, inflated)
+    assert length(smoothed) <= length(raw) + 1e-9
+    assert_clear(plan(g, (0, 0), (79, 79), 1.5), inflated)
+
+
+def test_shortcut_never_grazes_a_blocked_corner():
+    g = np.zeros((5, 5), bool)
+    g[0, 1] = True
+    assert not line_is_clear(g, (0, 0), (1, 1))  # passes exactly through the corner of (0, 1)
+    assert not line_is_clear(g, (0, 0), (2, 2))
+    assert line_is_clear(g, (1, 0), (2, 2))
+    path = np.array([(0, 0), (1, 0), (1, 1), (2, 2)])
+    assert smooth(path, g).tolist() == [[0, 0], [1, 0], [2, 2]]
+
+
+def test_line_test_matches_exact_geometry():
+    def touches(p, q, cell):  # closed segment vs closed unit square (Liang-Barsky)
+        p, q = np.array(p, float), np.array(q, float)
+        t0, t1 = 0.0, 1.0
+        for ax in (0, 1):
+            lo, hi, d = cell[ax] - 0.5, cell[ax] + 0.5, q[ax] - p[ax]
+            if d == 0:
+                if not lo <= p[ax] <= hi:
+                    return False
+            else:
+                a, b = sorted(((lo - p[ax]) / d, (hi - p[ax]) / d))
+                t0, t1 = max(t0, a), min(t1, b)
+        return t0 <= t1
+
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        g = rng.random((9, 9)) < 0.15
+        p, q = tuple(rng.integers(0, 9, 2)), tuple(rng.integers(0, 9, 2))
+        expected = not any(touches(p, q, c) for c in zip(*np.nonzero(g), strict=True))
+        assert line_is_clear(g, p, q) == expected, (p, q)
+
+
+def test_diagonal_corner_cutting_is_refused():
+    g = np.zeros((12, 12), bool)
+    for i in range(12):
+        g[i, 11 - i] = True  # a wall of cells touching only at their corners
+    w = np.where(g, np.inf, 1).astype(np.float32)
+    raw = pyastar2d.astar_path(w, (0, 0), (11, 11), allow_diagonal=True)
+    assert raw is not None and len(corner_cuts(raw, g))  # pyastar2d itself slips through
+    with pytest.raises(NoPath):
+        astar(g, (0, 0), (11, 11))
+    g[11, 0] = False  # an opening at one end: the path must use it
+    path = astar(g, (0, 0), (11, 11))
+    assert not len(corner_cuts(path, g))
+    assert ((path[:, 0] >= 10) & (path[:, 1] <= 1)).any()  # crossed at the opening
+    assert_clear(plan(g, (0, 0), (11, 11), 0), g)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_no_corner_cuts_on_noisy_grids(seed):
+    g = np.random.default_rng(seed).random((30, 30)) < 0.3
+    g[0, 0] = g[29, 29] = False
+    try:
+        path = astar(g, (0, 0), (29, 29))
+    except NoPath as err:
+        assert err.reason == UNREACHABLE
+    else:
+        assert not len(corner_cuts(path, g))
+        assert not g[path[:, 0], path[:, 1]].any()
+
+
+def test_start_and_goal_across_a_pinch_are_not_joined_diagonally():
+    g = np.zeros((4, 4), bool)
+    g[1, 1] = g[2, 2] = True
+    try:
+        path = astar(g, (1, 2), (2, 1))
+    except NoPath:
+        return
+    assert not len(corner_cuts(path, g))
+
+
+def test_start_equals_goal():
+    g = np.zeros((10, 10), bool)
+    g[5, 6] = True
+    assert plan(g, (5, 5), (5, 5), 3).tolist() == [[5, 5]]
+    assert astar(g, (2, 2), (2, 2)).tolist() == [[2, 2]]
+
+
+def test_out_of_grid_is_a_value_error():
+    g = np.zeros((10, 10), bool)
+    for start, goal in [((-1, 0), (5, 5)), ((0, 0), (10, 5)), ((0, 0), (5, 10))]:
+        with pytest.raises(ValueError):
+            plan(g, start, goal, 1)
+        with pytest.raises(ValueError):
+            astar(g, start, goal)
