@@ -77,6 +77,8 @@ class Autopilot:
         self._item_timer: float | None = None
         self._rtl_done = False
         self._descending = False
+        self.wanted = (0.0, 0.0)  # horizontal velocity navigation asked for, before avoidance
+        self.blocked = False  # avoidance holds the vehicle back from an obstacle
         self.ground_now = home[2]  # ground height under the vehicle, set each step
         self.hold_here()
 
@@ -238,13 +240,16 @@ class Autopilot:
             return
         self._descending = False
         vx, vy, vz, yaw = self._navigate(dt)
+        self.wanted = (vx, vy)
+        self.blocked = False
         if self.avoidance is not None and (vx or vy):
             pose = self.body.pose
             limit = self.avoidance.speed_limit(pose.x, pose.y, vx, vy, self.time)
-            wanted = math.hypot(vx, vy)
             limit = max(0.0, limit - self.body.speed * dt)  # one step of reaction time
+            wanted = math.hypot(vx, vy)
             if wanted > limit:
                 vx, vy = vx * limit / wanted, vy * limit / wanted
+                self.blocked = limit < 0.05
         self.body.step(dt, vx, vy, vz, yaw, ground, ground_normal)
         if self._descending and not self.flying:
             self._touchdown()

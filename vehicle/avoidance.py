@@ -38,11 +38,13 @@ class ObstacleDatabase:
         speed = math.hypot(vx, vy)
         if speed < 1e-9:
             return 0.0
-        live = self._times > now - self.lifetime
-        if not live.any():
+        rel = self._points - (x, y)
+        reach = self.body_radius + self.margin + 12.5  # no obstacle further than this limits speeds up to 5 m/s
+        near = (self._times > now - self.lifetime) & (np.abs(rel[:, 0]) < reach) & (np.abs(rel[:, 1]) < reach)
+        if not near.any():
             return math.inf
         ux, uy = vx / speed, vy / speed
-        rel = self._points[live] - (x, y)
+        rel = rel[near]
         ahead = rel[:, 0] * ux + rel[:, 1] * uy
         lateral = np.abs(rel[:, 0] * uy - rel[:, 1] * ux)
         corridor = self.body_radius + self.margin

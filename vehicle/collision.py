@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+LARGE_SPAN = 64  # grid cells: triangles covering more are checked by their bounding box alone
 WALKABLE_NORMAL_Z = 0.7  # faces flatter than ~45 degrees are ground a rover may drive on
 
 
@@ -52,10 +53,14 @@ class Collider:
         self._safe = 0.0
 
     def _build_grid(self) -> dict[tuple[int, int], np.ndarray]:
+        """Triangles by the grid cells their bounding boxes overlap; big ones (ground planes) go in ``_large``."""
         cells: dict[tuple[int, int], list[int]] = {}
         lo = np.floor(self._lo[:, :2] / self.cell_size).astype(int)
         hi = np.floor(self._hi[:, :2] / self.cell_size).astype(int)
-        for index, ((i0, j0), (i1, j1)) in enumerate(zip(lo, hi, strict=True)):
+        span = (hi - lo + 1).prod(axis=1)
+        self._large = np.flatnonzero(span > LARGE_SPAN)
+        for index in np.flatnonzero(span <= LARGE_SPAN):
+            (i0, j0), (i1, j1) = lo[index], hi[index]
             for i in range(i0, i1 + 1):
                 for j in range(j0, j1 + 1):
                     cells.setdefault((i, j), []).append(index)
@@ -67,8 +72,7 @@ class Collider:
         i1, j1 = np.floor(hi[:2] / self.cell_size).astype(int)
         found = [self._grid[key] for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)
                  if (key := (i, j)) in self._grid]
-        if not found:
-            return np.zeros(0, dtype=np.int64)
+        found.append(self._large)
         ids = np.unique(np.concatenate(found))
         overlap = np.all((self._lo[ids] <= hi) & (self._hi[ids] >= lo), axis=1)
         return ids[overlap]

@@ -85,14 +85,22 @@ class MemoryMap:
         return True
 
     def _cells_along(self, x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
-        """Flat indices of the cells the 2D segment passes through (inside the map), in no order."""
+        """Flat indices of the cells the 2D segment passes through (inside the map), in order.
+
+        Samples the segment every half cell (a cell the line only clips at a corner
+        may be missed, which costs nothing here); a straight line never comes back to
+        a cell it left, so dropping repeats of the previous sample leaves each cell once.
+        """
         length = math.hypot(x1 - x0, y1 - y0)
-        samples = max(2, int(length * self.resolution * 2) + 2)
-        t = np.linspace(0.0, 1.0, samples)
-        cols = np.floor((x0 + (x1 - x0) * t - self.origin[0]) * self.resolution).astype(np.int64)
-        rows = np.floor((y0 + (y1 - y0) * t - self.origin[1]) * self.resolution).astype(np.int64)
+        samples = int(length * self.resolution * 2) + 2
+        t = np.arange(samples) * (1.0 / (samples - 1))
+        cols = ((x0 - self.origin[0] + (x1 - x0) * t) * self.resolution).astype(np.int64)
+        rows = ((y0 - self.origin[1] + (y1 - y0) * t) * self.resolution).astype(np.int64)
         inside = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
-        return np.unique(rows[inside] * self.size + cols[inside])
+        flat = rows[inside] * self.size + cols[inside]
+        if len(flat) > 1:
+            flat = flat[np.concatenate(([True], flat[1:] != flat[:-1]))]
+        return flat
 
     def take_changes(self) -> np.ndarray:
         """Flat indices of cells changed since the last call (for streaming deltas)."""
@@ -106,6 +114,10 @@ class MemoryMap:
     @property
     def occupied(self) -> np.ndarray:
         return self.grid >= self.OCCUPIED_AT
+
+    def occupied_in(self, rows: slice, cols: slice) -> np.ndarray:
+        """The occupied mask of a window only (cheaper than slicing the whole mask)."""
+        return self.grid[rows, cols] >= self.OCCUPIED_AT
 
     @property
     def free(self) -> np.ndarray:

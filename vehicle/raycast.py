@@ -65,6 +65,14 @@ class RayCaster:
             return self._cast_embree(origins, directions)
         return self._cast_numpy(origins, directions)
 
+    def cast_from(self, origin: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``cast`` for rays that share one origin (a sensor), without the broadcasting overhead."""
+        if self.backend != "embree" or self._empty:
+            return self.cast(np.broadcast_to(origin, directions.shape), directions)
+        origins = np.empty(directions.shape, dtype=np.float32)
+        origins[:] = origin
+        return self._cast_embree(origins, directions)
+
     def _cast_embree(self, origins, directions):
         result = self._scene.run(origins.astype(np.float32), directions.astype(np.float32), output=1)
         face = result["primID"].astype(np.int64)
@@ -85,11 +93,9 @@ class RayCaster:
 
     def incidence_cos(self, directions: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """|cos| of the angle between each ray and the normal of the face it hit (0 where it missed)."""
-        out = np.zeros(len(faces))
-        hit = faces >= 0
-        if hit.any():
-            out[hit] = np.abs(np.einsum("ij,ij->i", self.face_normals[faces[hit]], directions[hit]))
-        return out
+        cos = np.abs((self.face_normals[faces] * directions).sum(axis=1))  # faces of -1 read the last normal
+        cos[faces < 0] = 0.0
+        return cos
 
     def ground_height(self, x: float, y: float, default: float = 0.0) -> float:
         """Height of the highest surface a vertical ray from above meets at (x, y)."""

@@ -111,21 +111,26 @@ class SonarArray:
         self.rng = np.random.default_rng(seed)
 
     def read(self, pose: Pose, time: float) -> list[Reading]:
-        origin = np.array(pose.xyz())
+        origin = np.array((pose.x, pose.y, pose.z))
         body = body_to_world(pose)
         rotations = [s._to_world(pose, body) for s in self.sensors]
-        directions = np.concatenate([s._local_rays @ r.T for s, r in zip(self.sensors, rotations, strict=True)])
-        distance, faces = self.caster.cast(np.broadcast_to(origin, directions.shape), directions)
+        if len(self.sensors) == 1:
+            directions = self.sensors[0]._local_rays @ rotations[0].T
+        else:
+            directions = np.concatenate([s._local_rays @ r.T for s, r in zip(self.sensors, rotations, strict=True)])
+        distance, faces = self.caster.cast_from(origin, directions)
         echo = self.caster.incidence_cos(directions, faces)
         readings = []
         start = 0
         for index, (sensor, rotation) in enumerate(zip(self.sensors, rotations, strict=True)):
             end = start + len(sensor._local_rays)
             d = distance[start:end]
-            usable = (echo[start:end] >= sensor._cos_critical) & (d >= sensor.min_range) & (d <= sensor.max_range)
-            value = float(d[usable].min()) if usable.any() else None
+            nearest = float(np.where((echo[start:end] >= sensor._cos_critical) & (d >= sensor.min_range), d,
+                                     np.inf).min())
+            value = nearest if nearest <= sensor.max_range else None
             if value is not None and sensor.noise > 0:
-                value = float(np.clip(value + self.rng.normal(0.0, sensor.noise), sensor.min_range, sensor.max_range))
+                noisy = value + self.rng.normal(0.0, sensor.noise)
+                value = float(min(sensor.max_range, max(sensor.min_range, noisy)))
             readings.append(Reading(time, index, origin, rotation[:, 0].copy(), value, sensor.max_range,
                                     sensor.yaw_offset))
             start = end

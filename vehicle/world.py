@@ -23,6 +23,7 @@ from vehicle.sensors import Reading, Sonar, SonarArray
 from vehicle.settings import Settings
 
 DEFAULT_STEP = 0.05  # s
+SONAR_RATE = 10.0  # Hz: readings per second, as long-range ultrasonic sensors manage
 STEP_HEIGHT = 0.5  # m: a rover climbs onto surfaces at most this far above its wheels
 
 
@@ -34,7 +35,7 @@ class World:
     def __init__(self, scene: Scene, kind: Kind | str = Kind.COPTER, settings: Settings | None = None,
                  start: tuple[float, float] | None = None, heading: float | None = None, seed: int = 0,
                  dt: float = DEFAULT_STEP, sensors: list[Sonar] | None = None, datum: Datum | None = None,
-                 limits: Limits | None = None, backend: str = "auto"):
+                 limits: Limits | None = None, backend: str = "auto", sonar_rate: float = SONAR_RATE):
         self.scene = scene
         self.kind = Kind(kind)
         self.settings = settings or Settings()
@@ -61,6 +62,9 @@ class World:
         self.collision: Contact | None = None
         self.distance_travelled = 0.0
         self._ground = (ground, (0.0, 0.0, 1.0))
+        self._ground_xy = (x, y)
+        self.sonar_rate = sonar_rate
+        self._next_reading = 0.0
 
     @property
     def pose(self) -> Pose:
@@ -81,13 +85,23 @@ class World:
             normal = -normal
         return float(origin[0, 2] - distance[0]), (float(normal[0]), float(normal[1]), float(normal[2]))
 
+    def _ground_stale(self) -> bool:
+        """A copter high above the ground it last measured need not look again until it moves a metre."""
+        if self.kind is Kind.ROVER:
+            return True
+        pose = self.body.pose
+        return (pose.z - self._ground[0] < 2.0
+                or math.hypot(pose.x - self._ground_xy[0], pose.y - self._ground_xy[1]) > 1.0)
+
     def step(self) -> list[Reading]:
-        """Advance one fixed step; returns the sonar readings taken at the end of it."""
+        """Advance one fixed step; returns the sonar readings taken at its end (when one is due)."""
         if self.collision is not None:
             return []
         pose = self.body.pose
-        bottom = pose.z - self.limits.radius - self.limits.ground_clearance
-        self._ground = self.ground_under(pose.x, pose.y, bottom)
+        if self._ground_stale():
+            bottom = pose.z - self.limits.radius - self.limits.ground_clearance
+            self._ground = self.ground_under(pose.x, pose.y, bottom)
+            self._ground_xy = (pose.x, pose.y)
         before = np.array(pose.xyz())
         self.autopilot.step(self.dt, *self._ground)
         after = np.array(pose.xyz())
@@ -100,7 +114,10 @@ class World:
             self.collision = contact
             self.autopilot.armed = False
             return []
-        self.distance_travelled += float(np.linalg.norm(after - before))
+        self.distance_travelled += math.dist(before, after)
+        if self.time + 1e-9 < self._next_reading:
+            return []
+        self._next_reading += 1.0 / self.sonar_rate
         readings = self.sonars.read(pose, self.time)
         for reading in readings:
             hit = reading.hit

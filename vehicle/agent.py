@@ -1,0 +1,190 @@
+"""The onboard agent: gets the vehicle ready, runs the monitor and the mission, and brings it home.
+
+Stepped once per ``monitor_period`` of simulated time, it reads the monitor's
+observation and commands the autopilot. Its phases run one way: preflight ->
+take-off -> mission -> homing -> landing -> done. A mission that completes or
+gives up, a vehicle that leaves the allowed space, or a time budget that
+runs low all lead home. An operator's mode change pauses the agent; AUTO with
+MISSION_START hands control back to it (see ``resume``).
+"""
+
+from __future__ import annotations
+
+import math
+from enum import StrEnum
+
+from vehicle.autopilot import Autopilot
+from vehicle.geodesy import heading_of
+from vehicle.memory_map import MemoryMap
+from vehicle.missions import mission_class
+from vehicle.missions.base import Context, Status
+from vehicle.missions.routines import Travel
+from vehicle.modes import Kind
+from vehicle.monitor import Monitor
+from vehicle.sensors import Reading
+from vehicle.settings import Settings
+
+HOME_TOLERANCE = 0.5  # m
+BLOCKED_FOR = 1.0  # s held back by avoidance before the monitor treats it as an obstacle too close
+RESERVE = 60.0  # s kept for scans, detours and landing on the way home
+
+
+class Phase(StrEnum):
+    PREFLIGHT = "preflight"
+    TAKEOFF = "takeoff"
+    MISSION = "mission"
+    HOMING = "homing"
+    LANDING = "landing"
+    DONE = "done"
+
+
+class Agent:
+    def __init__(self, vehicle: Autopilot, mission: str, settings: Settings, radius: float,
+                 waypoints: list[tuple[float, float]] | None = None):
+        self.vehicle = vehicle
+        self.settings = settings
+        home = (vehicle.home[0], vehicle.home[1])
+        self.map = MemoryMap(home, settings.space_size, settings.resolution)
+        self.monitor = Monitor(settings, self.map, home, radius)
+        self.messages: list[str] = []
+        self.ctx = Context(vehicle, self.map, self.monitor, settings, home, radius, waypoints, say=self.say)
+        self.mission = mission_class(mission)(self.ctx)
+        self.phase = Phase.PREFLIGHT
+        self.outcome: str | None = None  # "finished" | "stopped" once the mission ends
+        self.reason = ""
+        self.paused = False
+        self._travel: Travel | None = None
+        self._blocked_since: float | None = None
+        self._mode_changes = vehicle.mode_changes
+
+    @property
+    def done(self) -> bool:
+        return self.phase is Phase.DONE
+
+    def say(self, text: str) -> None:
+        self.messages.append(text)
+        self.vehicle._say(text)
+
+    def collect(self, readings: list[Reading]) -> None:
+        self.monitor.collect(readings)
+
+    # ---- operator takeover --------------------------------------------------------------------
+    def _operator_took_over(self) -> bool:
+        changed = self.vehicle.mode_changes != self._mode_changes and self.vehicle.mode_source != "agent"
+        self._mode_changes = self.vehicle.mode_changes
+        return changed
+
+    def resume(self) -> bool:
+        """Hand control back to the agent (the operator's AUTO + MISSION_START). False if not paused."""
+        if not self.paused:
+            return False
+        self.paused = False
+        self.say("Agent: resuming mission")
+        if self.phase in (Phase.MISSION, Phase.HOMING) and self.mission.mode == "GUIDED":
+            self._set_mode("GUIDED")
+        if self._travel is not None:
+            self._travel.path = None
+        return True
+
+    def _set_mode(self, mode: str) -> None:
+        self.vehicle.set_mode(mode, source="agent")
+        self._mode_changes = self.vehicle.mode_changes
+
+    # ---- the step -----------------------------------------------------------------------------
+    def step(self, now: float) -> None:
+        ctx = self.ctx
+        ctx.time = now
+        x, y = ctx.position
+        wanted = self.vehicle.wanted
+        travel = heading_of(*wanted) if math.hypot(*wanted) > 0.05 else None
+        observation = self.monitor.observe(now, x, y, travel)
+        ctx.observation = observation
+        if self._operator_took_over() and self.phase is not Phase.DONE:
+            self.paused = True
+            self.say(f"Agent: paused, operator switched to {self.vehicle.mode}")
+        if self.paused or self.phase is Phase.DONE:
+            return
+        if self.vehicle.blocked:
+            self._blocked_since = now if self._blocked_since is None else self._blocked_since
+        else:
+            self._blocked_since = None
+        if self._blocked_since is not None and now - self._blocked_since >= BLOCKED_FOR:
+            observation.too_close = True
+            self._blocked_since = None
+        getattr(self, f"_{self.phase.value}")(now)
+
+    def _preflight(self, now: float) -> None:
+        vehicle = self.vehicle
+        if self.mission.mode == "AUTO":
+            self.mission.begin()
+            self._set_mode("AUTO")
+            vehicle.arm()
+            if vehicle.start_mission() == 0:
+                self.phase = Phase.MISSION
+            return
+        self._set_mode("GUIDED")
+        vehicle.arm()
+        if self.vehicle.kind is Kind.COPTER:
+            vehicle.takeoff(self.settings.altitude)
+            self.phase = Phase.TAKEOFF
+        else:
+            self._start_mission()
+
+    def _takeoff(self, now: float) -> None:
+        if self.vehicle.altitude >= self.settings.altitude - 0.2:
+            self._start_mission()
+
+    def _start_mission(self) -> None:
+        self.phase = Phase.MISSION
+        self.say(f"Mission {self.mission.name}: start")
+        self.mission.begin()
+
+    def _mission(self, now: float) -> None:
+        observation = self.ctx.observation
+        if observation.outside:
+            self._end_mission(Status.STOPPED, "left the allowed space around home")
+            return
+        if observation.too_close:
+            status = self.mission.too_close()
+        elif self.ctx.time_left < self._time_home() and self.mission.mode == "GUIDED":
+            status = self.mission.out_of_time()
+        else:
+            status = self.mission.step()
+        if status is not Status.RUNNING:
+            self._end_mission(status, self.mission.reason)
+
+    def _time_home(self) -> float:
+        return 2.0 * self.ctx.distance_to(self.ctx.home) / self.settings.speed + RESERVE
+
+    def _end_mission(self, status: Status, reason: str) -> None:
+        self.outcome = "finished" if status is Status.DONE else "stopped"
+        self.reason = reason or ("mission complete" if status is Status.DONE else "stopped")
+        self.say(f"Mission {self.mission.name}: {self.outcome} ({self.reason}); going home")
+        if self.vehicle.mode != "GUIDED":
+            self._set_mode("GUIDED")
+        self.mission.stop()
+        self._travel = Travel(self.ctx, self.ctx.home, HOME_TOLERANCE)
+        self.phase = Phase.HOMING
+
+    def _homing(self, now: float) -> None:
+        travel = self._travel
+        status = travel.too_close() if self.ctx.observation.too_close else travel.step()
+        if status is Status.RUNNING:
+            return
+        if status is Status.STOPPED:
+            self.say(f"Homing: {travel.reason}; holding position")
+            self.outcome = "stopped"
+            self.reason = f"{self.reason}; could not get home: {travel.reason}"
+            self.mission.stop()
+            self.phase = Phase.DONE
+            return
+        if self.vehicle.kind is Kind.COPTER:
+            self._set_mode("LAND")
+            self.phase = Phase.LANDING
+        else:
+            self._set_mode("HOLD")
+            self.phase = Phase.DONE
+
+    def _landing(self, now: float) -> None:
+        if not self.vehicle.armed:
+            self.phase = Phase.DONE

@@ -1,0 +1,96 @@
+"""One headless mission on simulated time: scene + vehicle + agent, stepped until an outcome.
+
+The result is a plain dict (the JSON that ``vehicle experiment --json`` prints);
+everything in it but ``wall_time_s`` is a function of the arguments and seed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from vehicle import __version__
+from vehicle.agent import Agent
+from vehicle.modes import Kind
+from vehicle.scene import Scene, load_scene
+from vehicle.settings import Settings
+from vehicle.world import World
+
+OUTCOMES = ("finished", "stopped", "collision", "timeout", "error")
+
+
+@dataclass
+class Experiment:
+    """Everything that defines a run (and nothing that does not)."""
+
+    scene: str
+    mission: str
+    vehicle: str = "copter"
+    start: tuple[float, float] | None = None
+    heading: float | None = None
+    settings: Settings = field(default_factory=Settings)
+    seed: int = 0
+    waypoints: list[tuple[float, float]] | None = None
+
+
+def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: str | Path | None = None,
+                   on_step: Callable[[World, Agent], None] | None = None) -> dict:
+    """Run the mission to its outcome; ``on_step`` is called after every agent step (for logging)."""
+    started = time.perf_counter()
+    settings = experiment.settings
+    result = {
+        "mission": experiment.mission,
+        "scene": Path(experiment.scene).name,
+        "vehicle": experiment.vehicle,
+        "seed": experiment.seed,
+        "version": __version__,
+        "settings": settings.model_dump(),
+        "resolution": settings.resolution,
+    }
+    world = agent = None
+    try:
+        scene = scene or load_scene(experiment.scene)
+        world = World(scene, Kind(experiment.vehicle), settings, experiment.start, experiment.heading,
+                      seed=experiment.seed)
+        agent = Agent(world.autopilot, experiment.mission, settings, world.limits.radius, experiment.waypoints)
+        outcome, reason = _fly(world, agent, on_step)
+    except Exception as error:  # noqa: BLE001 - any failure is an outcome of the run, reported, not raised
+        outcome, reason = "error", f"{type(error).__name__}: {error}"
+    result.update(outcome=outcome, reason=reason)
+    if world is not None:
+        pose = world.pose
+        result.update(start=[round(world.home[0], 3), round(world.home[1], 3)],
+                      sim_time_s=round(world.time, 3), distance_m=round(world.distance_travelled, 2),
+                      final_position=[round(pose.x, 2), round(pose.y, 2), round(pose.z, 2)])
+    if agent is not None:
+        result.update(detections=agent.map.detections, cells_ever_hit=agent.map.cells_ever_hit,
+                      messages=agent.messages[-20:])
+        if map_out:
+            out = Path(map_out)
+            out.mkdir(parents=True, exist_ok=True)
+            stem = f"{Path(experiment.scene).stem}-{experiment.mission}-{experiment.seed}"
+            agent.map.save_npy(out / f"{stem}.npy")
+            agent.map.save_png(out / f"{stem}.png")
+    result.setdefault("detections", 0)
+    result.setdefault("cells_ever_hit", 0)
+    result["wall_time_s"] = round(time.perf_counter() - started, 3)
+    return result
+
+
+def _fly(world: World, agent: Agent, on_step) -> tuple[str, str]:
+    period = max(1, round(world.settings.monitor_period / world.dt))
+    limit = world.settings.time_limit
+    while True:
+        agent.collect(world.step())
+        if world.collision is not None:
+            return "collision", world.collision.describe()
+        if world.steps % period == 0:
+            agent.step(world.time)
+            if on_step is not None:
+                on_step(world, agent)
+            if agent.done:
+                return agent.outcome, agent.reason
+        if world.time >= limit:
+            return "timeout", f"time limit of {limit:g} s reached in phase {agent.phase.value}"

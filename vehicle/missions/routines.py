@@ -1,0 +1,96 @@
+"""Building blocks that several missions share: scanning in place and travelling with replanning."""
+
+from __future__ import annotations
+
+import math
+
+from vehicle.geodesy import wrap_pi
+from vehicle.missions.base import Context, Status
+from vehicle.modes import Kind
+from vehicle.sensors import Reading
+
+YAW_REACHED = math.radians(2)
+PATH_POINT_REACHED = 0.5  # m: intermediate path points count as passed this close
+
+
+class Scan:
+    """Turn in place through ``turn`` degrees in ``yaw_step`` increments, collecting every reading.
+
+    Turning the whole vehicle is what the thesis's Browse does; the sonar reads
+    all the while, so each step adds a fan of readings to the map.
+    """
+
+    def __init__(self, ctx: Context, turn: float = 360.0):
+        self.ctx = ctx
+        self.step_rad = math.radians(ctx.settings.yaw_step)
+        self.steps = max(1, math.ceil(turn / ctx.settings.yaw_step))
+        self.start = ctx.vehicle.body.pose.yaw
+        self.done_steps = -1
+        self.readings: list[Reading] = []
+        x, y = ctx.position
+        ctx.vehicle.goto(x, y, ctx.settings.altitude if ctx.kind is Kind.COPTER else None)  # hold here
+
+    def step(self) -> bool:
+        """True once the full turn is done."""
+        if self.ctx.observation is not None:
+            self.readings.extend(self.ctx.observation.readings)
+        target = self.start + max(self.done_steps, 0) * self.step_rad
+        if self.done_steps >= 0 and abs(wrap_pi(self.ctx.vehicle.body.pose.yaw - target)) > YAW_REACHED:
+            return False
+        self.done_steps += 1
+        if self.done_steps > self.steps:
+            return True
+        self.ctx.vehicle.set_yaw((self.start + self.done_steps * self.step_rad) % (2 * math.pi))
+        return False
+
+
+class Travel:
+    """Get to ``goal`` along a path planned on the memory map, replanning when it turns out blocked.
+
+    When the monitor reports an obstacle too close ahead, stop, scan around to
+    learn the surroundings, then plan again: the thesis's Pathfind behaviour.
+    """
+
+    def __init__(self, ctx: Context, goal: tuple[float, float], tolerance: float):
+        self.ctx = ctx
+        self.goal = goal
+        self.tolerance = tolerance
+        self.path: list[tuple[float, float]] | None = None
+        self.scan: Scan | None = None
+        self.reason = ""
+        self.replans = 0
+        self._sent: tuple[float, float] | None = None
+
+    def step(self) -> Status:
+        ctx = self.ctx
+        if self.scan is not None:
+            if not self.scan.step():
+                return Status.RUNNING
+            self.scan = None
+            self.path = None
+        if ctx.distance_to(self.goal) <= self.tolerance:
+            ctx.planned_path = []
+            return Status.DONE
+        if self.path is None or not ctx.path_clear(self.path):
+            self.path = ctx.plan(self.goal)
+            self.replans += 1
+            self._sent = None
+            if self.path is None:
+                self.reason = f"no known path to ({self.goal[0]:.1f}, {self.goal[1]:.1f})"
+                ctx.planned_path = []
+                return Status.STOPPED
+        while len(self.path) > 1 and ctx.distance_to(self.path[0]) < PATH_POINT_REACHED:
+            self.path.pop(0)
+        ctx.planned_path = [ctx.position, *self.path]
+        target = self.path[0]
+        if target != self._sent:
+            ctx.vehicle.goto(target[0], target[1], ctx.settings.altitude if ctx.kind is Kind.COPTER else None)
+            self._sent = target
+        return Status.RUNNING
+
+    def too_close(self) -> Status:
+        """Stop, look around, and plan again once the scan is done."""
+        if self.scan is None:
+            self.scan = Scan(self.ctx)
+            self._sent = None
+        return Status.RUNNING

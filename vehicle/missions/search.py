@@ -1,0 +1,119 @@
+"""Search: scan, then head for a far detection with open space beside it, and scan again there.
+
+As in the thesis, the next goal comes from the latest sweep: the echo that is
+far away and has the most open space beside it wins (a weighted score), and
+the vehicle aims beside it and short of it by a stand-off distance rather than
+onto it, which keeps it around the outside of objects. Goals near places
+already visited score lower, so it keeps finding new ground. It ends when
+sweeps stop adding detections, or when its time budget is spent.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vehicle.missions.base import Mission, Status
+from vehicle.missions.routines import Scan, Travel
+from vehicle.monitor import sweep_profile
+
+OPEN_ARC = (math.radians(10), math.radians(40))  # where "beside" an echo is, either side
+OPEN_WEIGHT = 0.5
+VISITED_RADIUS = 6.0  # m: goals this close to an earlier goal or scan spot are penalised
+VISITED_PENALTY = 1000.0
+MIN_LEG = 2.0  # m: goals closer than this are not worth a trip
+QUIET_SWEEPS = 3  # sweeps in a row that add (almost) nothing end the search
+NEW_CELLS = 5
+
+
+class Search(Mission):
+    name = "search"
+    help = "scan, move towards far detections with open space beside them at a stand-off distance, repeat"
+
+    def begin(self) -> None:
+        self.scan: Scan | None = Scan(self.ctx)
+        self.travel: Travel | None = None
+        self.visited: list[tuple[float, float]] = [self.ctx.position]
+        self.quiet = 0
+        self.known = self.ctx.map.cells_ever_hit
+        self.legs = 0
+
+    def step(self) -> Status:
+        if self.scan is not None:
+            if not self.scan.step():
+                return Status.RUNNING
+            return self._after_scan(self.scan.readings)
+        status = self.travel.step()
+        if status is Status.RUNNING:
+            return status
+        self.scan = Scan(self.ctx)  # arrived, or no way there: look around again
+        self.visited.append(self.ctx.position)
+        return Status.RUNNING
+
+    def _after_scan(self, readings) -> Status:
+        self.scan = None
+        known = self.ctx.map.cells_ever_hit
+        self.quiet = self.quiet + 1 if known - self.known < NEW_CELLS else 0
+        self.known = known
+        if self.quiet >= QUIET_SWEEPS:
+            self.reason = "sweeps stopped finding anything new"
+            return Status.DONE
+        goal = self.choose_goal(readings)
+        if goal is None:
+            self.reason = "no open direction left to search"
+            return Status.DONE
+        self.legs += 1
+        self.visited.append(goal)
+        self.travel = Travel(self.ctx, goal, self.ctx.settings.closeness)
+        return Status.RUNNING
+
+    def choose_goal(self, readings) -> tuple[float, float] | None:
+        """The stand-off point beside the best-scoring echo of the sweep, or None."""
+        ctx = self.ctx
+        band = ctx.map.band
+        readings = [r for r in readings if r.distance is None or abs(r.hit[2] - r.origin[2]) <= band]
+        headings, distances = sweep_profile(readings)
+        if not len(headings):
+            return None
+        reach = min(ctx.settings.farness, max(r.max_range for r in readings))
+        free = np.minimum(distances, reach)
+        standoff = ctx.settings.closeness + ctx.radius + ctx.settings.padding
+        x, y = ctx.position
+        best, best_score = None, -math.inf
+        for heading, distance in zip(headings, distances, strict=True):
+            if not np.isfinite(distance) or distance - standoff < MIN_LEG:
+                continue
+            left = _mean_in_arc(headings, free, heading - OPEN_ARC[1], heading - OPEN_ARC[0])
+            right = _mean_in_arc(headings, free, heading + OPEN_ARC[0], heading + OPEN_ARC[1])
+            side = 1.0 if right >= left else -1.0  # +1: clockwise of the echo
+            ux, uy = math.sin(heading), math.cos(heading)
+            sx, sy = side * uy, -side * ux  # perpendicular towards the open side
+            goal = (x + ux * (distance - standoff) + sx * standoff, y + uy * (distance - standoff) + sy * standoff)
+            if not ctx.is_clear(goal):
+                continue
+            score = distance + OPEN_WEIGHT * max(left, right)
+            if any(math.hypot(goal[0] - vx, goal[1] - vy) < VISITED_RADIUS for vx, vy in self.visited):
+                score -= VISITED_PENALTY
+            if score > best_score:
+                best, best_score = goal, score
+        return best
+
+    def too_close(self) -> Status:
+        """Close to a new object: stop and scan again from here."""
+        self.stop()
+        self.travel = None
+        self.scan = Scan(self.ctx)
+        self.visited.append(self.ctx.position)
+        return Status.RUNNING
+
+    def out_of_time(self) -> Status:
+        self.reason = f"search time used ({self.legs} legs)"
+        return Status.DONE
+
+
+def _mean_in_arc(headings: np.ndarray, values: np.ndarray, start: float, end: float) -> float:
+    """Mean of the values whose heading lies in the arc [start, end] (radians, any period)."""
+    offset = (headings - start) % (2 * math.pi)
+    inside = offset <= (end - start)
+    return float(values[inside].mean()) if inside.any() else 0.0

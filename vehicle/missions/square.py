@@ -1,0 +1,49 @@
+"""Square: the thesis's planned mission, AUTO waypoints in a square around home.
+
+The autopilot flies the waypoints on its own; the agent only watches. AUTO does
+not avoid obstacles, so when the monitor finds one too close ahead the agent
+stops the vehicle and brings it home along a planned path: the thesis's Square
+flew into objects, ours stops safely instead.
+"""
+
+from __future__ import annotations
+
+from vehicle.missions.base import Mission, Status
+from vehicle.modes import DO_CHANGE_SPEED, NAV_TAKEOFF, NAV_WAYPOINT, Kind, MissionItem
+
+MAX_HALF_SIDE = 25.0  # m
+
+
+def square_corners(home: tuple[float, float], space_size: float) -> list[tuple[float, float]]:
+    """North-west, north-east, south-east, south-west corners of a square around home inside the space."""
+    half = min(space_size / 4, MAX_HALF_SIDE)
+    x, y = home
+    return [(x - half, y + half), (x + half, y + half), (x + half, y - half), (x - half, y - half)]
+
+
+class Square(Mission):
+    name = "square"
+    help = "fly preplanned AUTO waypoints in a square around home (or the given waypoints)"
+    mode = "AUTO"
+
+    def begin(self) -> None:
+        ctx = self.ctx
+        self.corners = ctx.waypoints or square_corners(ctx.home, ctx.settings.space_size)
+        datum = ctx.vehicle.datum
+        items = [ctx.vehicle.home_item()]
+        if ctx.kind is Kind.COPTER:
+            items.append(MissionItem(NAV_TAKEOFF, alt=ctx.settings.altitude))
+        items.append(MissionItem(DO_CHANGE_SPEED, param1=1, param2=ctx.settings.speed))
+        for x, y in self.corners:
+            lat, lon = datum.to_global(x, y)
+            items.append(MissionItem(NAV_WAYPOINT, lat, lon, ctx.settings.altitude, param2=ctx.settings.closeness))
+        ctx.vehicle.set_mission(items)
+        self.first_corner = len(items) - len(self.corners)
+
+    def step(self) -> Status:
+        vehicle = self.ctx.vehicle
+        if vehicle.current >= len(vehicle.mission):
+            return Status.DONE
+        remaining = self.corners[max(0, vehicle.current - self.first_corner):]
+        self.ctx.planned_path = [self.ctx.position, *remaining]
+        return Status.RUNNING
