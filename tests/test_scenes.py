@@ -1,0 +1,243 @@
+"""The project's own scenes (scenes/*.wrl) load cleanly and are laid out as scenes/README.md says."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from scipy import ndimage
+
+from vehicle.scene import Scene, load_scene
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+
+# name: expected Shape instances, triangle range, bounds (lo, hi) with tolerance, start, clear radius
+EXPECTED = {
+    "default": dict(
+        objects=26,
+        triangles=(300, 20_000),
+        bounds=((-60, -60, 0), (60, 60, 12)),
+        start=(0.0, 0.0),
+        clear=3.0,
+    ),
+    "house": dict(
+        objects=32,
+        triangles=(200, 5_000),
+        bounds=((-8, -6, 0), (8, 6, 2.6)),
+        start=(-3.0, -1.5),
+        clear=1.5,
+    ),
+    "trees": dict(
+        objects=65,  # the terrain and 32 trees of a trunk and a crown each
+        triangles=(3_300, 200_000),
+        bounds=None,  # checked in test_trees_*
+        start=(0.0, 0.0),
+        clear=3.0,
+    ),
+}
+DEFAULT_COLOR = (204, 204, 204)  # VRML's diffuseColor when a Shape has no Material
+
+
+_cache: dict[str, Scene] = {}
+
+
+def _load(name: str) -> Scene:
+    if name not in _cache:
+        _cache[name] = load_scene(SCENES / f"{name}.wrl")
+    return _cache[name]
+
+
+@pytest.fixture(params=sorted(EXPECTED))
+def scene(request) -> tuple[str, Scene]:
+    return request.param, _load(request.param)
+
+
+def _ground_z(mesh: trimesh.Trimesh, xy: np.ndarray) -> np.ndarray:
+    """Height of the highest surface under each (x, y): a vertical ray from above; NaN where none."""
+    xy = np.atleast_2d(np.asarray(xy, dtype=float))
+    top = mesh.bounds[1, 2] + 10.0
+    origins = np.column_stack((xy, np.full(len(xy), top)))
+    directions = np.tile((0.0, 0.0, -1.0), (len(xy), 1))
+    locations, rays, _ = mesh.ray.intersects_location(origins, directions, multiple_hits=False)
+    z = np.full(len(xy), np.nan)
+    z[rays] = locations[:, 2]
+    return z
+
+
+def _horizontal_distance(triangles: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """Distance in the x-y plane from `point` to each triangle's projection (0 when it covers it)."""
+    a, b, c = (triangles[:, k, :2] for k in range(3))
+    p = np.asarray(point, dtype=float)[:2]
+
+    def cross(u, v):
+        return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+
+    def to_segment(s, e):
+        se, sp = e - s, p - s
+        t = np.clip(np.einsum("ij,ij->i", sp, se) / np.maximum(np.einsum("ij,ij->i", se, se), 1e-12), 0, 1)
+        return np.linalg.norm(s + se * t[:, None] - p, axis=1)
+
+    edges = np.minimum(np.minimum(to_segment(a, b), to_segment(b, c)), to_segment(c, a))
+    s1, s2, s3 = cross(b - a, p - a), cross(c - b, p - b), cross(a - c, p - c)
+    inside = ((s1 >= 0) & (s2 >= 0) & (s3 >= 0)) | ((s1 <= 0) & (s2 <= 0) & (s3 <= 0))
+    inside &= np.abs(cross(b - a, c - a)) > 1e-12
+    return np.where(inside, 0.0, edges)
+
+
+# --- every scene -------------------------------------------------------------------------------------
+
+
+def test_loads_without_warnings(scene):
+    name, s = scene
+    assert s.warnings == []
+    assert s.objects == EXPECTED[name]["objects"]
+    lo, hi = EXPECTED[name]["triangles"]
+    assert lo <= len(s.mesh.faces) <= hi
+    assert len(s.face_colors) == len(s.mesh.faces)
+    assert np.isfinite(s.mesh.vertices).all()
+
+
+def test_every_shape_has_its_own_colour(scene):
+    name, s = scene
+    rgb = s.face_colors[:, :3]
+    assert not np.all(rgb == DEFAULT_COLOR, axis=1).any(), "a Shape without a Material diffuseColor"
+    assert len(np.unique(rgb, axis=0)) >= 5
+
+
+def test_bounds(scene):
+    name, s = scene
+    expected = EXPECTED[name]["bounds"]
+    if expected is not None:
+        np.testing.assert_allclose(s.bounds, np.array(expected, dtype=float), atol=0.01)
+
+
+def test_start_and_heading(scene):
+    name, s = scene
+    assert s.start == pytest.approx(EXPECTED[name]["start"])
+    assert s.start_heading == pytest.approx(0.0, abs=0.01)  # looking north
+
+
+def test_start_ground_is_flat(scene):
+    """The ground under the start and 2 m around it is level: nothing overhead, no slope."""
+    name, s = scene
+    x, y = s.start
+    angles = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    ring = np.column_stack((x + 2 * np.cos(angles), y + 2 * np.sin(angles)))
+    z = _ground_z(s.mesh, np.vstack(([x, y], ring)))
+    assert np.isfinite(z).all()
+    assert np.ptp(z) < 0.05
+    if name in ("default", "house"):
+        assert abs(z[0]) < 0.01
+
+
+def test_start_in_clear_space(scene):
+    """No triangle between 0.2 m and 6 m above the start's ground within the clear radius."""
+    name, s = scene
+    x, y = s.start
+    g = _ground_z(s.mesh, [x, y])[0]
+    tris = s.mesh.triangles
+    zmin, zmax = tris[:, :, 2].min(axis=1), tris[:, :, 2].max(axis=1)
+    band = (zmax > g + 0.2) & (zmin < g + 6.0)
+    d = _horizontal_distance(tris[band], (x, y))
+    assert d.min() >= EXPECTED[name]["clear"], f"an obstacle {d.min():.2f} m from the start"
+
+
+# --- default ---------------------------------------------------------------------------------------
+
+
+def test_default_objects_around_the_start():
+    """Something stands 5-25 m from the start in most directions, and the ground covers 120 x 120 m."""
+    s = _load("default")
+    x, y = s.start
+    seen = 0
+    for bearing in range(0, 360, 30):
+        b = np.radians(bearing)
+        d = np.array([np.sin(b), np.cos(b), 0.0])
+        found = False
+        for offset in (-1.0, 0.0, 1.0):  # three parallel rays: a poor man's beam
+            o = np.array([x, y, 1.7]) + offset * np.array([d[1], -d[0], 0.0])
+            hits, _, _ = s.mesh.ray.intersects_location([o], [d])
+            dist = np.linalg.norm(hits[:, :2] - o[:2], axis=1) if len(hits) else np.array([])
+            found |= bool(((dist > 5) & (dist < 25)).any())
+        seen += found
+    assert seen >= 8, f"only {seen} of 12 directions see an object within 25 m"
+    assert _ground_z(s.mesh, [(-59, -59), (59, 59), (-59, 59), (59, -59)]) == pytest.approx(0.0, abs=0.01)
+
+
+# --- house -----------------------------------------------------------------------------------------
+
+
+def test_house_every_room_reachable_at_flight_height():
+    """At 1.2 m a 0.3 m copter gets from the start through the doorways into all five rooms."""
+    s = _load("house")
+    sections = trimesh.intersections.mesh_plane(s.mesh, (0, 0, 1), (0, 0, 1.2))
+    res = 0.05
+    lo = np.array([-8.5, -6.5])
+    shape = (int(17 / res), int(13 / res))
+    occupied = np.zeros(shape, dtype=bool)
+    for a, b in sections[:, :, :2]:
+        n = int(np.linalg.norm(b - a) / (res / 2)) + 2
+        pts = a + np.linspace(0, 1, n)[:, None] * (b - a)
+        ij = ((pts - lo) / res).astype(int)
+        occupied[ij[:, 0], ij[:, 1]] = True
+    occupied = ndimage.binary_dilation(occupied, iterations=int(0.3 / res))
+    labels, _ = ndimage.label(~occupied)
+
+    def label_at(x, y):
+        return labels[int((x - lo[0]) / res), int((y - lo[1]) / res)]
+
+    start = label_at(*s.start)
+    assert start != 0
+    assert label_at(-8.4, -6.4) != start, "the house is closed"
+    rooms = {"kitchen": (5, -2), "bedroom 1": (-5.5, 3), "bedroom 2": (0, 3), "bathroom": (6, 3)}
+    for room, (x, y) in rooms.items():
+        assert label_at(x, y) == start, f"{room} not reachable from the start"
+
+
+# --- trees -----------------------------------------------------------------------------------------
+
+
+def _trees_parts(s: Scene):
+    """The terrain (the Shape spanning the scene) and, per other Shape, its faces."""
+    objects = [np.flatnonzero(s.face_object == k) for k in range(s.objects)]
+    spans = [np.ptp(s.mesh.vertices[s.mesh.faces[f]].reshape(-1, 3)[:, :2], axis=0).min() for f in objects]
+    terrain = int(np.argmax(spans))
+    ground = trimesh.Trimesh(s.mesh.vertices, s.mesh.faces[objects[terrain]], process=False)
+    others = [f for k, f in enumerate(objects) if k != terrain]
+    return ground, others
+
+
+def test_trees_uneven_ground():
+    s = _load("trees")
+    ground, _ = _trees_parts(s)
+    lo, hi = ground.bounds
+    assert lo[:2] == pytest.approx((-40, -40)) and hi[:2] == pytest.approx((40, 40))
+    xs = np.linspace(-39, 39, 40)
+    grid = np.array(np.meshgrid(xs, xs)).reshape(2, -1).T
+    z = _ground_z(ground, grid)
+    assert np.isfinite(z).all()
+    assert np.ptp(z) >= 1.5
+    assert 0.0 <= z.min() and z.max() <= 3.0
+    assert 9.0 <= s.bounds[1, 2] <= 14.0
+
+
+def test_trees_trunks_stand_on_the_ground_and_crowns_clear_it():
+    s = _load("trees")
+    ground, parts = _trees_parts(s)
+    trunks = crowns = 0
+    for faces in parts:
+        v = s.mesh.vertices[np.unique(s.mesh.faces[faces])]
+        width = np.ptp(v[:, :2], axis=0).max()
+        height = np.ptp(v[:, 2])
+        if width < 1.0:  # a trunk: thin and tall, its foot just below the ground
+            trunks += 1
+            assert 3.0 <= height <= 6.5
+            assert 0.4 <= width <= 0.8
+            g = _ground_z(ground, v[:, :2].mean(axis=0))[0]
+            assert g - 0.5 < v[:, 2].min() < g, "trunk foot not just below the ground"
+        else:  # a crown: its every point at least 2.5 m above the ground below it
+            crowns += 1
+            assert 3.0 <= width <= 6.0
+            clearance = v[:, 2] - _ground_z(ground, v[:, :2])
+            assert clearance.min() >= 2.5
+    assert trunks == crowns == 32
