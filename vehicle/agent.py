@@ -163,7 +163,7 @@ class Agent:
         if self.vehicle.mode != "GUIDED":
             self._set_mode("GUIDED")
         self.mission.stop()
-        self._travel = Travel(self.ctx, self.ctx.home, HOME_TOLERANCE)
+        self._travel = Travel(self.ctx, self.ctx.home, HOME_TOLERANCE, relax=True)
         self.phase = Phase.HOMING
 
     def _homing(self, now: float) -> None:

@@ -10,6 +10,7 @@ columns along +x (east), as an image of the map seen from above with row 0 south
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 
@@ -37,6 +38,7 @@ class MemoryMap:
         self.origin = (self.center[0] - space_size, self.center[1] - space_size)  # south-west corner
         self.grid = np.zeros((self.size, self.size), dtype=np.int8)
         self.ever_hit = np.zeros((self.size, self.size), dtype=bool)
+        self.occupied_version = 0  # counts cells becoming or ceasing to be occupied, so users can skip rechecks
         self._changed: list[np.ndarray] = []
 
     # ---- geometry ----------------------------------------------------------------------------
@@ -72,17 +74,51 @@ class MemoryMap:
             if hit_cell is not None:
                 hit_flat = hit_cell[0] * self.size + hit_cell[1]
                 cells = cells[cells != hit_flat]
-        flat = self.grid.reshape(-1)
-        if len(cells):
-            flat[cells] = np.maximum(flat[cells].astype(np.int16) - self.MISS, -self.LIMIT)
-            self._changed.append(cells)
+        self._lower(cells, self.MISS)
         if hit_cell is None:
             return False
         row, col = hit_cell
-        self.grid[row, col] = min(int(self.grid[row, col]) + self.HIT, self.LIMIT)
+        before = int(self.grid[row, col])
+        self.grid[row, col] = min(before + self.HIT, self.LIMIT)
+        if before < self.OCCUPIED_AT <= before + self.HIT:
+            self.occupied_version += 1
         self.ever_hit[row, col] = True
         self._changed.append(np.array([row * self.size + col]))
         return True
+
+    def _lower(self, cells: np.ndarray, amount: int, floor: int | None = None) -> None:
+        """Remove obstacle evidence from the cells (flat indices)."""
+        if not len(cells):
+            return
+        flat = self.grid.reshape(-1)
+        before = flat[cells]
+        after = np.maximum(before.astype(np.int16) - amount, -self.LIMIT)
+        if floor is not None:
+            after = np.minimum(after, floor)
+        flat[cells] = after
+        if np.any((before >= self.OCCUPIED_AT) & (after < self.OCCUPIED_AT)):
+            self.occupied_version += 1
+        self._changed.append(cells)
+
+    @functools.cache  # noqa: B019 - a handful of radii per map, kept for the map's life
+    def _disc(self, radius: float) -> tuple[np.ndarray, np.ndarray]:
+        """Row and column offsets of the cells whose centres lie within ``radius`` metres of a cell's centre."""
+        reach = int(math.ceil(radius * self.resolution))
+        rows, cols = np.mgrid[-reach:reach + 1, -reach:reach + 1]
+        inside = (rows**2 + cols**2) * (1.0 / self.resolution**2) <= radius * radius
+        return rows[inside], cols[inside]
+
+    def mark_body(self, x: float, y: float, radius: float) -> None:
+        """The vehicle's body is here, so these cells are free, whatever the sonar said."""
+        centre = self.cell_of(x, y)
+        if centre is None:
+            return
+        offsets = self._disc(radius)
+        rows, cols = offsets[0] + centre[0], offsets[1] + centre[1]
+        keep = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
+        cells = rows[keep] * self.size + cols[keep]
+        cells = cells[self.grid.reshape(-1)[cells] > self.FREE_AT]
+        self._lower(cells, 0, floor=self.FREE_AT)
 
     def _cells_along(self, x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
         """Flat indices of the cells the 2D segment passes through (inside the map), in order.
@@ -118,6 +154,9 @@ class MemoryMap:
     def occupied_in(self, rows: slice, cols: slice) -> np.ndarray:
         """The occupied mask of a window only (cheaper than slicing the whole mask)."""
         return self.grid[rows, cols] >= self.OCCUPIED_AT
+
+    def free_in(self, rows: slice, cols: slice) -> np.ndarray:
+        return self.grid[rows, cols] <= self.FREE_AT
 
     @property
     def free(self) -> np.ndarray:

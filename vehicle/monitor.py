@@ -57,6 +57,7 @@ class Monitor:
         if self._last_xy is not None:
             self.distance_travelled += math.hypot(x - self._last_xy[0], y - self._last_xy[1])
         self._last_xy = (x, y)
+        self.map.mark_body(x, y, self.radius)
         farness = self.settings.farness
         corridor = self.radius + self.settings.padding
         ux, uy = (math.sin(travel), math.cos(travel)) if travel is not None else (0.0, 0.0)

@@ -51,7 +51,7 @@ class Sonar:
     mount_pitch: float = 0.0
     min_range: float = 0.02
     max_range: float = 40.0
-    beam_angle: float = 15.0  # half-angle of the cone
+    beam_angle: float = 7.5  # half-angle of the cone (HC-SR04: a 15 degree measuring angle)
     rings: int = 1  # rings of rays around the centre ray (6 rays per ring)
     critical_angle: float = 60.0  # no echo from surfaces hit more obliquely than this
     noise: float = 0.0  # standard deviation in metres
@@ -135,6 +135,21 @@ class SonarArray:
                                     sensor.yaw_offset))
             start = end
         return readings
+
+
+SENSOR_SUITES = {
+    "single": "one sonar looking forward (the thesis's vehicle)",
+    "triple": "three sonars: forward and 45 degrees to each side (sees walls alongside the path)",
+}
+
+
+def sensor_suite(name: str) -> list[Sonar]:
+    """The sonars of a named sensor suite (see SENSOR_SUITES)."""
+    if name == "single":
+        return [Sonar("front")]
+    if name == "triple":
+        return [Sonar("front"), Sonar("left", mount_yaw=-45.0), Sonar("right", mount_yaw=45.0)]
+    raise ValueError(f"unknown sensor suite {name!r}; suites: {', '.join(SENSOR_SUITES)}")
 
 
 def cone_rays(half_angle: float, rings: int, per_ring: int = 6) -> np.ndarray:

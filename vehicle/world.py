@@ -19,10 +19,11 @@ from vehicle.modes import Kind
 from vehicle.physics import Body, Limits, Pose
 from vehicle.raycast import RayCaster
 from vehicle.scene import Scene
-from vehicle.sensors import Reading, Sonar, SonarArray
+from vehicle.sensors import Reading, Sonar, SonarArray, sensor_suite
 from vehicle.settings import Settings
 
 DEFAULT_STEP = 0.05  # s
+DEFAULT_SUITE = "triple"
 SONAR_RATE = 10.0  # Hz: readings per second, as long-range ultrasonic sensors manage
 STEP_HEIGHT = 0.5  # m: a rover climbs onto surfaces at most this far above its wheels
 
@@ -58,7 +59,7 @@ class World:
         self.autopilot = Autopilot(self.kind, self.body, (x, y, ground), self.datum,
                                    cruise_speed=self.settings.speed, wp_radius=self.settings.closeness,
                                    avoidance=self.avoidance)
-        self.sonars = SonarArray(sensors if sensors is not None else [Sonar()], self.caster, seed)
+        self.sonars = SonarArray(sensors if sensors is not None else sensor_suite(DEFAULT_SUITE), self.caster, seed)
         self.collision: Contact | None = None
         self.distance_travelled = 0.0
         self._ground = (ground, (0.0, 0.0, 1.0))

@@ -24,7 +24,8 @@ from vehicle.modes import Kind
 from vehicle.monitor import Monitor, Observation
 from vehicle.settings import Settings
 
-PLAN_MARGIN = 15.0  # m around start and goal that a first planning attempt searches
+PLAN_MARGINS = (15.0, 40.0)  # m around start and goal that planning searches, the small window first
+UNSEEN_EXTENT = 1.0  # m: unknown cells this close to an obstacle are presumed to be more of it
 
 
 class Status(StrEnum):
@@ -69,50 +70,71 @@ class Context:
         return (self.radius + pad) * self.map.resolution
 
     # ---- planning on the memory map ------------------------------------------------------------
-    def plan(self, goal: tuple[float, float]) -> list[tuple[float, float]] | None:
+    def plan(self, goal: tuple[float, float], relax: bool = False,
+             level: int = 0) -> tuple[list[tuple[float, float]] | None, int]:
         """A path (scene metres, excluding the current position) to ``goal`` around known obstacles.
 
-        Searches a window around start and goal first (fast), then the whole map.
-        If the goal or start sits inside the padded obstacles, retries with less
-        padding: getting home along a tight path beats not getting home.
+        Searches a window around start and goal first (fast), then a wider one.
+        If the goal or start sits inside the padded obstacles, retries without the
+        padding. With ``relax`` (going home), an unreachable goal is tried again
+        without padding and then without presuming unseen obstacles: getting home
+        along a tight path beats not getting home. Returns the path (None if there is
+        none) and the level of relaxation that found it, to start from next time.
         """
         start_cell = self.map.cell_of(*self.position)
         goal_cell = self.map.cell_of(*goal)
         if start_cell is None or goal_cell is None:
-            return None
-        for padding in dict.fromkeys((self.settings.padding, 0.0)):
-            for window in (self._window(start_cell, goal_cell), None):
+            return None, level
+        if level == 0 and self.path_clear([goal], horizon=math.inf, padding=self.settings.padding):
+            return [goal], level  # in the open: no search needed
+        attempts = [(self.settings.padding, True), (0.0, True)] + ([(0.0, False)] if relax else [])
+        for index, (padding, presume) in enumerate(attempts[level:], start=level):
+            for margin in PLAN_MARGINS:
+                window = self._window(start_cell, goal_cell, margin)
                 try:
-                    cells = self._plan_in(start_cell, goal_cell, self.clearance_cells(padding), window)
+                    cells = self._plan_in(start_cell, goal_cell, self.clearance_cells(padding), window, presume)
                 except planning.NoPath as failure:
-                    if failure.reason == planning.UNREACHABLE and window is not None:
-                        continue
-                    break
+                    if failure.reason == planning.UNREACHABLE:
+                        continue  # a wider window may find a way round
+                    break  # start or goal inside the padding: try with less
                 points = [self.map.center_of(r, c) for r, c in cells[1:]]
                 if points:
                     points[-1] = goal
-                return points or [goal]
-        return None
+                return points or [goal], index
+            else:
+                if not relax:
+                    return None, level  # less padding would only squeeze through gaps never seen
+        return None, level
 
-    def _window(self, a: tuple[int, int], b: tuple[int, int]) -> tuple[slice, slice] | None:
-        margin = int(PLAN_MARGIN * self.map.resolution)
+    def _window(self, a: tuple[int, int], b: tuple[int, int], margin_m: float) -> tuple[slice, slice]:
+        """The rows and columns within ``margin_m`` of the box around cells a and b."""
+        margin = int(margin_m * self.map.resolution)
         r0, r1 = max(0, min(a[0], b[0]) - margin), min(self.map.size, max(a[0], b[0]) + margin + 1)
         c0, c1 = max(0, min(a[1], b[1]) - margin), min(self.map.size, max(a[1], b[1]) + margin + 1)
-        if r0 == 0 and c0 == 0 and r1 == self.map.size and c1 == self.map.size:
-            return None
         return slice(r0, r1), slice(c0, c1)
 
-    def _plan_in(self, start, goal, radius_cells, window) -> np.ndarray:
-        if window is None:
-            blocked, offset = self.map.occupied, (0, 0)
-        else:
-            blocked, offset = self.map.occupied_in(*window), (window[0].start, window[1].start)
+    def blocked_in(self, rows: slice, cols: slice, presume: bool = True) -> np.ndarray:
+        """Cells to plan around in a window: obstacles, and unknown cells right next to them.
+
+        A sonar sees a wall only where it faces the beam; the part of a wall that
+        runs along the path stays unknown until the vehicle is beside it. So the
+        unknown surroundings of what was seen are presumed to be more of it, and
+        paths keep that much further away until the sonar shows them free.
+        """
+        occupied = self.map.occupied_in(rows, cols)
+        if not presume:
+            return occupied
+        presumed = planning.inflate(occupied, UNSEEN_EXTENT * self.map.resolution)
+        return occupied | (presumed & ~self.map.free_in(rows, cols))
+
+    def _plan_in(self, start, goal, radius_cells, window, presume) -> np.ndarray:
+        blocked, offset = self.blocked_in(*window, presume), (window[0].start, window[1].start)
         local = planning.plan(blocked, (start[0] - offset[0], start[1] - offset[1]),
                               (goal[0] - offset[0], goal[1] - offset[1]), radius_cells)
         return local + np.array(offset)
 
-    def path_clear(self, points: list[tuple[float, float]], horizon: float = 15.0) -> bool:
-        """Whether the polyline from here through ``points`` keeps clear of known (unpadded) obstacles.
+    def path_clear(self, points: list[tuple[float, float]], horizon: float = 15.0, padding: float = 0.0) -> bool:
+        """Whether the polyline from here through ``points`` keeps clear of known obstacles (by ``padding``).
 
         Only the first ``horizon`` metres are checked: that is where new obstacles
         matter now, and the rest is checked again as the vehicle gets there.
@@ -131,14 +153,26 @@ class Context:
             return False
         rows = [c[0] for c in cells]
         cols = [c[1] for c in cells]
-        pad = int(math.ceil(self.clearance_cells(0.0))) + 1
+        pad = int(math.ceil(self.clearance_cells(padding))) + 1
         r0, r1 = max(0, min(rows) - pad), min(self.map.size, max(rows) + pad + 1)
         c0, c1 = max(0, min(cols) - pad), min(self.map.size, max(cols) + pad + 1)
-        blocked = planning.inflate(self.map.occupied_in(slice(r0, r1), slice(c0, c1)), self.clearance_cells(0.0))
+        blocked = planning.inflate(self.blocked_in(slice(r0, r1), slice(c0, c1)), self.clearance_cells(padding))
         local = [(r - r0, c - c0) for r, c in cells]
-        # the first leg starts where the vehicle is, possibly already within the clearance of a wall
-        return all(planning.line_is_clear(blocked, a, b) or (i == 0 and not blocked[b])
-                   for i, (a, b) in enumerate(zip(local, local[1:], strict=False)))
+        if blocked[local[0]]:
+            # the vehicle is already within the clearance of an obstacle (it stopped near a wall):
+            # the first leg need only be clear from where it leaves that margin
+            local[0] = self._leave_margin(local[0], local[1], blocked)
+        return all(planning.line_is_clear(blocked, a, b) for a, b in zip(local, local[1:], strict=False))
+
+    @staticmethod
+    def _leave_margin(a: tuple[int, int], b: tuple[int, int], blocked: np.ndarray) -> tuple[int, int]:
+        """The first cell on the way from a to b that is not blocked (b if there is none)."""
+        steps = max(abs(b[0] - a[0]), abs(b[1] - a[1]))
+        for k in range(1, steps + 1):
+            cell = (a[0] + round((b[0] - a[0]) * k / steps), a[1] + round((b[1] - a[1]) * k / steps))
+            if not blocked[cell]:
+                return cell
+        return b
 
     def is_clear(self, point: tuple[float, float], padding: float | None = None) -> bool:
         """Whether the body (plus padding) would fit at ``point`` without touching a known obstacle."""

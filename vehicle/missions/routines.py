@@ -51,8 +51,10 @@ class Travel:
     learn the surroundings, then plan again: the thesis's Pathfind behaviour.
     """
 
-    def __init__(self, ctx: Context, goal: tuple[float, float], tolerance: float):
+    def __init__(self, ctx: Context, goal: tuple[float, float], tolerance: float, relax: bool = False):
         self.ctx = ctx
+        self.relax = relax  # plan with less margin if that is the only way (going home)
+        self.level = 0  # how much planning had to relax so far; later plans start there
         self.goal = goal
         self.tolerance = tolerance
         self.path: list[tuple[float, float]] | None = None
@@ -60,6 +62,7 @@ class Travel:
         self.reason = ""
         self.replans = 0
         self._sent: tuple[float, float] | None = None
+        self._checked: tuple[int, int] | None = None
 
     def step(self) -> Status:
         ctx = self.ctx
@@ -71,10 +74,11 @@ class Travel:
         if ctx.distance_to(self.goal) <= self.tolerance:
             ctx.planned_path = []
             return Status.DONE
-        if self.path is None or not ctx.path_clear(self.path):
-            self.path = ctx.plan(self.goal)
+        if self.path is None or not self._still_clear():
+            self.path, self.level = ctx.plan(self.goal, self.relax, self.level)
             self.replans += 1
             self._sent = None
+            self._checked = (ctx.map.occupied_version, len(self.path or ()))
             if self.path is None:
                 self.reason = f"no known path to ({self.goal[0]:.1f}, {self.goal[1]:.1f})"
                 ctx.planned_path = []
@@ -87,6 +91,14 @@ class Travel:
             ctx.vehicle.goto(target[0], target[1], ctx.settings.altitude if ctx.kind is Kind.COPTER else None)
             self._sent = target
         return Status.RUNNING
+
+    def _still_clear(self) -> bool:
+        """Check the path against the map again, unless no cell became an obstacle since the last check."""
+        state = (self.ctx.map.occupied_version, len(self.path))
+        if state == self._checked:
+            return True
+        self._checked = state
+        return self.ctx.path_clear(self.path)
 
     def too_close(self) -> Status:
         """Stop, look around, and plan again once the scan is done."""

@@ -1,0 +1,133 @@
+"""``vehicle``: the onboard side's command line (scene, experiment, sweep, sim)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from vehicle import __version__
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+DEFAULT_SCENE = SCENES / "default.wrl"
+
+
+def _point(text: str) -> tuple[float, float]:
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y (write --start=X,Y for a negative X), not {text!r}") from None
+    return x, y
+
+
+def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = True) -> None:
+    """Options shared by ``experiment`` and ``sim``: what to fly, where, and with which settings."""
+    from vehicle.missions import missions
+    from vehicle.settings import Settings
+
+    names = list(missions())
+    parser.add_argument("--scene", default=str(DEFAULT_SCENE), help="VRML scene (default: %(default)s)")
+    parser.add_argument("--mission", required=mission_required, type=str.lower, choices=names,
+                        help="; ".join(f"{name}: {cls.help}" for name, cls in missions().items()))
+    parser.add_argument("--vehicle", default="copter", choices=["rover", "copter"])
+    parser.add_argument("--start", type=_point, help="start X,Y in scene metres (default: the scene's Start)")
+    parser.add_argument("--heading", type=float, help="start heading, compass degrees (0 = north)")
+    parser.add_argument("--altitude", type=float, help="operating altitude above the start's ground, m")
+    parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="NAME=VALUE",
+                        help="set a mission parameter: " + ", ".join(
+                            f"{n} ({u}, default {d:g}): {h}" for n, d, u, h, _ in Settings.describe()))
+    parser.add_argument("--config", help="TOML file of mission parameters")
+    parser.add_argument("--waypoints", help="QGC WPL 110 file of waypoints (square, pathfind)")
+    parser.add_argument("--seed", type=int, default=0, help="seed for sensor noise and random choices")
+
+
+def settings_from(args: argparse.Namespace, **extra):
+    from vehicle.settings import load_settings
+
+    return load_settings(args.config, args.assignments, altitude=args.altitude, **extra)
+
+
+def cmd_scene(args: argparse.Namespace) -> int:
+    from vehicle.scene import load_scene
+    from vehicle.topview import render_top_view
+
+    scene = load_scene(args.file)
+    bounds = [[round(float(v), 3) for v in row] for row in scene.bounds] if len(scene.mesh.faces) else None
+    report = {"triangles": len(scene.mesh.faces), "objects": scene.objects, "bounds": bounds,
+              "warnings": scene.warnings}
+    if scene.start is not None:
+        report["start"] = [round(v, 3) for v in scene.start]
+    if args.top_view:
+        render_top_view(scene, args.top_view, start=scene.start)
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    print(f"{args.file}: {report['triangles']} triangles, {report['objects']} objects")
+    if bounds:
+        print(f"bounds: {bounds[0]} .. {bounds[1]}")
+    if scene.start is not None:
+        print(f"start: {report['start']} heading {scene.start_heading or 0:g}")
+    for warning in scene.warnings:
+        print(f"warning: {warning}")
+    if args.top_view:
+        print(f"top view: {args.top_view}")
+    return 0
+
+
+def cmd_experiment(args: argparse.Namespace) -> int:
+    from vehicle.experiment import Experiment, run_experiment
+    from vehicle.geodesy import Datum
+    from vehicle.waypoints import load_positions
+
+    settings = settings_from(args, time_limit=args.time_limit)
+    waypoints = load_positions(args.waypoints, Datum()) if args.waypoints else None
+    experiment = Experiment(args.scene, args.mission, args.vehicle, args.start, args.heading, settings, args.seed,
+                            waypoints)
+    result = run_experiment(experiment, map_out=args.map_out)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{result['mission']} in {result['scene']} ({result['vehicle']}): {result['outcome']}"
+              f" - {result['reason']}")
+        print(f"detections {result['detections']} (cells ever hit {result['cells_ever_hit']}) at "
+              f"{result['resolution']:g} cells/m; {result.get('sim_time_s', 0):.1f} s simulated in "
+              f"{result['wall_time_s']:.2f} s; {result.get('distance_m', 0):.1f} m flown")
+        if args.map_out:
+            print(f"map written to {args.map_out}")
+    return 0 if result["outcome"] != "error" else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="vehicle", description="Onboard agent and simulated vehicle.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    scene = commands.add_parser("scene", help="load a VRML scene and describe it")
+    scene.add_argument("file")
+    scene.add_argument("--json", action="store_true", help="print a JSON object")
+    scene.add_argument("--top-view", metavar="PNG", help="write a top-down picture of the scene")
+    scene.set_defaults(run=cmd_scene)
+
+    experiment = commands.add_parser("experiment", help="run one headless mission on simulated time")
+    add_run_options(experiment)
+    experiment.add_argument("--time-limit", type=float, help="simulated seconds (default 600)")
+    experiment.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    experiment.add_argument("--map-out", metavar="DIR", help="write the final memory map (.npy and .png)")
+    experiment.set_defaults(run=cmd_experiment)
+
+    args = parser.parse_args(argv)
+    from vehicle.scene import SceneError
+    from vehicle.settings import SettingsError
+    from vehicle.waypoints import WaypointError
+    from vehicle.world import PlacementError
+
+    try:
+        return args.run(args)
+    except (SceneError, SettingsError, WaypointError, PlacementError, OSError) as error:
+        print(f"vehicle {args.command}: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,75 @@
+"""AUTO missions as QGC WPL 110 text: read with pymavlink's mavwp, written here.
+
+QGC WPL is what QGroundControl, Mission Planner and MAVProxy save, so a mission
+planned in any of them flies here, and ours open there. Item 0 is home. Writing
+is done here because mavwp saves coordinates with 6 decimals (11 cm); 8 keep
+a waypoint where it was put.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+from pymavlink import mavwp
+
+from vehicle.geodesy import Datum
+from vehicle.modes import MissionItem
+
+
+class WaypointError(ValueError):
+    pass
+
+
+def load_mission(path: str | Path) -> list[MissionItem]:
+    """Mission items from a QGC WPL file (item 0 is home)."""
+    loader = mavwp.MAVWPLoader()
+    try:
+        loader.load(str(path))
+    except (OSError, UnicodeDecodeError) as error:
+        raise WaypointError(f"{path}: {error}") from None
+    except Exception as error:  # mavwp raises MAVWPError and bare ValueErrors/IndexErrors on bad lines
+        raise WaypointError(f"{path}: not a QGC WPL 110 mission ({error})") from None
+    return [MissionItem(command=w.command, lat=w.x, lon=w.y, alt=w.z, param1=w.param1, param2=w.param2,
+                        param3=w.param3, param4=w.param4, frame=w.frame, autocontinue=w.autocontinue)
+            for w in (loader.wp(i) for i in range(loader.count()))]
+
+
+def parse_mission(text: str) -> list[MissionItem]:
+    """Mission items from QGC WPL text (for uploads over HTTP)."""
+    with tempfile.NamedTemporaryFile("w", suffix=".waypoints", delete=False, encoding="utf-8") as handle:
+        handle.write(text)
+    try:
+        return load_mission(handle.name)
+    finally:
+        os.unlink(handle.name)
+
+
+def mission_text(items: list[MissionItem]) -> str:
+    """QGC WPL 110 text of mission items, the first being home."""
+    lines = ["QGC WPL 110"]
+    for seq, item in enumerate(items):
+        lines.append("\t".join([
+            str(seq), "1" if seq == 0 else "0", str(item.frame), str(item.command),
+            *(f"{p:.8f}" for p in (item.param1, item.param2, item.param3, item.param4)),
+            f"{item.lat:.8f}", f"{item.lon:.8f}", f"{item.alt:.6f}", str(item.autocontinue),
+        ]))
+    return "\n".join(lines) + "\n"
+
+
+def save_mission(items: list[MissionItem], path: str | Path) -> None:
+    Path(path).write_text(mission_text(items), encoding="utf-8")
+
+
+def positions(items: list[MissionItem], datum: Datum) -> list[tuple[float, float]]:
+    """Scene x, y of the items that have a position, skipping home (item 0)."""
+    return [datum.to_local(item.lat, item.lon) for item in items[1:] if item.has_position]
+
+
+def load_positions(path: str | Path, datum: Datum) -> list[tuple[float, float]]:
+    points = positions(load_mission(path), datum)
+    if not points:
+        raise WaypointError(f"{path}: no waypoints with a position")
+    return points
+
