@@ -24,23 +24,34 @@ class ObstacleDatabase:
         self._points = np.zeros((capacity, 2))
         self._times = np.full(capacity, -np.inf)
         self._next = 0
+        self._clear_from: tuple[float, float] | None = None  # no obstacle within _clear_radius of here
+        self._clear_radius = 0.0
 
     def add(self, x: float, y: float, time: float) -> None:
+        if self._clear_from is not None:
+            self._clear_radius = min(self._clear_radius, math.dist(self._clear_from, (x, y)))
         self._points[self._next] = (x, y)
         self._times[self._next] = time
         self._next = (self._next + 1) % len(self._times)
 
     def clear(self) -> None:
         self._times[:] = -np.inf
+        self._clear_from = None
 
     def speed_limit(self, x: float, y: float, vx: float, vy: float, now: float) -> float:
         """Highest speed along (vx, vy) from (x, y) that can still stop short of every known obstacle."""
         speed = math.hypot(vx, vy)
         if speed < 1e-9:
             return 0.0
+        reach = self.body_radius + self.margin + speed * speed / (2 * self.accel) + 1.0  # further cannot matter
+        if self._clear_from is not None and math.dist(self._clear_from, (x, y)) + reach < self._clear_radius:
+            return math.inf  # nothing known anywhere near: skip the search
         rel = self._points - (x, y)
-        reach = self.body_radius + self.margin + 12.5  # no obstacle further than this limits speeds up to 5 m/s
-        near = (self._times > now - self.lifetime) & (np.abs(rel[:, 0]) < reach) & (np.abs(rel[:, 1]) < reach)
+        live = self._times > now - self.lifetime
+        distances = np.hypot(rel[:, 0], rel[:, 1])
+        self._clear_from = (x, y)
+        self._clear_radius = float(distances[live].min()) if live.any() else math.inf
+        near = live & (distances < reach)
         if not near.any():
             return math.inf
         ux, uy = vx / speed, vy / speed

@@ -11,6 +11,7 @@ everything within some radius, and until it leaves that ball no test is needed
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,17 +86,16 @@ class Collider:
             return self.search
         return min(self.search, float(point_triangle_distance(point, self._triangles[ids]).min()))
 
-    def sweep(self, p0: np.ndarray, p1: np.ndarray) -> Contact | None:
-        """First contact of the body moving in a straight line from p0 to p1, or None."""
+    def sweep(self, p0, p1) -> Contact | None:
+        """First contact of the body moving in a straight line from p0 to p1 (x, y, z), or None."""
+        if self._anchor is not None and max(math.dist(p0, self._anchor), math.dist(p1, self._anchor)) <= self._safe:
+            return None  # still inside the ball known to be clear
+        step = math.dist(p0, p1)
         p0 = np.asarray(p0, dtype=np.float64)
         p1 = np.asarray(p1, dtype=np.float64)
-        if self._anchor is not None and max(np.linalg.norm(p0 - self._anchor),
-                                            np.linalg.norm(p1 - self._anchor)) <= self._safe:
-            return None
-        step = float(np.linalg.norm(p1 - p0))
         clear = self.clearance(p0)
         if clear - self.radius > step:
-            self._anchor, self._safe = p0, clear - self.radius
+            self._anchor, self._safe = tuple(p0), clear - self.radius
             return None
         self._anchor = None
         ids = self._candidates(np.minimum(p0, p1) - self.radius, np.maximum(p0, p1) + self.radius)

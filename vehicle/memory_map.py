@@ -25,6 +25,8 @@ class MemoryMap:
     LIMIT = 30  # saturation, so a long-seen wall can still fade within a few passes
     OCCUPIED_AT = 6  # at or above: occupied
     FREE_AT = -3  # at or below: free
+    NO_ECHO_CLEARS = 15.0  # m: a reading without echo is evidence of free space only this far
+    # (a surface met at a grazing angle returns no echo either, so "nothing" is weak evidence)
 
     def __init__(self, center: tuple[float, float], space_size: float = 100.0, resolution: float = 10.0,
                  band: float = 1.0):
@@ -57,42 +59,86 @@ class MemoryMap:
         return self.cell_of(x, y) is not None
 
     # ---- evidence ----------------------------------------------------------------------------
+    def add_readings(self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray,
+                     max_ranges: np.ndarray) -> int:
+        """Project a batch of readings into the map; returns how many marked an obstacle.
+
+        ``distances`` holds NaN where a reading had no echo (then the ray is free up to
+        its max range). A batch is one monitor period: each cell that any ray passes
+        loses ``MISS`` once, each cell a ray ends in gains ``HIT`` once (readings of one
+        period see the same thing, so they are one piece of evidence); misses are
+        applied before hits. A ray that leaves the band around the sensor's height
+        counts only up to where it leaves it, and its echo (ground or ceiling) is no
+        obstacle.
+        """
+        origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+        directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        if not len(origins):
+            return 0
+        echo = ~np.isnan(distances)
+        lengths = np.where(echo, distances, np.minimum(max_ranges, self.NO_ECHO_CLEARS))
+        vertical = np.abs(directions[:, 2] * lengths)
+        leaves = vertical > self.band
+        lengths = np.where(leaves, lengths * self.band / np.maximum(vertical, 1e-12), lengths)
+        echo &= ~leaves
+        ends = origins[:, :2] + directions[:, :2] * lengths[:, None]
+        hit_of_ray = np.where(echo, self._flat_cells(ends[:, 0], ends[:, 1]), -1)
+        passed, ray = self._cells_along(origins[:, :2], ends)
+        self._lower(passed[passed != hit_of_ray[ray]], self.MISS)  # a ray does not pass its own end cell
+        hits = hit_of_ray[hit_of_ray >= 0]
+        if len(hits):
+            cells = hits
+            flat = self.grid.reshape(-1)
+            before = flat[cells].astype(np.int16)
+            after = np.minimum(before + self.HIT, self.LIMIT)
+            flat[cells] = after  # a cell listed twice is written twice with the same value
+            self.ever_hit.reshape(-1)[cells] = True
+            if np.any((before < self.OCCUPIED_AT) & (after >= self.OCCUPIED_AT)):
+                self.occupied_version += 1
+            self._changed.append(cells)
+        return len(hits)
+
     def add_reading(self, origin: np.ndarray, direction: np.ndarray, distance: float | None,
                     max_range: float) -> bool:
-        """Project one reading into the map; True when it marked an obstacle."""
-        length = max_range if distance is None else distance
-        end = origin + direction * length
-        vertical = direction[2] * length
-        if abs(vertical) > self.band:  # the ray leaves the band: only its part inside it is evidence
-            length = length * self.band / abs(vertical)
-            end = origin + direction * length
-            distance = None
-        cells = self._cells_along(origin[0], origin[1], end[0], end[1])
-        hit_cell = None
-        if distance is not None:
-            hit_cell = self.cell_of(end[0], end[1])
-            if hit_cell is not None:
-                hit_flat = hit_cell[0] * self.size + hit_cell[1]
-                cells = cells[cells != hit_flat]
-        self._lower(cells, self.MISS)
-        if hit_cell is None:
-            return False
-        row, col = hit_cell
-        before = int(self.grid[row, col])
-        self.grid[row, col] = min(before + self.HIT, self.LIMIT)
-        if before < self.OCCUPIED_AT <= before + self.HIT:
-            self.occupied_version += 1
-        self.ever_hit[row, col] = True
-        self._changed.append(np.array([row * self.size + col]))
-        return True
+        """Project one reading (see ``add_readings``); True when it marked an obstacle."""
+        return self.add_readings(np.asarray(origin)[None], np.asarray(direction)[None],
+                                 np.array([np.nan if distance is None else distance]), np.array([max_range])) > 0
+
+    def _flat_cells(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Flat index of the cell of each point, -1 outside the map."""
+        cols = np.floor((x - self.origin[0]) * self.resolution).astype(np.int64)
+        rows = np.floor((y - self.origin[1]) * self.resolution).astype(np.int64)
+        inside = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
+        return np.where(inside, rows * self.size + cols, -1)
+
+    def _cells_along(self, starts: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Flat indices of the cells the 2D segments pass through (inside the map), each once per segment,
+        and the index of the segment each belongs to.
+
+        Samples each segment once per cell length (a cell a line only clips near a corner
+        may be missed, which costs nothing here); a straight line never comes back to a
+        cell it left, so dropping repeats of the previous sample leaves each cell once.
+        """
+        lengths = np.hypot(*(ends - starts).T)
+        samples = (lengths * self.resolution).astype(np.int64) + 2
+        ray = np.repeat(np.arange(len(samples)), samples)
+        first = np.repeat(np.cumsum(samples) - samples, samples)
+        t = (np.arange(len(ray)) - first) / np.repeat(samples - 1, samples)
+        x = starts[ray, 0] + (ends[ray, 0] - starts[ray, 0]) * t
+        y = starts[ray, 1] + (ends[ray, 1] - starts[ray, 1]) * t
+        flat = self._flat_cells(x, y)
+        new = np.ones(len(flat), dtype=bool)
+        new[1:] = (flat[1:] != flat[:-1]) | (ray[1:] != ray[:-1])
+        new &= flat >= 0
+        return flat[new], ray[new]
 
     def _lower(self, cells: np.ndarray, amount: int, floor: int | None = None) -> None:
-        """Remove obstacle evidence from the cells (flat indices)."""
+        """Remove ``amount`` of obstacle evidence from each listed cell (once, however often listed)."""
         if not len(cells):
             return
         flat = self.grid.reshape(-1)
-        before = flat[cells]
-        after = np.maximum(before.astype(np.int16) - amount, -self.LIMIT)
+        before = flat[cells].astype(np.int16)
+        after = np.maximum(before - amount, -self.LIMIT)
         if floor is not None:
             after = np.minimum(after, floor)
         flat[cells] = after
@@ -119,24 +165,6 @@ class MemoryMap:
         cells = rows[keep] * self.size + cols[keep]
         cells = cells[self.grid.reshape(-1)[cells] > self.FREE_AT]
         self._lower(cells, 0, floor=self.FREE_AT)
-
-    def _cells_along(self, x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
-        """Flat indices of the cells the 2D segment passes through (inside the map), in order.
-
-        Samples the segment every half cell (a cell the line only clips at a corner
-        may be missed, which costs nothing here); a straight line never comes back to
-        a cell it left, so dropping repeats of the previous sample leaves each cell once.
-        """
-        length = math.hypot(x1 - x0, y1 - y0)
-        samples = int(length * self.resolution * 2) + 2
-        t = np.arange(samples) * (1.0 / (samples - 1))
-        cols = ((x0 - self.origin[0] + (x1 - x0) * t) * self.resolution).astype(np.int64)
-        rows = ((y0 - self.origin[1] + (y1 - y0) * t) * self.resolution).astype(np.int64)
-        inside = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
-        flat = rows[inside] * self.size + cols[inside]
-        if len(flat) > 1:
-            flat = flat[np.concatenate(([True], flat[1:] != flat[:-1]))]
-        return flat
 
     def take_changes(self) -> np.ndarray:
         """Flat indices of cells changed since the last call (for streaming deltas)."""

@@ -9,7 +9,7 @@ stop before it gets any closer. It also keeps the mission's progress figures.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -42,6 +42,17 @@ class Monitor:
         self._last_xy: tuple[float, float] | None = None
         self._pending: list[Reading] = []
 
+    def _nearest_ahead(self, x, y, travel, origins, directions, distances) -> float | None:
+        """Distance ahead of the nearest echo inside the corridor the body sweeps along ``travel``."""
+        echo = ~np.isnan(distances)
+        hits = origins[echo] + directions[echo] * distances[echo, None]
+        level = np.abs(hits[:, 2] - origins[echo, 2]) <= self.map.band  # not ground or ceiling
+        ux, uy = math.sin(travel), math.cos(travel)
+        dx, dy = hits[:, 0] - x, hits[:, 1] - y
+        ahead = dx * ux + dy * uy
+        inside = level & (ahead > 0) & (np.abs(dx * uy - dy * ux) < self.radius + self.settings.padding)
+        return float(ahead[inside].min()) if inside.any() else None
+
     def collect(self, readings: list[Reading]) -> None:
         """Buffer readings taken between two monitor periods."""
         self._pending.extend(readings)
@@ -59,28 +70,21 @@ class Monitor:
         self._last_xy = (x, y)
         self.map.mark_body(x, y, self.radius)
         farness = self.settings.farness
-        corridor = self.radius + self.settings.padding
-        ux, uy = (math.sin(travel), math.cos(travel)) if travel is not None else (0.0, 0.0)
-        for reading in self._pending:
-            if reading.distance is not None and reading.distance > farness:
-                self.readings_dropped += 1
-                reading = Reading(reading.time, reading.sensor, reading.origin, reading.direction, None,
-                                  min(reading.max_range, farness), reading.yaw_offset)
-            self.readings_used += 1
-            self.map.add_reading(reading.origin, reading.direction, reading.distance,
-                                 min(reading.max_range, farness))
-            observation.readings.append(reading)
-            if reading.distance is None or travel is None:
-                continue
-            hit = reading.hit
-            if abs(hit[2] - reading.origin[2]) > self.map.band:
-                continue  # ground or ceiling
-            dx, dy = hit[0] - x, hit[1] - y
-            ahead = dx * ux + dy * uy
-            if ahead > 0 and abs(dx * uy - dy * ux) < corridor:
-                nearest = observation.nearest_ahead
-                observation.nearest_ahead = ahead if nearest is None else min(nearest, ahead)
-        self._pending.clear()
+        readings = [r if r.distance is None or r.distance <= farness else replace(r, distance=None)
+                    for r in self._pending]  # past farness: a glitch, or too far to trust
+        observation.readings = readings
+        self.readings_used += len(readings)
+        self.readings_dropped += sum(r.distance is not None for r in self._pending) - \
+            sum(r.distance is not None for r in readings)
+        if readings:
+            origins = np.array([r.origin for r in readings])
+            directions = np.array([r.direction for r in readings])
+            distances = np.array([np.nan if r.distance is None else r.distance for r in readings])
+            max_ranges = np.minimum([r.max_range for r in readings], farness)
+            self.map.add_readings(origins, directions, distances, max_ranges)
+            if travel is not None:
+                observation.nearest_ahead = self._nearest_ahead(x, y, travel, origins, directions, distances)
+        self._pending = []
         observation.too_close = (observation.nearest_ahead is not None
                                  and observation.nearest_ahead < self.settings.closeness)
         half = self.settings.space_size

@@ -109,32 +109,56 @@ class SonarArray:
         self.sensors = sensors
         self.caster = caster
         self.rng = np.random.default_rng(seed)
+        self._mount_key: tuple[float, ...] | None = None
+        self._cos_critical = np.array([s._cos_critical for s in sensors])
+        self._min_range = np.array([s.min_range for s in sensors])
+        self._max_range = np.array([s.max_range for s in sensors])
+        self._uniform = len({len(s._local_rays) for s in sensors}) == 1
+
+    def _body_rays(self) -> tuple[np.ndarray, np.ndarray]:
+        """All sensors' rays and beam axes in the body frame; recomputed only when a servo moved."""
+        key = tuple(s.yaw_offset for s in self.sensors)
+        if key != self._mount_key:
+            mounts = [s._mount_rotation() for s in self.sensors]
+            self._rays = np.concatenate([s._local_rays @ m.T for s, m in zip(self.sensors, mounts, strict=True)])
+            self._axes = np.array([m[:, 0] for m in mounts])
+            self._mount_key = key
+        return self._rays, self._axes
 
     def read(self, pose: Pose, time: float) -> list[Reading]:
         origin = np.array((pose.x, pose.y, pose.z))
         body = body_to_world(pose)
-        rotations = [s._to_world(pose, body) for s in self.sensors]
-        if len(self.sensors) == 1:
-            directions = self.sensors[0]._local_rays @ rotations[0].T
-        else:
-            directions = np.concatenate([s._local_rays @ r.T for s, r in zip(self.sensors, rotations, strict=True)])
+        rays, axes = self._body_rays()
+        directions = rays @ body.T
         distance, faces = self.caster.cast_from(origin, directions)
         echo = self.caster.incidence_cos(directions, faces)
+        if self._uniform:  # one reduction for all sensors: each reports its nearest usable echo
+            count = len(self.sensors)
+            usable = ((echo.reshape(count, -1) >= self._cos_critical[:, None])
+                      & (distance.reshape(count, -1) >= self._min_range[:, None]))
+            nearest = np.where(usable, distance.reshape(count, -1), np.inf).min(axis=1)
+        else:
+            nearest = self._nearest_each(distance, echo)
+        world_axes = axes @ body.T
         readings = []
-        start = 0
-        for index, (sensor, rotation) in enumerate(zip(self.sensors, rotations, strict=True)):
-            end = start + len(sensor._local_rays)
-            d = distance[start:end]
-            nearest = float(np.where((echo[start:end] >= sensor._cos_critical) & (d >= sensor.min_range), d,
-                                     np.inf).min())
-            value = nearest if nearest <= sensor.max_range else None
+        for index, sensor in enumerate(self.sensors):
+            value = float(nearest[index]) if nearest[index] <= self._max_range[index] else None
             if value is not None and sensor.noise > 0:
                 noisy = value + self.rng.normal(0.0, sensor.noise)
                 value = float(min(sensor.max_range, max(sensor.min_range, noisy)))
-            readings.append(Reading(time, index, origin, rotation[:, 0].copy(), value, sensor.max_range,
+            readings.append(Reading(time, index, origin, world_axes[index], value, sensor.max_range,
                                     sensor.yaw_offset))
-            start = end
         return readings
+
+    def _nearest_each(self, distance: np.ndarray, echo: np.ndarray) -> np.ndarray:
+        nearest = np.empty(len(self.sensors))
+        start = 0
+        for index, sensor in enumerate(self.sensors):
+            end = start + len(sensor._local_rays)
+            usable = (echo[start:end] >= sensor._cos_critical) & (distance[start:end] >= sensor.min_range)
+            nearest[index] = np.where(usable, distance[start:end], np.inf).min()
+            start = end
+        return nearest
 
 
 SENSOR_SUITES = {

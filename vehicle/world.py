@@ -103,9 +103,9 @@ class World:
             bottom = pose.z - self.limits.radius - self.limits.ground_clearance
             self._ground = self.ground_under(pose.x, pose.y, bottom)
             self._ground_xy = (pose.x, pose.y)
-        before = np.array(pose.xyz())
+        before = pose.xyz()
         self.autopilot.step(self.dt, *self._ground)
-        after = np.array(pose.xyz())
+        after = pose.xyz()
         self.steps += 1
         self.time = self.steps * self.dt
         contact = self.collider.sweep(before, after)
