@@ -9,6 +9,7 @@ scene metres; mission items carry latitude/longitude, converted with the datum.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 from vehicle.avoidance import ObstacleDatabase
@@ -67,7 +68,7 @@ class Autopilot:
         self.mission: list[MissionItem] = [self.home_item()]
         self.current = 1
         self.mission_running = False
-        self.events: list[Event] = []
+        self.events: deque[Event] = deque(maxlen=256)  # drained by telemetry; bounded when nobody listens
         self.time = 0.0
         self._target: tuple[float, float, float] | None = None  # GUIDED position
         self._velocity: tuple[float, float, float, float] | None = None  # vx, vy, vz, expiry

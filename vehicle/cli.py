@@ -84,7 +84,16 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     waypoints = load_positions(args.waypoints, Datum()) if args.waypoints else None
     experiment = Experiment(args.scene, args.mission, args.vehicle, args.start, args.heading, settings, args.seed,
                             waypoints)
-    result = run_experiment(experiment, map_out=args.map_out)
+    log = None
+    if args.log:
+        from vehicle.flightlog import ExperimentLog
+
+        log = ExperimentLog(args.log)
+    try:
+        result = run_experiment(experiment, map_out=args.map_out, on_step=log)
+    finally:
+        if log is not None:
+            log.close()
     if args.json:
         print(json.dumps(result))
     else:
@@ -95,6 +104,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
               f"{result['wall_time_s']:.2f} s; {result.get('distance_m', 0):.1f} m flown")
         if args.map_out:
             print(f"map written to {args.map_out}")
+        if log is not None:
+            print(f"log written to {args.log} ({log.messages} messages)")
     return 0 if result["outcome"] != "error" else 1
 
 
@@ -114,6 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     experiment.add_argument("--time-limit", type=float, help="simulated seconds (default 600)")
     experiment.add_argument("--json", action="store_true", help="print the result as one JSON object")
     experiment.add_argument("--map-out", metavar="DIR", help="write the final memory map (.npy and .png)")
+    experiment.add_argument("--log", metavar="FILE.tlog", help="write the run as a MAVLink telemetry log")
     experiment.set_defaults(run=cmd_experiment)
 
     args = parser.parse_args(argv)

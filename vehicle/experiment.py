@@ -37,7 +37,7 @@ class Experiment:
 
 def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: str | Path | None = None,
                    on_step: Callable[[World, Agent], None] | None = None) -> dict:
-    """Run the mission to its outcome; ``on_step`` is called after every agent step (for logging)."""
+    """Run the mission to its outcome; ``on_step(world, agent, readings)`` is called after every step."""
     started = time.perf_counter()
     settings = experiment.settings
     result = {
@@ -83,14 +83,16 @@ def _fly(world: World, agent: Agent, on_step) -> tuple[str, str]:
     period = max(1, round(world.settings.monitor_period / world.dt))
     limit = world.settings.time_limit
     while True:
-        agent.collect(world.step())
+        readings = world.step()
+        agent.collect(readings)
         if world.collision is not None:
             return "collision", world.collision.describe()
-        if world.steps % period == 0:
+        monitor_due = world.steps % period == 0
+        if monitor_due:
             agent.step(world.time)
-            if on_step is not None:
-                on_step(world, agent)
-            if agent.done:
-                return agent.outcome, agent.reason
+        if on_step is not None:
+            on_step(world, agent, readings)
+        if monitor_due and agent.done:
+            return agent.outcome, agent.reason
         if world.time >= limit:
             return "timeout", f"time limit of {limit:g} s reached in phase {agent.phase.value}"

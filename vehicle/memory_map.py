@@ -23,6 +23,8 @@ class MemoryMap:
     HIT = 9  # evidence added to the cell a reading ends in
     MISS = 3  # evidence removed from each cell a reading passes through
     LIMIT = 30  # saturation, so a long-seen wall can still fade within a few passes
+    FLOOR = -3  # free evidence saturates at once: a newcomer shows up at its first echo, and
+    # free cells change only once, which keeps the streamed map small
     OCCUPIED_AT = 6  # at or above: occupied
     FREE_AT = -3  # at or below: free
     NO_ECHO_CLEARS = 15.0  # m: a reading without echo is evidence of free space only this far
@@ -138,7 +140,7 @@ class MemoryMap:
             return
         flat = self.grid.reshape(-1)
         before = flat[cells].astype(np.int16)
-        after = np.maximum(before - amount, -self.LIMIT)
+        after = np.maximum(before - amount, self.FLOOR)
         if floor is not None:
             after = np.minimum(after, floor)
         flat[cells] = after

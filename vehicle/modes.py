@@ -9,9 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from pymavlink import mavutil
-
-mav = mavutil.mavlink
+from vehicle.mav import mavlink as mav
 
 
 class Kind(StrEnum):

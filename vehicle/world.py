@@ -13,6 +13,7 @@ import numpy as np
 
 from vehicle.autopilot import Autopilot
 from vehicle.avoidance import ObstacleDatabase
+from vehicle.battery import Battery
 from vehicle.collision import Collider, Contact
 from vehicle.geodesy import Datum
 from vehicle.modes import Kind
@@ -60,6 +61,7 @@ class World:
                                    cruise_speed=self.settings.speed, wp_radius=self.settings.closeness,
                                    avoidance=self.avoidance)
         self.sonars = SonarArray(sensors if sensors is not None else sensor_suite(DEFAULT_SUITE), self.caster, seed)
+        self.battery = Battery()
         self.collision: Contact | None = None
         self.distance_travelled = 0.0
         self._ground = (ground, (0.0, 0.0, 1.0))
@@ -116,6 +118,7 @@ class World:
             self.autopilot.armed = False
             return []
         self.distance_travelled += math.dist(before, after)
+        self.battery.drain(self.dt, self.autopilot.armed, self.autopilot.flying, self.body.speed, self.body.vz)
         if self.time + 1e-9 < self._next_reading:
             return []
         self._next_reading += 1.0 / self.sonar_rate

@@ -1,0 +1,240 @@
+"""The memory map and the planned path over MAVLink TUNNEL messages.
+
+TUNNEL (385) carries at most 128 bytes of payload, tagged with a payload type;
+types from 32768 up are free for private use. Three are ours (all integers
+little-endian):
+
+* ``MAP_SNAPSHOT`` (32800): one chunk of a full map. Chunk header
+  ``<HHH`` = snapshot id, chunk index, chunk count, then up to 122 bytes of
+  the snapshot blob. The blob, once its chunks are joined, is ``<BHffI``
+  (format version 1, cells per side, resolution in cells/m, south-west corner
+  x and y in metres east and north of home) then ``<I`` (the number of the
+  last delta already in it) then the zlib-compressed grid: int8 log-odds,
+  rows south to north, columns west to east.
+* ``MAP_DELTA`` (32801): ``<IB`` = delta number, cell count n, then n times
+  ``<Ib`` = flat cell index (row * size + column) and its new value. Values
+  are absolute, so applying a delta twice does no harm.
+* ``PATH`` (32802): ``<HBB`` = path id, chunk index, chunk count, then up to
+  15 points ``<ff`` (metres east and north of home). An empty path is one
+  chunk with no points.
+
+A receiver that joins late, or misses a delta (a gap in the numbers), waits for
+the next snapshot and then applies the deltas numbered after it, so its copy
+equals the onboard map cell for cell. Snapshots go out every few seconds, less
+often when they are big, so that they use at most a set share of the link.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+MAP_SNAPSHOT = 32800
+MAP_DELTA = 32801
+PATH = 32802
+PAYLOAD = 128
+
+_CHUNK = struct.Struct("<HHH")
+_SNAPSHOT = struct.Struct("<BHfffIHHHH")
+_DELTA = struct.Struct("<IB")
+_CELL = struct.Struct("<Ib")
+_PATH = struct.Struct("<HBB")
+_POINT = struct.Struct("<ff")
+_CELLS = np.dtype([("i", "<u4"), ("v", "i1")])
+CELLS_PER_DELTA = (PAYLOAD - _DELTA.size) // _CELL.size
+POINTS_PER_CHUNK = (PAYLOAD - _PATH.size) // _POINT.size
+FORMAT_VERSION = 1
+
+
+@dataclass
+class MapGeometry:
+    size: int
+    resolution: float
+    origin: tuple[float, float]  # south-west corner, metres east and north of home
+
+
+# ---- sending -------------------------------------------------------------------------------------
+class MapStreamer:
+    """Turns the onboard map into TUNNEL payloads: deltas as cells change, a snapshot now and then."""
+
+    def __init__(self, memory_map, home: tuple[float, float], snapshot_period: float = 5.0,
+                 delta_period: float = 0.5, snapshot_budget: float = 8000.0):
+        self.map = memory_map
+        self.home = home
+        self.snapshot_period = snapshot_period  # at least this long between snapshots
+        self.snapshot_budget = snapshot_budget  # bytes/s that snapshots may use on average
+        self.delta_period = delta_period
+        self.delta_seq = 0
+        self.snapshot_id = 0
+        self.path_id = 0
+        self._next_snapshot = 0.0
+        self._next_delta = 0.0
+        self._last_path: list[tuple[float, float]] | None = None
+        self._sent = memory_map.grid.reshape(-1).copy()  # the values receivers have been told
+
+    def tick(self, now: float) -> list[tuple[int, bytes]]:
+        """Payloads (type, bytes) due at ``now``."""
+        out: list[tuple[int, bytes]] = []
+        if now >= self._next_delta:
+            self._next_delta = now + self.delta_period
+            out += self.deltas()
+        if now >= self._next_snapshot:
+            chunks = self.snapshot()
+            size = len(chunks) * PAYLOAD
+            self._next_snapshot = now + max(self.snapshot_period, size / self.snapshot_budget)
+            out += chunks
+        return out
+
+    def deltas(self) -> list[tuple[int, bytes]]:
+        """Cells whose value differs from what was last sent, in as few payloads as fit."""
+        touched = self.map.take_changes()
+        grid = self.map.grid.reshape(-1)
+        changed = touched[grid[touched] != self._sent[touched]]
+        self._sent[changed] = grid[changed]
+        cells = np.empty(len(changed), dtype=_CELLS)
+        cells["i"], cells["v"] = changed, grid[changed]
+        out = []
+        for start in range(0, len(cells), CELLS_PER_DELTA):
+            part = cells[start:start + CELLS_PER_DELTA]
+            self.delta_seq += 1
+            out.append((MAP_DELTA, _DELTA.pack(self.delta_seq, len(part)) + part.tobytes()))
+        return out
+
+    def snapshot(self) -> list[tuple[int, bytes]]:
+        """The whole map, chunked. Pending changes go out as deltas first, so the snapshot covers them."""
+        out = self.deltas()
+        m = self.map
+        origin = (m.origin[0] - self.home[0], m.origin[1] - self.home[1])
+        rows = np.flatnonzero(m.grid.any(axis=1))
+        cols = np.flatnonzero(m.grid.any(axis=0))
+        r0, c0 = (int(rows[0]), int(cols[0])) if len(rows) else (0, 0)
+        nr, nc = (int(rows[-1]) + 1 - r0, int(cols[-1]) + 1 - c0) if len(rows) else (0, 0)
+        part = np.ascontiguousarray(m.grid[r0:r0 + nr, c0:c0 + nc])
+        blob = _SNAPSHOT.pack(FORMAT_VERSION, m.size, m.resolution, *origin, self.delta_seq, r0, c0, nr, nc) + \
+            zlib.compress(part.tobytes(), 6)
+        self.snapshot_id = (self.snapshot_id + 1) % 65536
+        return out + _chunks(MAP_SNAPSHOT, self.snapshot_id, blob)
+
+    def path(self, points: list[tuple[float, float]], force: bool = False) -> list[tuple[int, bytes]]:
+        """The planned path (scene metres) if it changed since the last call (or ``force``)."""
+        rounded = [(round(x - self.home[0], 2), round(y - self.home[1], 2)) for x, y in points]
+        if rounded == self._last_path and not force:
+            return []
+        self._last_path = rounded
+        self.path_id = (self.path_id + 1) % 65536
+        groups = [rounded[i:i + POINTS_PER_CHUNK] for i in range(0, len(rounded), POINTS_PER_CHUNK)] or [[]]
+        return [(PATH, _PATH.pack(self.path_id, index, len(groups)) + b"".join(_POINT.pack(*p) for p in group))
+                for index, group in enumerate(groups)]
+
+
+def _chunks(kind: int, ident: int, blob: bytes) -> list[tuple[int, bytes]]:
+    room = PAYLOAD - _CHUNK.size
+    parts = [blob[i:i + room] for i in range(0, len(blob), room)]
+    if len(parts) > 65535:
+        raise ValueError("map snapshot too large to chunk")
+    return [(kind, _CHUNK.pack(ident, index, len(parts)) + part) for index, part in enumerate(parts)]
+
+
+# ---- receiving -----------------------------------------------------------------------------------
+@dataclass
+class MapReceiver:
+    """Rebuilds a vehicle's map (and planned path) from TUNNEL payloads, tolerating loss and late joining."""
+
+    geometry: MapGeometry | None = None
+    grid: np.ndarray | None = None
+    applied: int = 0  # number of the last delta applied
+    synced: bool = False  # the copy equals the onboard map as of delta ``applied``
+    path: list[tuple[float, float]] = field(default_factory=list)  # metres east, north of home
+    snapshots: int = 0
+    gaps: int = 0
+    version: int = 0  # increments whenever the grid changes (for redraws)
+    _parts: dict[int, dict[int, bytes]] = field(default_factory=dict)
+    _pending: dict[int, bytes] = field(default_factory=dict)  # deltas waiting for a snapshot
+    _path_parts: dict[int, dict[int, list]] = field(default_factory=dict)
+
+    def feed(self, payload_type: int, payload: bytes) -> bool:
+        """Take one TUNNEL payload; True if it was ours. Malformed payloads are dropped."""
+        try:
+            if payload_type == MAP_DELTA:
+                self._delta(payload)
+            elif payload_type == MAP_SNAPSHOT:
+                self._snapshot_chunk(payload)
+            elif payload_type == PATH:
+                self._path_chunk(payload)
+            else:
+                return False
+        except (struct.error, zlib.error, ValueError):
+            return True  # ours but damaged: ignore, the next snapshot repairs
+        return True
+
+    def _delta(self, payload: bytes) -> None:
+        seq, count = _DELTA.unpack_from(payload)
+        if len(payload) < _DELTA.size + count * _CELL.size:
+            raise ValueError("short delta")
+        if not self.synced:
+            self._pending[seq] = payload
+            if len(self._pending) > 4096:  # never got a snapshot: keep only the recent ones
+                self._pending.pop(min(self._pending))
+            return
+        if seq <= self.applied:
+            return
+        if seq != self.applied + 1:
+            self.gaps += 1
+            self.synced = False
+            self._pending = {seq: payload}
+            return
+        self._apply(payload)
+
+    def _apply(self, payload: bytes) -> None:
+        seq, count = _DELTA.unpack_from(payload)
+        cells = np.frombuffer(payload, dtype=_CELLS, count=count, offset=_DELTA.size)
+        flat = self.grid.reshape(-1)
+        if count and int(cells["i"].max()) >= flat.size:
+            raise ValueError("cell index outside the map")
+        flat[cells["i"]] = cells["v"]
+        self.applied = seq
+        self.version += 1
+
+    def _snapshot_chunk(self, payload: bytes) -> None:
+        ident, index, count = _CHUNK.unpack_from(payload)
+        parts = self._parts.setdefault(ident, {})
+        parts[index] = payload[_CHUNK.size:]
+        for other in [k for k in self._parts if k != ident]:  # an older snapshot will not complete now
+            if len(self._parts[other]) < len(parts):
+                del self._parts[other]
+        if len(parts) < count:
+            return
+        del self._parts[ident]
+        blob = b"".join(parts[i] for i in range(count))
+        version, size, resolution, ox, oy, last_delta, r0, c0, nr, nc = _SNAPSHOT.unpack_from(blob)
+        if version != FORMAT_VERSION:
+            raise ValueError(f"unknown map format {version}")
+        part = np.frombuffer(zlib.decompress(blob[_SNAPSHOT.size:]), dtype=np.int8)
+        if part.size != nr * nc or r0 + nr > size or c0 + nc > size:
+            raise ValueError("snapshot size mismatch")
+        grid = np.zeros((size, size), dtype=np.int8)
+        grid[r0:r0 + nr, c0:c0 + nc] = part.reshape(nr, nc)
+        self.geometry = MapGeometry(size, resolution, (ox, oy))
+        self.grid = grid
+        self.applied = last_delta
+        self.synced = True
+        self.snapshots += 1
+        self.version += 1
+        pending, self._pending = self._pending, {}
+        for seq in sorted(s for s in pending if s > last_delta):
+            self._delta(pending[seq])
+
+    def _path_chunk(self, payload: bytes) -> None:
+        ident, index, count = _PATH.unpack_from(payload)
+        body = payload[_PATH.size:]
+        points = [_POINT.unpack_from(body, i * _POINT.size) for i in range(len(body) // _POINT.size)]
+        parts = self._path_parts.setdefault(ident, {})
+        parts[index] = points
+        for other in [k for k in self._path_parts if k != ident]:
+            del self._path_parts[other]
+        if len(parts) == count:
+            self.path = [p for i in range(count) for p in parts[i]]
+            del self._path_parts[ident]

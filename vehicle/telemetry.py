@@ -1,0 +1,225 @@
+"""What a ground station hears from the vehicle: ArduPilot's standard messages plus the map in TUNNEL.
+
+``Telemetry.tick(now)`` returns the messages due at ``now`` on a per-message
+schedule (intervals can be changed, as MAV_CMD_SET_MESSAGE_INTERVAL asks).
+The clock is the caller's: wall time for a live ``vehicle sim``, simulated
+time for the log of a headless experiment; the messages are the same.
+Conventions: LOCAL_POSITION_NED is metres from home (north, east, down);
+DISTANCE_SENSOR carries one reading, ``max_distance + 1`` meaning no echo.
+"""
+
+from __future__ import annotations
+
+import math
+
+from vehicle import __version__
+from vehicle.agent import Agent
+from vehicle.mapstream import PAYLOAD, MapStreamer
+from vehicle.mav import mavlink
+from vehicle.modes import mode_number
+from vehicle.sensors import Reading
+from vehicle.world import World
+
+# SYS_STATUS sensor bits we claim present, enabled and healthy (MAVProxy warns of a fence breach
+# unless the geofence bits are set)
+SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+           | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+           | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+           | mavlink.MAV_SYS_STATUS_SENSOR_RC_RECEIVER | mavlink.MAV_SYS_STATUS_GEOFENCE
+           | mavlink.MAV_SYS_STATUS_AHRS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+           | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY)
+
+DEFAULT_INTERVALS = {  # seconds
+    mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.05,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.05,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: 0.05,
+    mavlink.MAVLINK_MSG_ID_VFR_HUD: 0.25,
+    mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
+}
+PATH_PERIOD = 0.5  # s between checks of the planned path
+VERSION = tuple(int(p) for p in __version__.split(".")[:3])
+
+
+class Telemetry:
+    def __init__(self, world: World, agent: Agent | None, start: float = 0.0, sysid: int = 1):
+        self.world = world
+        self.sysid = sysid
+        self.agent = agent
+        self.boot = start
+        self.intervals: dict[int, float] = dict(DEFAULT_INTERVALS)
+        self._due: dict[int, float] = dict.fromkeys(self.intervals, start)
+        self.streamer = MapStreamer(agent.map, agent.ctx.home) if agent is not None else None
+        self._next_path = start
+
+    # ---- schedule ------------------------------------------------------------------------------
+    def set_interval(self, message_id: int, interval: float | None) -> bool:
+        """Set how often a message is sent (seconds; None restores the default, <= 0 stops it)."""
+        if message_id not in self.builders():
+            return False
+        if interval is None:
+            interval = DEFAULT_INTERVALS.get(message_id, 1.0)
+        self.intervals[message_id] = interval
+        self._due[message_id] = self.boot
+        return True
+
+    def tick(self, now: float) -> list:
+        """Messages due at ``now``: the periodic ones, events, and map and path payloads."""
+        out = []
+        builders = self.builders()
+        for message_id, interval in self.intervals.items():
+            if interval > 0 and now >= self._due.get(message_id, now):
+                self._due[message_id] = max(self._due.get(message_id, now) + interval, now)
+                out.append(builders[message_id](now))
+        out += self.events(now)
+        if self.streamer is not None:
+            out += [self._tunnel(kind, payload) for kind, payload in self.streamer.tick(now)]
+            if now >= self._next_path:
+                self._next_path = now + PATH_PERIOD
+                out += [self._tunnel(k, p) for k, p in self.streamer.path(self.agent.ctx.planned_path)]
+        return out
+
+    def builders(self) -> dict:
+        return {
+            mavlink.MAVLINK_MSG_ID_HEARTBEAT: self.heartbeat,
+            mavlink.MAVLINK_MSG_ID_SYS_STATUS: self.sys_status,
+            mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: self.battery_status,
+            mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self.global_position,
+            mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self.local_position,
+            mavlink.MAVLINK_MSG_ID_ATTITUDE: self.attitude,
+            mavlink.MAVLINK_MSG_ID_VFR_HUD: self.vfr_hud,
+            mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: self.mission_current,
+            mavlink.MAVLINK_MSG_ID_HOME_POSITION: self.home_position,
+            mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
+        }
+
+    def _ms(self, now: float) -> int:
+        return int((now - self.boot) * 1000) & 0xFFFFFFFF
+
+    # ---- messages ------------------------------------------------------------------------------
+    def heartbeat(self, now: float):
+        pilot = self.world.autopilot
+        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if pilot.armed:
+            base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        if pilot.mode in ("GUIDED", "AUTO", "RTL", "LAND", "LOITER", "BRAKE", "HOLD"):
+            base |= mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+        status = mavlink.MAV_STATE_ACTIVE if pilot.armed else mavlink.MAV_STATE_STANDBY
+        return mavlink.MAVLink_heartbeat_message(self.world.kind.mav_type, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                                 base, mode_number(self.world.kind, pilot.mode), status, 3)
+
+    def sys_status(self, now: float):
+        battery = self.world.battery
+        return mavlink.MAVLink_sys_status_message(
+            SENSORS, SENSORS, SENSORS, 250, int(battery.voltage * 1000), int(battery.current * 100),
+            int(battery.remaining * 100), 0, 0, 0, 0, 0, 0)
+
+    def battery_status(self, now: float):
+        battery = self.world.battery
+        cell = int(battery.voltage * 1000 / 4)
+        return mavlink.MAVLink_battery_status_message(
+            0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, 32767, [cell] * 4 + [65535] * 6,
+            int(battery.current * 100), int(battery.consumed_mah), -1, int(battery.remaining * 100))
+
+    def _position(self):
+        pose = self.world.pose
+        home = self.world.home
+        lat, lon = self.world.datum.to_global(pose.x, pose.y)
+        height = pose.z - home[2]  # above the start's ground
+        return pose, lat, lon, height
+
+    def global_position(self, now: float):
+        pose, lat, lon, height = self._position()
+        body = self.world.body
+        msl = self.world.datum.alt + self.world.home[2] + height
+        heading = int(math.degrees(pose.yaw) * 100) % 36000
+        return mavlink.MAVLink_global_position_int_message(
+            self._ms(now), int(round(lat * 1e7)), int(round(lon * 1e7)), int(msl * 1000), int(height * 1000),
+            int(body.vy * 100), int(body.vx * 100), int(-body.vz * 100), heading)
+
+    def local_position(self, now: float):
+        pose, _, _, height = self._position()
+        body = self.world.body
+        home = self.world.home
+        return mavlink.MAVLink_local_position_ned_message(
+            self._ms(now), pose.y - home[1], pose.x - home[0], -height, body.vy, body.vx, -body.vz)
+
+    def attitude(self, now: float):
+        pose = self.world.pose
+        yaw = pose.yaw if pose.yaw <= math.pi else pose.yaw - 2 * math.pi
+        return mavlink.MAVLink_attitude_message(self._ms(now), pose.roll, pose.pitch, yaw, 0.0, 0.0,
+                                                self.world.body.yaw_rate)
+
+    def vfr_hud(self, now: float):
+        pose, _, _, height = self._position()
+        body = self.world.body
+        throttle = 50 if self.world.autopilot.flying else 0
+        return mavlink.MAVLink_vfr_hud_message(body.speed, body.speed, int(math.degrees(pose.yaw)) % 360,
+                                               throttle, self.world.datum.alt + self.world.home[2] + height, body.vz)
+
+    def mission_current(self, now: float):
+        pilot = self.world.autopilot
+        total = len(pilot.mission)
+        state = mavlink.MISSION_STATE_NO_MISSION if total <= 1 else (
+            mavlink.MISSION_STATE_ACTIVE if pilot.mission_running else
+            mavlink.MISSION_STATE_COMPLETE if pilot.current >= total else mavlink.MISSION_STATE_PAUSED)
+        return mavlink.MAVLink_mission_current_message(min(pilot.current, max(total - 1, 0)), total, state,
+                                                       1 if pilot.mode == "AUTO" else 0)
+
+    def home_position(self, now: float):
+        home = self.world.home
+        lat, lon = self.world.datum.to_global(home[0], home[1])
+        return mavlink.MAVLink_home_position_message(
+            int(round(lat * 1e7)), int(round(lon * 1e7)), int((self.world.datum.alt + home[2]) * 1000),
+            0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
+
+    def autopilot_version(self, now: float):
+        capabilities = (mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                        | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+                        | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                        | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT)
+        major, minor, patch = (VERSION + (0, 0, 0))[:3]
+        software = (major << 24) | (minor << 16) | (patch << 8) | 255  # 255: official release
+        return mavlink.MAVLink_autopilot_version_message(capabilities, software, 0, 0, 0, [0] * 8, [0] * 8,
+                                                         [0] * 8, 0, 0, self.sysid)
+
+    def events(self, now: float) -> list:
+        """STATUSTEXT, MISSION_ITEM_REACHED and MISSION_CURRENT for what the autopilot reported."""
+        out = []
+        events = self.world.autopilot.events
+        while events:
+            event = events.popleft()
+            if event.kind == "text":
+                out.append(mavlink.MAVLink_statustext_message(event.severity, event.text[:50].encode()))
+            elif event.kind == "reached":
+                out.append(mavlink.MAVLink_mission_item_reached_message(event.seq))
+            elif event.kind == "current":
+                out.append(self.mission_current(now))
+        return out
+
+    def distance_sensor(self, reading: Reading, now: float):
+        sensor = self.world.sonars.sensors[reading.sensor]
+        top = int(sensor.max_range * 100)
+        value = top + 1 if reading.distance is None else max(int(sensor.min_range * 100), int(reading.distance * 100))
+        orientation, quaternion = _orientation(reading.yaw_offset, sensor.mount_pitch)
+        fov = math.radians(2 * sensor.beam_angle)
+        return mavlink.MAVLink_distance_sensor_message(
+            self._ms(now), int(sensor.min_range * 100), top, min(value, 65535), mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND,
+            reading.sensor, orientation, 0, fov, fov, quaternion, 0)
+
+    @staticmethod
+    def _tunnel(kind: int, payload: bytes):
+        return mavlink.MAVLink_tunnel_message(0, 0, kind, len(payload), list(payload.ljust(PAYLOAD, b"\0")))
+
+
+def _orientation(yaw_offset: float, pitch: float) -> tuple[int, list[float]]:
+    """MAV_SENSOR_ORIENTATION for a mount yaw (degrees clockwise) and pitch, or CUSTOM with a quaternion."""
+    if pitch == 0 and yaw_offset % 45 == 0:
+        return int(yaw_offset % 360) // 45, [0.0, 0.0, 0.0, 0.0]  # NONE, YAW_45 ... YAW_315
+    half_yaw, half_pitch = math.radians(yaw_offset) / 2, math.radians(pitch) / 2
+    # body frame is forward-right-down: yaw about z (down) then pitch about y (right)
+    cy, sy, cp, sp = math.cos(half_yaw), math.sin(half_yaw), math.cos(half_pitch), math.sin(half_pitch)
+    return mavlink.MAV_SENSOR_ROTATION_CUSTOM, [cy * cp, -sy * sp, cy * sp, sy * cp]
