@@ -42,10 +42,11 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--seed", type=int, default=0, help="seed for sensor noise and random choices")
 
 
-def settings_from(args: argparse.Namespace, **extra):
+def settings_from(args: argparse.Namespace, scene, **extra):
+    """Mission parameters: defaults < the scene's suggestions < --config < --set < --altitude and the like."""
     from vehicle.settings import load_settings
 
-    return load_settings(args.config, args.assignments, altitude=args.altitude, **extra)
+    return load_settings(args.config, args.assignments, scene.hints, altitude=args.altitude, **extra)
 
 
 def cmd_scene(args: argparse.Namespace) -> int:
@@ -78,9 +79,11 @@ def cmd_scene(args: argparse.Namespace) -> int:
 def cmd_experiment(args: argparse.Namespace) -> int:
     from vehicle.experiment import Experiment, run_experiment
     from vehicle.geodesy import Datum
+    from vehicle.scene import load_scene
     from vehicle.waypoints import load_positions
 
-    settings = settings_from(args, time_limit=args.time_limit)
+    scene = load_scene(args.scene)
+    settings = settings_from(args, scene, time_limit=args.time_limit)
     waypoints = load_positions(args.waypoints, Datum()) if args.waypoints else None
     experiment = Experiment(args.scene, args.mission, args.vehicle, args.start, args.heading, settings, args.seed,
                             waypoints)
@@ -90,7 +93,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
         log = ExperimentLog(args.log)
     try:
-        result = run_experiment(experiment, map_out=args.map_out, on_step=log)
+        result = run_experiment(experiment, scene=scene, map_out=args.map_out, on_step=log)
     finally:
         if log is not None:
             log.close()

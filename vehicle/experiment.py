@@ -16,6 +16,7 @@ from vehicle.agent import Agent
 from vehicle.modes import Kind
 from vehicle.scene import Scene, load_scene
 from vehicle.settings import Settings
+from vehicle.waypoints import parse_points
 from vehicle.world import World
 
 OUTCOMES = ("finished", "stopped", "collision", "timeout", "error")
@@ -54,7 +55,10 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
         scene = scene or load_scene(experiment.scene)
         world = World(scene, Kind(experiment.vehicle), settings, experiment.start, experiment.heading,
                       seed=experiment.seed)
-        agent = Agent(world.autopilot, experiment.mission, settings, world.limits.radius, experiment.waypoints)
+        waypoints = experiment.waypoints
+        if waypoints is None and "waypoints" in scene.hints:
+            waypoints = parse_points(scene.hints["waypoints"])
+        agent = Agent(world.autopilot, experiment.mission, settings, world.limits.radius, waypoints)
         outcome, reason = _fly(world, agent, on_step)
     except Exception as error:  # noqa: BLE001 - any failure is an outcome of the run, reported, not raised
         outcome, reason = "error", f"{type(error).__name__}: {error}"

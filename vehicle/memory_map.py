@@ -17,6 +17,13 @@ from pathlib import Path
 import numpy as np
 
 UNKNOWN, FREE, OCCUPIED = 0, 1, 2
+FREE_SPREAD = 0.7  # share of a beam's half-angle at which its sides are marked free
+
+
+def _turn(vectors: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """2D vectors (n, 2) rotated counter-clockwise by angles (n,) in radians."""
+    c, s = np.cos(angles), np.sin(angles)
+    return np.column_stack([vectors[:, 0] * c - vectors[:, 1] * s, vectors[:, 0] * s + vectors[:, 1] * c])
 
 
 class MemoryMap:
@@ -62,16 +69,20 @@ class MemoryMap:
 
     # ---- evidence ----------------------------------------------------------------------------
     def add_readings(self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray,
-                     max_ranges: np.ndarray) -> int:
+                     max_ranges: np.ndarray, beams: np.ndarray | None = None) -> int:
         """Project a batch of readings into the map; returns how many marked an obstacle.
 
         ``distances`` holds NaN where a reading had no echo (then the ray is free up to
-        its max range). A batch is one monitor period: each cell that any ray passes
-        loses ``MISS`` once, each cell a ray ends in gains ``HIT`` once (readings of one
-        period see the same thing, so they are one piece of evidence); misses are
-        applied before hits. A ray that leaves the band around the sensor's height
-        counts only up to where it leaves it, and its echo (ground or ceiling) is no
-        obstacle.
+        its max range, at most ``NO_ECHO_CLEARS``). A sonar hears the nearest echo in
+        its cone, so the whole cone is free up to the distance measured (the classic
+        sonar model): besides the centre line, two lines at ``FREE_SPREAD`` of the
+        half-angle ``beams`` (radians) either side are marked free. The echo itself is
+        placed on the centre line. A batch is one monitor period: each cell that any
+        line passes loses ``MISS`` once, each cell an echo ends in gains ``HIT`` once
+        (readings of one period see the same thing, so they are one piece of
+        evidence); misses are applied before hits. A beam that leaves the band around
+        the sensor's height counts only up to where it leaves it, and its echo (ground
+        or ceiling) is no obstacle.
         """
         origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
         directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
@@ -85,19 +96,25 @@ class MemoryMap:
         echo &= ~leaves
         ends = origins[:, :2] + directions[:, :2] * lengths[:, None]
         hit_of_ray = np.where(echo, self._flat_cells(ends[:, 0], ends[:, 1]), -1)
-        passed, ray = self._cells_along(origins[:, :2], ends)
-        self._lower(passed[passed != hit_of_ray[ray]], self.MISS)  # a ray does not pass its own end cell
+        starts, stops, owners = origins[:, :2], ends, np.arange(len(origins))
+        if beams is not None:  # the cone's sides, as far as the centre line reaches
+            spread = FREE_SPREAD * np.asarray(beams)
+            sides = [_turn(directions[:, :2], sign * spread) * lengths[:, None] + starts for sign in (-1, 1)]
+            starts = np.concatenate([starts] * 3)
+            stops = np.concatenate([stops, *sides])
+            owners = np.concatenate([owners] * 3)
+        passed, line = self._cells_along(starts, stops)
+        self._lower(passed[passed != hit_of_ray[owners[line]]], self.MISS)  # a beam does not pass its own echo
         hits = hit_of_ray[hit_of_ray >= 0]
         if len(hits):
-            cells = hits
             flat = self.grid.reshape(-1)
-            before = flat[cells].astype(np.int16)
+            before = flat[hits].astype(np.int16)
             after = np.minimum(before + self.HIT, self.LIMIT)
-            flat[cells] = after  # a cell listed twice is written twice with the same value
-            self.ever_hit.reshape(-1)[cells] = True
+            flat[hits] = after  # a cell listed twice is written twice with the same value
+            self.ever_hit.reshape(-1)[hits] = True
             if np.any((before < self.OCCUPIED_AT) & (after >= self.OCCUPIED_AT)):
                 self.occupied_version += 1
-            self._changed.append(cells)
+            self._changed.append(hits)
         return len(hits)
 
     def add_reading(self, origin: np.ndarray, direction: np.ndarray, distance: float | None,

@@ -81,7 +81,8 @@ class Monitor:
             directions = np.array([r.direction for r in readings])
             distances = np.array([np.nan if r.distance is None else r.distance for r in readings])
             max_ranges = np.minimum([r.max_range for r in readings], farness)
-            self.map.add_readings(origins, directions, distances, max_ranges)
+            beams = np.radians([r.beam_angle for r in readings])
+            self.map.add_readings(origins, directions, distances, max_ranges, beams)
             if travel is not None:
                 observation.nearest_ahead = self._nearest_ahead(x, y, travel, origins, directions, distances)
         self._pending = []

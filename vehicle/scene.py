@@ -51,6 +51,7 @@ class Scene:
     warnings: list[str] = field(default_factory=list)
     start: tuple[float, float] | None = None  # Viewpoint "Start", x and y
     start_heading: float | None = None  # compass degrees of its view direction; None if vertical
+    hints: dict[str, str] = field(default_factory=dict)  # "name=value" strings of a WorldInfo's info
 
     @property
     def bounds(self) -> np.ndarray:
@@ -92,6 +93,7 @@ class _Builder:
         self.triangles = 0
         self.start: tuple[float, float] | None = None
         self.start_heading: float | None = None
+        self.hints: dict[str, str] = {}
         self.handlers: dict[str, Callable[[Node, np.ndarray, int], None]] = {
             "Transform": self._transform,
             "Group": self._group,
@@ -103,6 +105,7 @@ class _Builder:
             "Inline": self._inline,
             "Shape": self._shape,
             "Viewpoint": self._viewpoint,
+            "WorldInfo": self._world_info,
         }
 
     def build(self, data: str | bytes, scene_path: Path | None) -> Scene:
@@ -207,6 +210,13 @@ class _Builder:
         if math.hypot(view[0], view[1]) > 1e-6 * np.linalg.norm(view):
             self.start_heading = math.degrees(math.atan2(view[0], view[1])) % 360
 
+    def _world_info(self, node: Node, matrix: np.ndarray, depth: int) -> None:
+        """``info ["altitude=1.2"]``: settings the scene suggests for missions flown in it."""
+        for text in _strings(node, "info"):
+            name, sep, value = text.partition("=")
+            if sep and name.strip():
+                self.hints.setdefault(name.strip(), value.strip())
+
     def _scene(self, path: Path | None) -> Scene:
         counts = [len(f) for f in self.faces]
         offsets = np.cumsum([0] + [len(v) for v in self.vertices])[:-1]
@@ -228,6 +238,7 @@ class _Builder:
             warnings=warnings,
             start=self.start,
             start_heading=self.start_heading,
+            hints=self.hints,
         )
 
 

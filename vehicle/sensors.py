@@ -96,6 +96,7 @@ class Reading:
     distance: float | None  # metres, None when nothing echoed within range
     max_range: float
     yaw_offset: float  # degrees, sensor relative to the nose (for DISTANCE_SENSOR orientation)
+    beam_angle: float = 0.0  # degrees, half-angle of the cone
 
     @property
     def hit(self) -> np.ndarray | None:
@@ -147,7 +148,7 @@ class SonarArray:
                 noisy = value + self.rng.normal(0.0, sensor.noise)
                 value = float(min(sensor.max_range, max(sensor.min_range, noisy)))
             readings.append(Reading(time, index, origin, world_axes[index], value, sensor.max_range,
-                                    sensor.yaw_offset))
+                                    sensor.yaw_offset, sensor.beam_angle))
         return readings
 
     def _nearest_each(self, distance: np.ndarray, echo: np.ndarray) -> np.ndarray:

@@ -92,10 +92,17 @@ def _explain(error: ValidationError) -> str:
     return "; ".join(parts)
 
 
+def scene_defaults(hints: dict[str, str]) -> dict[str, str]:
+    """The settings among a scene's hints (its WorldInfo ``name=value`` strings); others are not ours."""
+    return {name: value for name, value in hints.items() if name in Settings.model_fields}
+
+
 def load_settings(config: str | Path | None = None, assignments: list[str] | None = None,
-                  **explicit: float | None) -> Settings:
-    """Defaults, then the TOML file, then ``--set`` pairs, then explicit options that were given."""
+                  scene_hints: dict[str, str] | None = None, **explicit: float | None) -> Settings:
+    """Defaults, then the scene's suggestions, then the TOML file, then ``--set`` pairs, then options given."""
     settings = Settings()
+    if scene_hints:
+        settings = settings.updated(scene_defaults(scene_hints))
     if config:
         settings = settings.with_config(config)
     if assignments:

@@ -73,3 +73,15 @@ def load_positions(path: str | Path, datum: Datum) -> list[tuple[float, float]]:
         raise WaypointError(f"{path}: no waypoints with a position")
     return points
 
+
+
+def parse_points(text: str) -> list[tuple[float, float]]:
+    """``"x,y; x,y; ..."`` (scene metres), as a scene's ``waypoints=`` hint gives them."""
+    points = []
+    for part in filter(None, (p.strip() for p in text.split(";"))):
+        try:
+            x, y = (float(v) for v in part.split(","))
+        except ValueError:
+            raise WaypointError(f"waypoints are 'x,y; x,y; ...', not {text!r}") from None
+        points.append((x, y))
+    return points

@@ -61,6 +61,11 @@ class Context:
         x, y = self.position
         return math.hypot(point[0] - x, point[1] - y)
 
+    def inside(self, point: tuple[float, float], margin: float = 1.0) -> bool:
+        """Whether the point lies in the allowed space around home (with a margin)."""
+        half = self.settings.space_size - margin
+        return abs(point[0] - self.home[0]) <= half and abs(point[1] - self.home[1]) <= half
+
     @property
     def time_left(self) -> float:
         return self.settings.time_limit - self.time

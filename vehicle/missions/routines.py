@@ -11,6 +11,8 @@ from vehicle.sensors import Reading
 
 YAW_REACHED = math.radians(2)
 PATH_POINT_REACHED = 0.5  # m: intermediate path points count as passed this close
+PATH_CHECK_PERIOD = 1.0  # s between checks of the path ahead against new obstacles
+SCANNED_NEAR = 1.0  # m: a scan this close counts as having looked around here
 
 
 class Scan:
@@ -49,6 +51,8 @@ class Travel:
 
     When the monitor reports an obstacle too close ahead, stop, scan around to
     learn the surroundings, then plan again: the thesis's Pathfind behaviour.
+    When no path is known, look around once from here before giving up: the
+    way may lie through a doorway the sonar has not looked through yet.
     """
 
     def __init__(self, ctx: Context, goal: tuple[float, float], tolerance: float, relax: bool = False):
@@ -63,6 +67,8 @@ class Travel:
         self.replans = 0
         self._sent: tuple[float, float] | None = None
         self._checked: tuple[int, int] | None = None
+        self._scanned_at: tuple[float, float] | None = None
+        self._next_check = 0.0
 
     def step(self) -> Status:
         ctx = self.ctx
@@ -79,6 +85,8 @@ class Travel:
             self.replans += 1
             self._sent = None
             self._checked = (ctx.map.occupied_version, len(self.path or ()))
+            if self.path is None and not self._scanned_near():
+                return self.too_close()  # scan, then plan again
             if self.path is None:
                 self.reason = f"no known path to ({self.goal[0]:.1f}, {self.goal[1]:.1f})"
                 ctx.planned_path = []
@@ -93,16 +101,25 @@ class Travel:
         return Status.RUNNING
 
     def _still_clear(self) -> bool:
-        """Check the path against the map again, unless no cell became an obstacle since the last check."""
+        """Check the path against the map again, at most once a second and only if obstacles changed.
+
+        Between checks the monitor and the autopilot's avoidance keep the vehicle safe;
+        the check only decides when a better path is worth planning.
+        """
         state = (self.ctx.map.occupied_version, len(self.path))
-        if state == self._checked:
+        if state == self._checked or self.ctx.time < self._next_check:
             return True
         self._checked = state
+        self._next_check = self.ctx.time + PATH_CHECK_PERIOD
         return self.ctx.path_clear(self.path)
 
     def too_close(self) -> Status:
         """Stop, look around, and plan again once the scan is done."""
         if self.scan is None:
             self.scan = Scan(self.ctx)
+            self._scanned_at = self.ctx.position
             self._sent = None
         return Status.RUNNING
+
+    def _scanned_near(self) -> bool:
+        return self._scanned_at is not None and self.ctx.distance_to(self._scanned_at) < SCANNED_NEAR

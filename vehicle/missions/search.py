@@ -3,9 +3,10 @@
 As in the thesis, the next goal comes from the latest sweep: the echo that is
 far away and has the most open space beside it wins (a weighted score), and
 the vehicle aims beside it and short of it by a stand-off distance rather than
-onto it, which keeps it around the outside of objects. Goals near places
-already visited score lower, so it keeps finding new ground. It ends when
-sweeps stop adding detections, or when its time budget is spent.
+onto it, which keeps it around the outside of objects. We add two things: goals
+near places already visited are not considered, and goals among unknown cells
+score higher, so it keeps finding new ground (the next room, the far side of a
+building). It ends when no goal is left, or when its time budget is spent.
 """
 
 from __future__ import annotations
@@ -20,11 +21,11 @@ from vehicle.monitor import sweep_profile
 
 OPEN_ARC = (math.radians(10), math.radians(40))  # where "beside" an echo is, either side
 OPEN_WEIGHT = 0.5
-VISITED_RADIUS = 6.0  # m: goals this close to an earlier goal or scan spot are penalised
-VISITED_PENALTY = 1000.0
-MIN_LEG = 2.0  # m: goals closer than this are not worth a trip
-QUIET_SWEEPS = 3  # sweeps in a row that add (almost) nothing end the search
-NEW_CELLS = 5
+UNKNOWN_WEIGHT = 20.0  # m of score for a goal surrounded by nothing but unknown cells
+UNKNOWN_RADIUS = 3.0  # m around a goal looked at for unknown cells
+VISITED_FRACTION = 0.2  # goals closer to an earlier goal or scan spot than this share of space_size are skipped
+VISITED_MAX = 6.0  # m, whatever the space size
+MIN_LEG = 1.0  # m: goals closer than this are not worth a trip
 
 
 class Search(Mission):
@@ -35,8 +36,7 @@ class Search(Mission):
         self.scan: Scan | None = Scan(self.ctx)
         self.travel: Travel | None = None
         self.visited: list[tuple[float, float]] = [self.ctx.position]
-        self.quiet = 0
-        self.known = self.ctx.map.cells_ever_hit
+        self.visited_radius = min(VISITED_MAX, VISITED_FRACTION * self.ctx.settings.space_size)
         self.legs = 0
 
     def step(self) -> Status:
@@ -53,12 +53,6 @@ class Search(Mission):
 
     def _after_scan(self, readings) -> Status:
         self.scan = None
-        known = self.ctx.map.cells_ever_hit
-        self.quiet = self.quiet + 1 if known - self.known < NEW_CELLS else 0
-        self.known = known
-        if self.quiet >= QUIET_SWEEPS:
-            self.reason = "sweeps stopped finding anything new"
-            return Status.DONE
         goal = self.choose_goal(readings)
         if goal is None:
             self.reason = "no open direction left to search"
@@ -90,14 +84,24 @@ class Search(Mission):
             ux, uy = math.sin(heading), math.cos(heading)
             sx, sy = side * uy, -side * ux  # perpendicular towards the open side
             goal = (x + ux * (distance - standoff) + sx * standoff, y + uy * (distance - standoff) + sy * standoff)
-            if not ctx.is_clear(goal):
+            if any(math.hypot(goal[0] - vx, goal[1] - vy) < self.visited_radius for vx, vy in self.visited):
                 continue
-            score = distance + OPEN_WEIGHT * max(left, right)
-            if any(math.hypot(goal[0] - vx, goal[1] - vy) < VISITED_RADIUS for vx, vy in self.visited):
-                score -= VISITED_PENALTY
+            if not ctx.is_clear(goal) or not ctx.inside(goal):
+                continue
+            score = distance + OPEN_WEIGHT * max(left, right) + UNKNOWN_WEIGHT * self._unknown_around(goal)
             if score > best_score:
                 best, best_score = goal, score
         return best
+
+    def _unknown_around(self, point: tuple[float, float]) -> float:
+        """Share of the cells within UNKNOWN_RADIUS of the point that are neither free nor occupied."""
+        m = self.ctx.map
+        cell = m.cell_of(*point)
+        reach = int(UNKNOWN_RADIUS * m.resolution)
+        rows = slice(max(0, cell[0] - reach), cell[0] + reach + 1)
+        cols = slice(max(0, cell[1] - reach), cell[1] + reach + 1)
+        window = m.grid[rows, cols]
+        return float(np.count_nonzero((window > m.FREE_AT) & (window < m.OCCUPIED_AT))) / max(window.size, 1)
 
     def too_close(self) -> Status:
         """Close to a new object: stop and scan again from here."""
