@@ -1,0 +1,56 @@
+"""Shared fixtures: small VRML scenes written in the tests themselves (Z-up, metres, x east, y north)."""
+
+from pathlib import Path
+
+import pytest
+
+from vehicle.scene import Scene, parse_scene
+
+HEADER = "#VRML V2.0 utf8\n"
+CASTLE = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "castle.wrl"
+
+
+def vrml_box(x: float, y: float, z: float, sx: float, sy: float, sz: float, rotation: str = "") -> str:
+    """A Box of size sx sy sz centred at (x, y, z); ``rotation`` is a VRML axis-angle ("0 0 1 0.5")."""
+    rotate = f"rotation {rotation}" if rotation else ""
+    return (f"Transform {{ translation {x} {y} {z} {rotate} "
+            f"children Shape {{ geometry Box {{ size {sx} {sy} {sz} }} }} }}\n")
+
+
+GROUND = vrml_box(0, 0, -0.05, 200, 200, 0.1)  # top at z = 0
+NORTH_WALL = vrml_box(0, 10, 2, 20, 0.2, 6)  # south face at y = 9.9, x from -10 to 10, up to z = 5
+
+
+@pytest.fixture
+def box():
+    """The VRML text of a Box: ``box(x, y, z, sx, sy, sz, rotation="")``."""
+    return vrml_box
+
+
+@pytest.fixture
+def make_scene():
+    """Build a Scene from VRML node texts (the header is added)."""
+
+    def make(*nodes: str) -> Scene:
+        return parse_scene(HEADER + "".join(nodes))
+
+    return make
+
+
+@pytest.fixture
+def flat_scene(make_scene) -> Scene:
+    """Open flat ground, 200 x 200 m, its top at z = 0."""
+    return make_scene(GROUND)
+
+
+@pytest.fixture
+def wall_scene(make_scene) -> Scene:
+    """Flat ground and a wall north of the origin: its south face at y = 9.9 for -10 < x < 10, 5 m high."""
+    return make_scene(GROUND, NORTH_WALL)
+
+
+@pytest.fixture
+def castle_path() -> Path:
+    if not CASTLE.exists():
+        pytest.skip("needs ../shared/scenes/castle.wrl (absent in a bare clone)")
+    return CASTLE

@@ -1,0 +1,613 @@
+"""The simulated flight controller in its World (vehicle.autopilot, vehicle.physics, vehicle.world).
+
+Everything runs on simulated time: the tests step the World and look at the pose.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from vehicle.autopilot import ACCEPTED, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, VELOCITY_TIMEOUT
+from vehicle.geodesy import heading_of, wrap_pi
+from vehicle.modes import (
+    DO_CHANGE_SPEED,
+    MODES,
+    NAV_LAND,
+    NAV_LOITER_UNLIM,
+    NAV_RETURN_TO_LAUNCH,
+    NAV_TAKEOFF,
+    NAV_WAYPOINT,
+    STOP_MODE,
+    Kind,
+    MissionItem,
+    mode_name,
+    mode_number,
+)
+from vehicle.physics import Limits
+from vehicle.sensors import Sonar
+from vehicle.world import World
+
+ALTITUDE = 4.0
+REST_Z = 0.35  # body centre of a landed vehicle on ground at z = 0 (radius 0.3 + clearance 0.05)
+
+
+def armed_copter(scene, start=(0.0, 0.0), altitude=ALTITUDE, **kwargs) -> World:
+    """A copter that took off in GUIDED and hovers at ``altitude`` above its start."""
+    world = World(scene, Kind.COPTER, start=start, **kwargs)
+    assert world.autopilot.arm() == ACCEPTED
+    assert world.autopilot.takeoff(altitude) == ACCEPTED
+    world.run_for(altitude / world.limits.climb_rate + 3.0)
+    return world
+
+
+def armed_rover(scene, start=(0.0, 0.0), **kwargs) -> World:
+    world = World(scene, Kind.ROVER, start=start, **kwargs)
+    assert world.autopilot.arm() == ACCEPTED
+    assert world.autopilot.set_mode("GUIDED") == ACCEPTED
+    return world
+
+
+def vehicle(kind: Kind, scene, **kwargs) -> World:
+    return armed_copter(scene, **kwargs) if kind is Kind.COPTER else armed_rover(scene, **kwargs)
+
+
+def step_until(world: World, condition, limit: float) -> float:
+    """Step until ``condition()`` holds; returns the simulated time it took (fails past ``limit`` seconds)."""
+    start = world.time
+    while not condition():
+        assert world.time - start < limit, f"not reached within {limit} s of simulated time"
+        world.step()
+    return world.time - start
+
+
+def position_item(world: World, command: int, x: float, y: float, alt: float = ALTITUDE, **params) -> MissionItem:
+    lat, lon = world.datum.to_global(x, y)
+    return MissionItem(command, lat, lon, alt, **params)
+
+
+def reached(world: World) -> list[int]:
+    return [event.seq for event in world.autopilot.events if event.kind == "reached"]
+
+
+def texts(world: World) -> list[str]:
+    return [event.text for event in world.autopilot.events if event.kind == "text"]
+
+
+# ---- arming and take-off ----------------------------------------------------------------------
+
+def test_copter_boots_disarmed_on_the_ground_in_guided(flat_scene):
+    world = World(flat_scene, Kind.COPTER, start=(2.0, 3.0), heading=90.0)
+    assert not world.autopilot.armed and world.autopilot.mode == "GUIDED"
+    assert world.pose.xyz() == pytest.approx((2.0, 3.0, REST_Z))
+    assert world.pose.yaw == pytest.approx(math.pi / 2)
+    assert world.home == pytest.approx((2.0, 3.0, 0.0))
+    world.run_for(2.0)
+    assert world.pose.xyz() == pytest.approx((2.0, 3.0, REST_Z))  # disarmed: nothing moves
+
+
+def test_rover_boots_disarmed_in_hold(flat_scene):
+    world = World(flat_scene, Kind.ROVER)
+    assert not world.autopilot.armed and world.autopilot.mode == "HOLD"
+
+
+def test_copter_takes_off_to_altitude_in_guided(flat_scene):
+    world = World(flat_scene, Kind.COPTER, start=(0.0, 0.0))
+    world.autopilot.arm()
+    assert world.autopilot.takeoff(ALTITUDE) == ACCEPTED
+    took = step_until(world, lambda: abs(world.pose.z - ALTITUDE) < 0.2 and abs(world.body.vz) < 0.05, limit=8.0)
+    assert took <= ALTITUDE / world.limits.climb_rate + 3.0
+    assert world.autopilot.flying
+    assert world.autopilot.altitude == pytest.approx(ALTITUDE, abs=0.2)
+    world.run_for(10.0)
+    assert world.pose.xyz() == pytest.approx((0.0, 0.0, ALTITUDE), abs=0.2)  # and holds there
+
+
+def test_takeoff_altitude_is_above_the_start_ground(make_scene, box):
+    scene = make_scene(box(0, 0, -0.05, 100, 100, 0.1), box(0, 0, 1, 6, 6, 2))  # start on a 2 m plinth
+    world = armed_copter(scene)
+    assert world.pose.z == pytest.approx(2.0 + ALTITUDE, abs=0.2)
+    assert world.autopilot.altitude == pytest.approx(ALTITUDE, abs=0.2)
+
+
+def test_takeoff_refused_when_disarmed(flat_scene):
+    world = World(flat_scene, Kind.COPTER)
+    assert world.autopilot.takeoff(ALTITUDE) == TEMPORARILY_REJECTED
+    world.run_for(2.0)
+    assert world.pose.z == pytest.approx(REST_Z)
+
+
+def test_takeoff_refused_outside_guided(flat_scene):
+    world = World(flat_scene, Kind.COPTER)
+    world.autopilot.arm()
+    assert world.autopilot.set_mode("LOITER") == ACCEPTED
+    assert world.autopilot.takeoff(ALTITUDE) == TEMPORARILY_REJECTED
+    world.run_for(2.0)
+    assert world.pose.z == pytest.approx(REST_Z)
+
+
+def test_takeoff_to_zero_altitude_denied_and_again_in_the_air_failed(flat_scene):
+    world = World(flat_scene, Kind.COPTER)
+    world.autopilot.arm()
+    assert world.autopilot.takeoff(0.0) == DENIED
+    world = armed_copter(flat_scene)
+    assert world.autopilot.takeoff(ALTITUDE) == FAILED
+
+
+def test_rover_takeoff_unsupported(flat_scene):
+    world = armed_rover(flat_scene)
+    assert world.autopilot.takeoff(ALTITUDE) == UNSUPPORTED
+
+
+def test_guided_commands_refused_when_disarmed(flat_scene):
+    autopilot = World(flat_scene, Kind.COPTER).autopilot
+    assert autopilot.goto(5.0, 5.0) == TEMPORARILY_REJECTED
+    assert autopilot.set_velocity(1.0, 0.0) == TEMPORARILY_REJECTED
+    assert autopilot.set_yaw(1.0) == TEMPORARILY_REJECTED
+
+
+def test_arming_refused_in_land_unless_forced(flat_scene):
+    world = World(flat_scene, Kind.COPTER)
+    world.autopilot.set_mode("LAND")
+    assert world.autopilot.arm() == FAILED
+    assert not world.autopilot.armed
+    assert world.autopilot.arm(force=True) == ACCEPTED
+
+
+# ---- modes ------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
+def test_unknown_mode_name_is_unsupported(kind, flat_scene):
+    autopilot = World(flat_scene, kind).autopilot
+    before = autopilot.mode
+    assert autopilot.set_mode("FLIP") == UNSUPPORTED
+    assert autopilot.mode == before
+
+
+def test_copter_has_no_hold_and_rover_has_no_brake(flat_scene):
+    assert World(flat_scene, Kind.COPTER).autopilot.set_mode("HOLD") == UNSUPPORTED
+    assert World(flat_scene, Kind.ROVER).autopilot.set_mode("BRAKE") == UNSUPPORTED
+
+
+def test_mode_names_are_case_insensitive(flat_scene):
+    autopilot = World(flat_scene, Kind.COPTER).autopilot
+    assert autopilot.set_mode("brake") == ACCEPTED
+    assert autopilot.mode == "BRAKE"
+
+
+def test_mode_numbers_are_ardupilots():
+    assert {name: mode_number(Kind.ROVER, name) for name in ("HOLD", "LOITER", "AUTO", "RTL", "GUIDED")} == \
+        {"HOLD": 4, "LOITER": 5, "AUTO": 10, "RTL": 11, "GUIDED": 15}
+    assert {name: mode_number(Kind.COPTER, name) for name in ("AUTO", "GUIDED", "LOITER", "RTL", "LAND", "BRAKE")} \
+        == {"AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6, "LAND": 9, "BRAKE": 17}
+    assert all(mode_name(kind, number) == name for kind in Kind for name, number in MODES[kind].items())
+    assert mode_name(Kind.COPTER, 99) is None
+    with pytest.raises(ValueError, match="no mode"):
+        mode_number(Kind.COPTER, "HOLD")
+    assert STOP_MODE == {Kind.ROVER: "HOLD", Kind.COPTER: "BRAKE"}
+
+
+# ---- GUIDED: goto, velocity, yaw, speed ---------------------------------------------------------
+
+@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
+def test_goto_turns_first_then_moves(kind, flat_scene):
+    world = vehicle(kind, flat_scene)  # facing north
+    target = (20.0, -20.0)  # south-east: 135 degrees to turn
+    assert world.autopilot.goto(*target) == ACCEPTED
+    turned_at = None
+    for _ in range(200):
+        world.step()
+        error = abs(wrap_pi(heading_of(target[0] - world.pose.x, target[1] - world.pose.y) - world.pose.yaw))
+        if error > math.radians(15):
+            assert world.body.speed < 0.05, f"moving at {world.body.speed:.2f} m/s with {math.degrees(error):.0f} deg"
+        elif turned_at is None:
+            turned_at = world.time
+    assert turned_at is not None
+    assert world.body.speed > 1.0  # moving once it faces the target
+
+
+@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
+def test_goto_reaches_the_target_and_holds(kind, flat_scene):
+    world = vehicle(kind, flat_scene)
+    world.autopilot.goto(20.0, -20.0)
+    step_until(world, lambda: math.hypot(world.pose.x - 20, world.pose.y + 20) < 0.15 and world.body.speed < 0.01,
+               limit=40.0)
+    world.run_for(10.0)
+    assert (world.pose.x, world.pose.y) == pytest.approx((20.0, -20.0), abs=0.15)
+    assert world.body.speed < 0.01
+    if kind is Kind.COPTER:
+        assert world.pose.z == pytest.approx(ALTITUDE, abs=0.2)
+
+
+def test_goto_with_altitude_changes_height(flat_scene):
+    world = armed_copter(flat_scene)
+    world.autopilot.goto(0.0, 10.0, altitude=7.0)
+    world.run_for(20.0)
+    assert world.pose.xyz() == pytest.approx((0.0, 10.0, 7.0), abs=0.2)
+
+
+@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
+def test_speed_acceleration_turn_and_climb_limits_hold_at_every_step(kind, flat_scene):
+    limits = Limits()
+    world = vehicle(kind, flat_scene, limits=limits)
+    autopilot = world.autopilot
+    assert autopilot.set_speed(limits.max_speed) == ACCEPTED
+    commands = [(25.0, 0.0, 0.0, 9.0), (-20.0, 15.0, 0.0, 2.0), (0.0, 0.0, 0.0, 8.0)]  # goto x, y, alt; hurry
+    prev = (world.body.vx, world.body.vy, world.pose.yaw, world.pose.z)
+    max_speed = 0.0
+    for x, y, _, altitude in commands:
+        autopilot.goto(x, y, altitude=altitude)
+        for _ in range(400):
+            world.step()
+            vx, vy, yaw, z = world.body.vx, world.body.vy, world.pose.yaw, world.pose.z
+            speed = math.hypot(vx, vy)
+            max_speed = max(max_speed, speed)
+            assert speed <= limits.max_speed + 1e-9
+            assert math.hypot(vx - prev[0], vy - prev[1]) <= limits.accel * world.dt + 1e-9
+            assert abs(wrap_pi(yaw - prev[2])) <= limits.turn_rate * world.dt + 1e-9
+            assert abs(z - prev[3]) <= limits.climb_rate * world.dt + 1e-6
+            prev = (vx, vy, yaw, z)
+    assert max_speed == pytest.approx(limits.max_speed, abs=0.01)  # the limit was actually reached
+
+
+def test_velocity_beyond_max_speed_is_capped(flat_scene):
+    world = armed_copter(flat_scene)
+    world.autopilot.set_velocity(0.0, 50.0)
+    world.run_for(2.9)
+    assert world.body.speed == pytest.approx(world.limits.max_speed)
+
+
+def test_velocity_command_moves_the_vehicle_until_it_expires_after_3_s(flat_scene):
+    world = armed_copter(flat_scene)  # facing north: no turn needed
+    assert world.autopilot.set_velocity(0.0, 2.0) == ACCEPTED
+    world.run_for(VELOCITY_TIMEOUT - 0.1)
+    assert world.body.vy == pytest.approx(2.0)
+    world.run_for(0.15)
+    expired_at = world.pose.y
+    speeds = []
+    for _ in range(round(8.0 / world.dt)):
+        world.step()
+        speeds.append(world.body.speed)
+        assert abs(world.pose.y - expired_at) < 2.0  # braking distance at 2 m/s is 0.8 m
+    assert speeds[0] < 2.0  # braking right after expiry
+    assert max(speeds[-40:]) < 0.01  # and at rest for good
+
+
+def test_velocity_command_turns_first_towards_its_direction(flat_scene):
+    world = armed_copter(flat_scene)  # facing north
+    world.autopilot.set_velocity(2.0, 0.0)  # east
+    world.run_for(0.5)  # 45 degrees turned at 90 deg/s
+    assert world.body.speed < 0.05
+    world.run_for(1.5)
+    assert world.pose.yaw == pytest.approx(math.pi / 2, abs=1e-6)
+    assert world.body.vx > 1.0
+
+
+@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
+def test_set_yaw_turns_in_place(kind, flat_scene):
+    world = vehicle(kind, flat_scene)
+    start = world.pose.xyz()
+    assert world.autopilot.set_yaw(math.radians(270)) == ACCEPTED  # west: a quarter turn left
+    for _ in range(round(2.0 / world.dt)):
+        world.step()
+        assert world.body.speed < 1e-9
+    assert world.pose.yaw == pytest.approx(math.radians(270), abs=1e-6)
+    assert world.pose.xyz() == pytest.approx(start, abs=1e-6)
+
+
+def test_set_yaw_relative_turns_by_that_angle(flat_scene):
+    world = armed_copter(flat_scene)
+    world.autopilot.set_yaw(math.radians(90))
+    world.run_for(2.0)
+    world.autopilot.set_yaw(math.radians(-30), relative=True)
+    world.run_for(1.0)
+    assert math.degrees(world.pose.yaw) == pytest.approx(60.0, abs=1e-4)
+
+
+def test_set_speed_changes_cruise_and_refuses_out_of_range(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    assert autopilot.set_speed(0.0) == DENIED
+    assert autopilot.set_speed(world.limits.max_speed + 1) == DENIED
+    assert autopilot.set_speed(1.0) == ACCEPTED
+    autopilot.goto(0.0, 30.0)
+    world.run_for(10.0)
+    assert world.body.speed == pytest.approx(1.0)
+
+
+# ---- AUTO missions ----------------------------------------------------------------------------
+
+def test_auto_mission_visits_waypoints_in_order_with_speed_changes(flat_scene):
+    world = World(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.set_mission([
+        MissionItem(NAV_WAYPOINT),  # home, replaced
+        MissionItem(NAV_TAKEOFF, alt=ALTITUDE),  # 1
+        position_item(world, NAV_WAYPOINT, 20.0, 0.0),  # 2
+        MissionItem(DO_CHANGE_SPEED, param1=1, param2=4.0),  # 3
+        position_item(world, NAV_WAYPOINT, 20.0, 25.0),  # 4
+        position_item(world, NAV_WAYPOINT, 0.0, 25.0, param2=0.5),  # 5: tighter acceptance radius
+        position_item(world, NAV_LOITER_UNLIM, 0.0, 10.0),  # 6
+    ])
+    autopilot.arm()
+    assert autopilot.set_mode("AUTO") == ACCEPTED
+    assert not autopilot.mission_running  # a copter on the ground waits for MISSION_START
+    assert autopilot.start_mission() == ACCEPTED
+    leg_speeds: dict[int, float] = {}
+    nearest: dict[int, float] = {}
+    targets = {2: (20.0, 0.0), 4: (20.0, 25.0), 5: (0.0, 25.0)}
+    while autopilot.current < 6:
+        assert world.time < 120
+        current = autopilot.current
+        world.step()
+        leg_speeds[current] = max(leg_speeds.get(current, 0.0), world.body.speed)
+        if current in targets:
+            distance = math.dist((world.pose.x, world.pose.y), targets[current])
+            nearest[current] = min(nearest.get(current, math.inf), distance)
+    assert reached(world) == [1, 2, 3, 4, 5]
+    assert leg_speeds[2] == pytest.approx(2.5, abs=0.01)  # the cruise speed until DO_CHANGE_SPEED
+    assert leg_speeds[4] == pytest.approx(4.0, abs=0.01)
+    assert autopilot.speed == 4.0
+    assert nearest[2] <= world.settings.closeness and nearest[4] <= world.settings.closeness
+    assert nearest[5] <= 0.5
+    assert world.pose.z == pytest.approx(ALTITUDE, abs=0.2)
+
+
+def test_auto_nav_land_lands_at_its_position_and_disarms(flat_scene):
+    world = World(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=3.0),
+                           position_item(world, NAV_LAND, 8.0, 6.0, alt=0.0)])
+    autopilot.arm()
+    autopilot.set_mode("AUTO")
+    autopilot.start_mission()
+    step_until(world, lambda: not autopilot.armed, limit=40.0)
+    world.run_for(1.0)  # disarmed at touchdown, within 5 cm of resting: it settles
+    assert world.pose.xyz() == pytest.approx((8.0, 6.0, REST_Z), abs=0.15)
+    assert reached(world) == [1, 2]
+    assert "Landed; disarming" in texts(world)
+    assert world.collision is None
+
+
+def test_auto_return_to_launch_brings_a_copter_home_and_lands(flat_scene):
+    world = World(flat_scene, Kind.COPTER, start=(3.0, 4.0))
+    autopilot = world.autopilot
+    autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=ALTITUDE),
+                           position_item(world, NAV_WAYPOINT, 15.0, 4.0), MissionItem(NAV_RETURN_TO_LAUNCH)])
+    autopilot.arm()
+    autopilot.set_mode("AUTO")
+    autopilot.start_mission()
+    step_until(world, lambda: not autopilot.armed, limit=60.0)
+    world.run_for(1.0)
+    assert math.hypot(world.pose.x - 3.0, world.pose.y - 4.0) < 0.3
+    assert world.pose.z == pytest.approx(REST_Z, abs=0.01)
+    assert reached(world) == [1, 2, 3]
+
+
+def test_auto_rover_starts_on_entering_auto_and_returns_home_to_hold(flat_scene):
+    world = World(flat_scene, Kind.ROVER, start=(3.0, 4.0))
+    autopilot = world.autopilot
+    autopilot.set_mission([MissionItem(NAV_WAYPOINT), position_item(world, NAV_WAYPOINT, 12.0, 4.0),
+                           position_item(world, NAV_WAYPOINT, 12.0, 12.0), MissionItem(NAV_RETURN_TO_LAUNCH)])
+    autopilot.arm()
+    autopilot.set_mode("AUTO")
+    assert autopilot.mission_running
+    step_until(world, lambda: not autopilot.mission_running, limit=60.0)
+    assert reached(world) == [1, 2, 3]
+    assert "Mission complete" in texts(world)
+    world.run_for(5.0)
+    assert math.hypot(world.pose.x - 3.0, world.pose.y - 4.0) < 0.3
+    assert world.body.speed < 0.01
+    assert autopilot.armed  # a rover holds at home
+
+
+def test_auto_loiter_unlimited_holds_forever(flat_scene):
+    world = World(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=ALTITUDE),
+                           position_item(world, NAV_LOITER_UNLIM, -6.0, 5.0),
+                           position_item(world, NAV_WAYPOINT, 10.0, 10.0)])
+    autopilot.arm()
+    autopilot.set_mode("AUTO")
+    autopilot.start_mission()
+    world.run_for(600.0)
+    assert autopilot.current == 2 and autopilot.mission_running
+    assert reached(world) == [1]
+    assert world.pose.xyz() == pytest.approx((-6.0, 5.0, ALTITUDE), abs=0.2)
+
+
+def test_start_mission_refused_outside_auto_and_without_items(flat_scene):
+    world = World(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.arm()
+    assert autopilot.start_mission() == DENIED  # GUIDED
+    autopilot.set_mode("AUTO")
+    assert autopilot.start_mission() == FAILED  # only home
+
+
+def test_unsupported_mission_items_are_skipped_with_a_warning(flat_scene):
+    world = World(flat_scene, Kind.ROVER)
+    autopilot = world.autopilot
+    autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(183),  # DO_SET_SERVO
+                           position_item(world, NAV_WAYPOINT, 0.0, 8.0)])
+    autopilot.arm()
+    autopilot.set_mode("AUTO")
+    world.run_for(15.0)
+    assert reached(world) == [1, 2]
+    assert any("unsupported command 183" in text for text in texts(world))
+
+
+# ---- RTL, LAND, stopping ------------------------------------------------------------------------
+
+def test_rtl_copter_returns_home_lands_and_disarms(flat_scene):
+    world = armed_copter(flat_scene, start=(2.0, -3.0))
+    world.autopilot.goto(15.0, 5.0)
+    world.run_for(15.0)
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    step_until(world, lambda: not world.autopilot.armed, limit=40.0)
+    world.run_for(1.0)
+    assert math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 0.3
+    assert world.pose.z == pytest.approx(REST_Z, abs=0.01)
+    assert "Reached home" in texts(world)
+    assert world.collision is None
+
+
+def test_rtl_rover_returns_home_and_holds(flat_scene):
+    world = armed_rover(flat_scene, start=(2.0, -3.0))
+    world.autopilot.goto(15.0, 5.0)
+    world.run_for(15.0)
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    world.run_for(30.0)
+    assert math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 0.3
+    assert world.body.speed < 0.01
+    assert world.autopilot.armed
+
+
+def test_land_mode_lands_in_place_and_disarms(flat_scene):
+    world = armed_copter(flat_scene)
+    world.autopilot.goto(5.0, 5.0)
+    world.run_for(10.0)
+    here = (world.pose.x, world.pose.y)
+    assert world.autopilot.set_mode("LAND") == ACCEPTED
+    took = step_until(world, lambda: not world.autopilot.armed, limit=15.0)
+    world.run_for(1.0)
+    assert took == pytest.approx((ALTITUDE - REST_Z) / 0.7, abs=0.5)  # at the landing speed
+    assert (world.pose.x, world.pose.y) == pytest.approx(here, abs=0.05)
+    assert world.pose.z == pytest.approx(REST_Z, abs=0.01)
+
+
+@pytest.mark.parametrize(("kind", "mode"), [(Kind.COPTER, "BRAKE"), (Kind.COPTER, "LOITER"),
+                                            (Kind.ROVER, "HOLD"), (Kind.ROVER, "LOITER")])
+def test_stop_modes_stop_in_place(kind, mode, flat_scene):
+    world = vehicle(kind, flat_scene)
+    world.autopilot.goto(0.0, 60.0)
+    world.run_for(10.0)
+    speed = world.body.speed
+    assert speed == pytest.approx(2.5)
+    stopped_at = world.pose.xyz()
+    assert world.autopilot.set_mode(mode) == ACCEPTED
+    braking = speed * speed / (2 * world.limits.accel)
+    for _ in range(round(10.0 / world.dt)):
+        world.step()
+        assert math.dist(world.pose.xyz(), stopped_at) < braking + 0.2
+    resting = world.pose.xyz()
+    world.run_for(10.0)
+    assert world.pose.xyz() == pytest.approx(resting, abs=1e-3)
+    assert world.body.speed < 1e-3
+    assert world.autopilot.armed
+
+
+def test_disarm_refused_in_the_air_unless_forced(flat_scene):
+    world = armed_copter(flat_scene)
+    assert world.autopilot.disarm() == FAILED
+    assert world.autopilot.armed
+    assert world.autopilot.disarm(force=True) == ACCEPTED
+    assert not world.autopilot.armed
+
+
+def test_disarm_on_the_ground_is_accepted(flat_scene):
+    world = armed_rover(flat_scene)
+    assert world.autopilot.disarm() == ACCEPTED
+    assert not world.autopilot.armed
+
+
+def test_forced_disarm_in_the_air_makes_a_copter_fall_to_the_ground(flat_scene):
+    world = armed_copter(flat_scene)
+    world.autopilot.disarm(force=True)
+    heights = []
+    for _ in range(round(2.0 / world.dt)):
+        world.step()
+        heights.append(world.pose.z)
+    assert all(b <= a for a, b in zip(heights, heights[1:], strict=False))
+    fall_time = math.sqrt(2 * (ALTITUDE - REST_Z) / 9.81)  # free fall: 0.86 s
+    landed = next(i for i, z in enumerate(heights) if z <= REST_Z + 1e-6) * world.dt
+    assert landed == pytest.approx(fall_time, abs=0.1)
+    assert heights[-1] == pytest.approx(REST_Z)
+    assert not world.autopilot.flying
+
+
+# ---- ground following, determinism, avoidance ----------------------------------------------------
+
+@pytest.fixture
+def hill_scene(make_scene):
+    """An ElevationGrid: flat at z = 0 for x < 0, rising 0.2 m per m eastwards to z = 2 at x = 10, then flat."""
+    xs = np.arange(-20, 21)
+    heights = np.clip(xs * 0.2, 0.0, 2.0)
+    values = " ".join(f"{h:g}" for h in np.tile(heights, 5))
+    return make_scene(
+        "Transform { translation -20 10 0 rotation 1 0 0 1.5708 children Shape { geometry ElevationGrid {"
+        f" xDimension 41 zDimension 5 xSpacing 1 zSpacing 5 height [ {values} ] }} }} }}\n")
+
+
+def test_rover_follows_uneven_ground(hill_scene):
+    world = armed_rover(hill_scene, start=(-8.0, 0.0))
+    caster = world.caster
+    world.autopilot.goto(16.0, 0.0)
+    samples = []
+    for _ in range(round(20.0 / world.dt)):
+        world.step()
+        ground = caster.ground_height(world.pose.x, world.pose.y)
+        assert world.pose.z - ground == pytest.approx(REST_Z, abs=0.05)
+        samples.append((world.pose.x, world.pose.pitch))
+    assert world.collision is None
+    assert world.pose.x == pytest.approx(16.0, abs=0.2)
+    assert world.pose.z == pytest.approx(2.0 + REST_Z, abs=0.01)
+    climbing = [pitch for x, pitch in samples if 1.0 < x < 9.0]
+    assert climbing and all(p == pytest.approx(math.atan(0.2), abs=1e-3) for p in climbing)  # nose up
+    world.autopilot.goto(-8.0, 0.0)
+    descending = []
+    for _ in range(round(25.0 / world.dt)):
+        world.step()
+        if 1.0 < world.pose.x < 9.0:
+            descending.append(world.pose.pitch)
+    assert descending and all(p == pytest.approx(-math.atan(0.2), abs=1e-3) for p in descending)  # nose down
+    assert world.pose.z == pytest.approx(REST_Z, abs=0.01)
+
+
+def test_copter_holds_height_above_the_start_ground_over_a_hill(hill_scene):
+    world = armed_copter(hill_scene, start=(-8.0, 0.0))
+    world.autopilot.goto(16.0, 0.0)
+    world.run_for(20.0)
+    assert world.pose.x == pytest.approx(16.0, abs=0.2)
+    assert world.pose.z == pytest.approx(ALTITUDE, abs=0.2)  # does not follow the terrain
+
+
+def trajectory(scene) -> list[tuple]:
+    sensors = [Sonar("front", noise=0.05), Sonar("right", mount_yaw=60.0, noise=0.05)]
+    world = World(scene, Kind.COPTER, seed=7, sensors=sensors)
+    world.autopilot.arm()
+    world.autopilot.takeoff(3.0)
+    out = []
+    for target in ((6.0, 8.0), (-7.0, 2.0)):
+        world.run_for(4.0)
+        world.autopilot.goto(*target)
+        for _ in range(200):
+            readings = world.step()
+            out.append((*world.pose.xyz(), world.pose.yaw, world.pose.pitch, world.pose.roll,
+                        tuple(r.distance for r in readings)))
+    return out
+
+
+def test_two_identical_runs_give_identical_trajectories(wall_scene):
+    first, second = trajectory(wall_scene), trajectory(wall_scene)
+    assert first == second
+    assert any(d is not None for *_, distances in first for d in distances)  # the sonars saw the wall
+
+
+def test_a_copter_flown_at_a_wall_stops_short_of_it_with_the_default_sensors(wall_scene):
+    world = armed_copter(wall_scene)
+    world.autopilot.goto(0.0, 20.0)  # behind the wall
+    world.run_for(30.0)
+    assert world.collision is None
+    assert world.autopilot.blocked
+    assert world.body.speed < 0.01
+    assert 8.0 < world.pose.y < 9.9 - world.limits.radius
+
+
+def test_a_copter_flown_diagonally_at_a_wall_stops_short_of_it(wall_scene):
+    world = armed_copter(wall_scene, start=(-6.0, 0.0))
+    world.autopilot.set_speed(4.0)
+    world.autopilot.goto(6.0, 16.0)
+    world.run_for(30.0)
+    assert world.collision is None
+    assert world.pose.y < 9.9 - world.limits.radius

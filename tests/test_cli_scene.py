@@ -1,0 +1,119 @@
+"""``vehicle scene FILE [--json] [--top-view PNG]`` (vehicle.cli).
+
+The main cases run ``python -m vehicle.cli`` as real subprocesses, started together once per module
+(each pays about a second of imports); the rest call ``main()`` in-process.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from PIL import Image
+
+from vehicle.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT = ROOT / "scenes" / "default.wrl"
+CASTLE = ROOT.parent / "shared" / "scenes" / "castle.wrl"
+BROKEN = "#VRML V2.0 utf8\nShape {\n  geometry Box {"
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, subprocess.CompletedProcess]:
+    """Run the CLI cases concurrently; each result also carries ``path`` and ``out`` (the files involved)."""
+    folder = tmp_path_factory.mktemp("cli")
+    broken = folder / "broken.wrl"
+    broken.write_text(BROKEN)
+    top = folder / "top.png"
+    cases = {
+        "default": [str(DEFAULT), "--json", "--top-view", str(top)],
+        "broken": [str(broken), "--json"],
+    }
+    if CASTLE.exists():
+        cases["castle"] = [str(CASTLE), "--json"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    started = {name: subprocess.Popen([sys.executable, "-m", "vehicle.cli", "scene", *args], cwd=ROOT, env=env,
+                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+               for name, args in cases.items()}
+    results = {}
+    for name, process in started.items():
+        stdout, stderr = process.communicate(timeout=60)
+        results[name] = subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
+    results["default"].out = top
+    results["broken"].path = broken
+    return results
+
+
+def test_scene_json_describes_the_default_scene(runs):
+    result = runs["default"]
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert {"triangles", "objects", "bounds", "warnings"} <= set(report)
+    assert report["triangles"] > 300 and report["objects"] == 26
+    (x0, y0, z0), (x1, y1, z1) = report["bounds"]
+    assert (x0, y0, x1, y1) == (-60.0, -60.0, 60.0, 60.0) and z0 == 0.0 and z1 == 12.0
+    assert report["warnings"] == []
+    assert report["start"] == [0.0, 0.0]
+
+
+def test_scene_json_of_the_castle(runs, castle_path):
+    result = runs["castle"]
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["triangles"] == 1066
+    assert report["objects"] > 0 and report["warnings"] == []
+    assert report["bounds"][0][0] < -100 and report["bounds"][1][0] > 100
+
+
+def test_scene_top_view_writes_a_png(runs):
+    assert runs["default"].returncode == 0, runs["default"].stderr
+    with Image.open(runs["default"].out) as image:
+        assert image.format == "PNG"
+        assert min(image.size) > 100
+        colours = image.convert("RGB").getcolors(maxcolors=1 << 20)
+    assert len(colours) > 5  # a picture, not a blank canvas
+
+
+def test_a_broken_file_exits_2_with_file_line_and_column(runs):
+    result = runs["broken"]
+    assert result.returncode == 2
+    assert result.stdout == ""
+    assert f"{result.path}:3:17:" in result.stderr
+    assert "expected '}'" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_scene_json_lists_warnings_for_unsupported_nodes(tmp_path, capsys):
+    path = tmp_path / "warn.wrl"
+    path.write_text('#VRML V2.0 utf8\nShape { geometry Box { size 2 4 6 } }\nScript { }\n'
+                    'Shape { geometry Text { string "hi" } }\n')
+    assert main(["scene", str(path), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["triangles"] == 12 and report["objects"] == 1
+    assert report["bounds"] == [[-1.0, -2.0, -3.0], [1.0, 2.0, 3.0]]
+    assert len(report["warnings"]) == 2
+    assert any("Script" in w for w in report["warnings"]) and any("Text" in w for w in report["warnings"])
+    assert "start" not in report
+
+
+def test_scene_without_json_prints_a_summary(capsys):
+    assert main(["scene", str(DEFAULT)]) == 0
+    out = capsys.readouterr().out
+    assert "triangles" in out and "26 objects" in out and "bounds:" in out and "start:" in out
+
+
+def test_a_missing_file_exits_2_with_a_message(tmp_path, capsys):
+    assert main(["scene", str(tmp_path / "nope.wrl")]) == 2
+    err = capsys.readouterr().err
+    assert "nope.wrl" in err and "cannot read" in err
+
+
+@pytest.mark.parametrize("args", [["scene"], ["scene", "x.wrl", "--bogus"]])
+def test_bad_arguments_are_usage_errors(args, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(args)
+    assert exit_.value.code == 2
+    assert "usage:" in capsys.readouterr().err

@@ -1,0 +1,150 @@
+"""Swept-sphere collision (vehicle.collision) and what a collision does to a World run (vehicle.world)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from vehicle.collision import Collider
+from vehicle.modes import Kind
+from vehicle.sensors import Sonar
+from vehicle.world import PlacementError, World
+
+RADIUS = 0.3
+WALL_FACE_Y = 9.9  # south face of the wall in the wall_scene fixture
+REAR_ONLY = [Sonar("rear", mount_yaw=180.0)]  # sees nothing ahead, so avoidance cannot brake
+
+
+def test_a_body_flying_into_a_wall_touches_it_at_wall_minus_radius(wall_scene):
+    collider = Collider(wall_scene.mesh, RADIUS)
+    contact = collider.sweep((0.0, 0.0, 4.0), (0.0, 12.0, 4.0))
+    assert contact is not None
+    assert contact.point[1] == pytest.approx(WALL_FACE_Y - RADIUS, abs=0.02)
+    assert contact.point[0] == pytest.approx(0.0) and contact.point[2] == pytest.approx(4.0)
+    assert contact.fraction == pytest.approx((WALL_FACE_Y - RADIUS) / 12.0, abs=0.002)
+    assert wall_scene.mesh.face_normals[contact.face][1] == pytest.approx(-1.0, abs=1e-6)  # the south face
+    assert "collision at" in contact.describe()
+
+
+def test_a_body_passing_a_wall_further_than_its_radius_does_not_touch_it(wall_scene):
+    collider = Collider(wall_scene.mesh, RADIUS)
+    assert collider.sweep((-15.0, WALL_FACE_Y - 1.0, 4.0), (15.0, WALL_FACE_Y - 1.0, 4.0)) is None
+
+
+def test_grazing_a_wall_at_radius_plus_one_centimetre_does_not_touch_it(wall_scene):
+    collider = Collider(wall_scene.mesh, RADIUS)
+    y = WALL_FACE_Y - RADIUS - 0.01
+    assert collider.sweep((-15.0, y, 4.0), (15.0, y, 4.0)) is None
+    # and past the wall's end, along its length
+    assert collider.sweep((10.0 + RADIUS + 0.01, 0.0, 4.0), (10.0 + RADIUS + 0.01, 20.0, 4.0)) is None
+
+
+def test_grazing_a_wall_one_centimetre_inside_the_radius_touches_it(wall_scene):
+    collider = Collider(wall_scene.mesh, RADIUS)
+    y = WALL_FACE_Y - RADIUS + 0.01
+    contact = collider.sweep((-15.0, y, 4.0), (15.0, y, 4.0))
+    assert contact is not None
+    assert contact.point[0] == pytest.approx(-10.0, abs=0.3)  # where the path meets the wall's west end
+
+
+def test_a_fast_step_through_a_thin_wall_is_caught(wall_scene):
+    """The whole swept path counts, not only where the step ends."""
+    collider = Collider(wall_scene.mesh, RADIUS)
+    assert collider.sweep((0.0, 8.0, 4.0), (0.0, 12.0, 4.0)) is not None
+
+
+def test_clearance_is_the_distance_to_the_nearest_surface(wall_scene):
+    collider = Collider(wall_scene.mesh, RADIUS)
+    assert collider.clearance(np.array([0.0, 8.0, 4.0])) == pytest.approx(1.9, abs=1e-6)
+    assert collider.clearance(np.array([0.0, 0.0, 50.0])) == collider.search  # nothing near
+
+
+def test_touches_a_point_within_radius_of_the_wall(wall_scene):
+    collider = Collider(wall_scene.mesh, RADIUS)
+    assert collider.touches(np.array([0.0, WALL_FACE_Y - 0.2, 2.0]))
+    assert not collider.touches(np.array([0.0, WALL_FACE_Y - 0.4, 2.0]))
+
+
+def test_the_ground_is_an_obstacle_for_a_copter_but_not_for_a_rover(flat_scene):
+    resting_low = np.array([0.0, 0.0, 0.2])  # sphere bottom 0.1 m below the ground's top
+    assert Collider(flat_scene.mesh, RADIUS).touches(resting_low)
+    assert not Collider(flat_scene.mesh, RADIUS, ignore_walkable=True).touches(resting_low)
+
+
+@pytest.fixture
+def ramp_scene(make_scene, box):
+    """Ground and a 10 degree ramp (a tilted box) rising eastwards from x = 0; a wall across it at x = 12."""
+    slope = math.radians(10)
+    centre_x = 8.0
+    centre_z = centre_x * math.tan(slope) - 0.5 / math.cos(slope)  # top surface at z = 0 at x = 0
+    return make_scene(
+        box(0, 0, -0.05, 100, 100, 0.1),
+        box(centre_x, 0, centre_z, 20, 6, 1, rotation=f"0 1 0 {-slope}"),
+        box(12, 0, 4, 0.3, 6, 6),
+    )
+
+
+def test_a_rover_driving_up_a_tilted_box_is_not_colliding(ramp_scene):
+    world = World(ramp_scene, Kind.ROVER, start=(-5.0, 0.0), heading=90.0)
+    world.autopilot.arm()
+    world.autopilot.set_mode("GUIDED")
+    world.autopilot.goto(9.0, 0.0)
+    world.run_for(20.0)
+    assert world.collision is None
+    assert world.pose.x == pytest.approx(9.0, abs=0.2)
+    assert world.pose.z > 1.5  # up on the ramp, 9 m * tan(10 deg) = 1.59 m
+    assert world.pose.pitch == pytest.approx(math.radians(10), abs=0.01)
+
+
+def test_a_rover_on_a_slope_collides_with_a_wall(ramp_scene):
+    world = World(ramp_scene, Kind.ROVER, start=(-5.0, 0.0), heading=90.0, sensors=REAR_ONLY)
+    world.autopilot.arm()
+    world.autopilot.set_mode("GUIDED")
+    world.autopilot.goto(20.0, 0.0)
+    world.run_for(30.0)
+    assert world.collision is not None
+    assert world.collision.point[0] == pytest.approx(12 - 0.15 - RADIUS, abs=0.05)
+
+
+def test_world_refuses_a_start_overlapping_a_wall(wall_scene):
+    with pytest.raises(PlacementError, match="inside an obstacle"):
+        World(wall_scene, Kind.COPTER, start=(0.0, WALL_FACE_Y - 0.1))
+
+
+def test_world_refuses_a_rover_start_overlapping_a_box(make_scene, box):
+    scene = make_scene(box(0, 0, -0.05, 100, 100, 0.1), box(0.2, 0, 1, 0.2, 4, 2))
+    with pytest.raises(PlacementError):
+        World(scene, Kind.ROVER, start=(0.0, 0.0))
+
+
+def test_world_accepts_a_start_just_clear_of_a_wall(wall_scene):
+    World(wall_scene, Kind.COPTER, start=(0.0, WALL_FACE_Y - RADIUS - 0.05))
+
+
+def fly_into_the_wall(wall_scene) -> World:
+    world = World(wall_scene, Kind.COPTER, start=(0.0, 0.0), sensors=REAR_ONLY)
+    world.autopilot.arm()
+    world.autopilot.takeoff(4.0)
+    world.run_for(8.0)
+    world.autopilot.goto(0.0, 20.0)
+    world.run_for(30.0)
+    return world
+
+
+def test_a_collision_ends_the_run(wall_scene):
+    world = fly_into_the_wall(wall_scene)
+    assert world.collision is not None
+    assert world.pose.y == pytest.approx(WALL_FACE_Y - RADIUS, abs=0.02)
+    assert world.body.speed == 0.0
+    assert not world.autopilot.armed
+
+
+def test_nothing_moves_after_a_collision(wall_scene):
+    world = fly_into_the_wall(wall_scene)
+    pose, steps, contact = world.pose.xyz(), world.steps, world.collision
+    assert world.autopilot.goto(0.0, -20.0) != 0  # disarmed: GUIDED commands are refused
+    for _ in range(50):
+        assert world.step() == []
+    assert world.pose.xyz() == pose
+    assert world.steps == steps
+    assert world.collision is contact
