@@ -75,6 +75,7 @@ class Autopilot:
         self._yaw: float | None = None
         self._hold: tuple[float, float, float] | None = None
         self._altitude_goal: float | None = None  # copter take-off
+        self._braking = False
         self._item_timer: float | None = None
         self._rtl_done = False
         self._descending = False
@@ -101,8 +102,10 @@ class Autopilot:
         self.events.append(Event("text", text, severity))
 
     def hold_here(self) -> None:
+        """Hold where the vehicle comes to rest (braking first if it is moving), at its current height."""
         pose = self.body.pose
         self._hold = (pose.x, pose.y, pose.z)
+        self._braking = True
 
     # ---- requests (each returns a MAV_RESULT) ------------------------------------------------
     def arm(self, force: bool = False) -> int:
@@ -112,6 +115,7 @@ class Autopilot:
             self._say(f"Arm: mode {self.mode} not armable", mav.MAV_SEVERITY_CRITICAL)
             return FAILED
         self.armed = True
+        self._altitude_goal = None
         self.hold_here()
         self._say("Arming motors")
         return ACCEPTED
@@ -124,6 +128,7 @@ class Autopilot:
             return FAILED
         self.armed = False
         self.mission_running = False
+        self._altitude_goal = None
         self._say("Disarming motors" + (" (forced)" if force else ""))
         return ACCEPTED
 
@@ -137,7 +142,7 @@ class Autopilot:
         self.mode = name
         self.mode_source = source
         self.mode_changes += 1
-        self._target = self._velocity = self._yaw = None
+        self._target = self._velocity = self._yaw = self._altitude_goal = None
         self._rtl_done = False
         self._item_timer = None
         self.hold_here()
@@ -283,8 +288,21 @@ class Autopilot:
         return self._hold_position(dt)  # HOLD, LOITER, BRAKE, MANUAL without a pilot
 
     def _hold_position(self, dt):
+        if self._braking:  # stop first, then hold the spot where it stopped, as ArduPilot's BRAKE does
+            if self.body.speed > 0.05:
+                pose = self.body.pose
+                self._hold = (pose.x, pose.y, self._hold[2])
+                return 0.0, 0.0, self._climb_towards(self._hold[2]), None
+            self._braking = False
+            self._hold = (self.body.pose.x, self.body.pose.y, self._hold[2])
         x, y, z = self._hold
         return self._fly_to(x, y, z, dt, turn_first=False)[:4]
+
+    def _climb_towards(self, z: float) -> float:
+        if self.kind is not Kind.COPTER:
+            return 0.0
+        climb = self.body.limits.climb_rate
+        return max(-climb, min(climb, 2.0 * (z - self.body.pose.z)))
 
     def _guided(self, dt):
         if self._velocity is not None:
@@ -313,9 +331,7 @@ class Autopilot:
         pose = self.body.pose
         dx, dy = x - pose.x, y - pose.y
         distance = math.hypot(dx, dy)
-        vz = 0.0
-        if self.kind is Kind.COPTER:
-            vz = max(-self.body.limits.climb_rate, min(self.body.limits.climb_rate, 2.0 * (z - pose.z)))
+        vz = self._climb_towards(z)
         arrived = distance < ARRIVED and abs(z - pose.z) < 0.2 if self.kind is Kind.COPTER else distance < ARRIVED
         if distance < ARRIVED:
             return 0.0, 0.0, vz, None, arrived

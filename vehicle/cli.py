@@ -112,6 +112,31 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     return 0 if result["outcome"] != "error" else 1
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from vehicle.missions import missions
+    from vehicle.sweep import PRESETS, SweepSpec, parse_grid, run_sweep
+
+    preset = PRESETS[args.preset] if args.preset else {}
+    mission_names = args.missions.split(",") if args.missions else preset.get("missions", list(missions()))
+    for name in mission_names:
+        if name not in missions():
+            raise ValueError(f"unknown mission {name!r}; missions: {', '.join(missions())}")
+    scenes = args.scene or (preset["scenes"]() if preset else [str(DEFAULT_SCENE)])
+    grid = {**preset.get("grid", {}), **parse_grid(args.grid)}
+    spec = SweepSpec(mission_names, scenes, grid, args.seeds, args.vehicle)
+    print(f"{len(spec.jobs())} runs: {len(mission_names)} missions x {len(scenes)} scenes x "
+          f"{len(spec.jobs()) // max(1, len(mission_names) * len(scenes) * args.seeds)} settings x {args.seeds} seeds",
+          file=sys.stderr)
+    results = run_sweep(spec, args.out, workers=args.workers, dask=args.dask)
+    print((Path(args.out) / "best.md").read_text(encoding="utf-8"))
+    outcomes: dict[str, int] = {}
+    for r in results:
+        outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
+    print("outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
+    print(f"results in {args.out}/results.csv, table in {args.out}/best.md, maps in {args.out}/maps/")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="vehicle", description="Onboard agent and simulated vehicle.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -131,6 +156,23 @@ def main(argv: list[str] | None = None) -> int:
     experiment.add_argument("--log", metavar="FILE.tlog", help="write the run as a MAVLink telemetry log")
     experiment.set_defaults(run=cmd_experiment)
 
+    from vehicle.sweep import PRESETS
+
+    sweep = commands.add_parser("sweep", help="run many headless missions over a grid of settings")
+    sweep.add_argument("--preset", choices=list(PRESETS),
+                       help="; ".join(f"{name}: {p['help']}" for name, p in PRESETS.items()))
+    sweep.add_argument("--missions", help="comma-separated missions (default: the preset's, or all)")
+    sweep.add_argument("--scene", action="append", metavar="FILE[@X,Y]",
+                       help="a scene, with an optional start (repeatable; default: the preset's)")
+    sweep.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2",
+                       help="values of a setting to sweep (repeatable; added to the preset's)")
+    sweep.add_argument("--seeds", type=int, default=1, help="seeds per combination (default 1)")
+    sweep.add_argument("--vehicle", default="copter", choices=["rover", "copter"])
+    sweep.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    sweep.add_argument("--dask", metavar="tcp://HOST:PORT", help="run on this Dask scheduler instead")
+    sweep.add_argument("--out", default="sweep-results", help="output folder (default: %(default)s)")
+    sweep.set_defaults(run=cmd_sweep)
+
     args = parser.parse_args(argv)
     from vehicle.scene import SceneError
     from vehicle.settings import SettingsError
@@ -139,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return args.run(args)
-    except (SceneError, SettingsError, WaypointError, PlacementError, OSError) as error:
+    except (SceneError, SettingsError, WaypointError, PlacementError, OSError, ValueError) as error:
         print(f"vehicle {args.command}: {error}", file=sys.stderr)
         return 2
 

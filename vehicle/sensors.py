@@ -127,6 +127,8 @@ class SonarArray:
         return self._rays, self._axes
 
     def read(self, pose: Pose, time: float) -> list[Reading]:
+        if not self.sensors:
+            return []
         origin = np.array((pose.x, pose.y, pose.z))
         body = body_to_world(pose)
         rays, axes = self._body_rays()
