@@ -30,6 +30,7 @@ RESERVE = 60.0  # s kept for scans, detours and landing on the way home
 
 
 class Phase(StrEnum):
+    WAITING = "waiting"  # on the ground, for a start from the operator
     PREFLIGHT = "preflight"
     TAKEOFF = "takeoff"
     MISSION = "mission"
@@ -40,7 +41,7 @@ class Phase(StrEnum):
 
 class Agent:
     def __init__(self, vehicle: Autopilot, mission: str, settings: Settings, radius: float,
-                 waypoints: list[tuple[float, float]] | None = None):
+                 waypoints: list[tuple[float, float]] | None = None, autostart: bool = True):
         self.vehicle = vehicle
         self.settings = settings
         home = (vehicle.home[0], vehicle.home[1])
@@ -48,8 +49,9 @@ class Agent:
         self.monitor = Monitor(settings, self.map, home, radius)
         self.messages: list[str] = []
         self.ctx = Context(vehicle, self.map, self.monitor, settings, home, radius, waypoints, say=self.say)
+        self.mission_name = mission
         self.mission = mission_class(mission)(self.ctx)
-        self.phase = Phase.PREFLIGHT
+        self.phase = Phase.PREFLIGHT if autostart else Phase.WAITING
         self.outcome: str | None = None  # "finished" | "stopped" once the mission ends
         self.reason = ""
         self.paused = False
@@ -73,6 +75,19 @@ class Agent:
         changed = self.vehicle.mode_changes != self._mode_changes and self.vehicle.mode_source != "agent"
         self._mode_changes = self.vehicle.mode_changes
         return changed
+
+    def start(self) -> bool:
+        """Start the mission (the operator's start, or again after one ended). False if one is running."""
+        if self.phase not in (Phase.WAITING, Phase.DONE):
+            return False
+        if self.phase is Phase.DONE:
+            self.mission = mission_class(self.mission_name)(self.ctx)
+            self.outcome, self.reason, self._travel = None, "", None
+        self.paused = False
+        self.ctx.started = self.ctx.time
+        self.phase = Phase.PREFLIGHT
+        self._mode_changes = self.vehicle.mode_changes
+        return True
 
     def resume(self) -> bool:
         """Hand control back to the agent (the operator's AUTO + MISSION_START). False if not paused."""
@@ -99,10 +114,10 @@ class Agent:
         travel = heading_of(*wanted) if math.hypot(*wanted) > 0.05 else None
         observation = self.monitor.observe(now, x, y, travel)
         ctx.observation = observation
-        if self._operator_took_over() and self.phase is not Phase.DONE:
+        if self._operator_took_over() and self.phase not in (Phase.DONE, Phase.WAITING):
             self.paused = True
             self.say(f"Agent: paused, operator switched to {self.vehicle.mode}")
-        if self.paused or self.phase is Phase.DONE:
+        if self.paused or self.phase in (Phase.DONE, Phase.WAITING):
             return
         if self.vehicle.blocked:
             self._blocked_since = now if self._blocked_since is None else self._blocked_since
@@ -119,19 +134,23 @@ class Agent:
             self.mission.begin()
             self._set_mode("AUTO")
             vehicle.arm()
+            if vehicle.mission_running:
+                self.phase = Phase.MISSION
+                return
             if vehicle.start_mission() == 0:
                 self.phase = Phase.MISSION
             return
         self._set_mode("GUIDED")
         vehicle.arm()
-        if self.vehicle.kind is Kind.COPTER:
-            vehicle.takeoff(self.settings.altitude)
-            self.phase = Phase.TAKEOFF
-        else:
+        if self.vehicle.kind is Kind.ROVER or (vehicle.flying and not vehicle.taking_off):
             self._start_mission()
+            return
+        if not vehicle.taking_off:
+            vehicle.takeoff(self.settings.altitude)
+        self.phase = Phase.TAKEOFF
 
     def _takeoff(self, now: float) -> None:
-        if self.vehicle.altitude >= self.settings.altitude - 0.2:
+        if self.vehicle.flying and not self.vehicle.taking_off:
             self._start_mission()
 
     def _start_mission(self) -> None:

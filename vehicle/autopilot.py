@@ -90,6 +90,11 @@ class Autopilot:
         return self.kind is Kind.COPTER and self.body.pose.z > self.body.rest_height(self.ground_now) + 0.05
 
     @property
+    def taking_off(self) -> bool:
+        """A GUIDED take-off is still climbing."""
+        return self._altitude_goal is not None
+
+    @property
     def altitude(self) -> float:
         """Height of the body above the start's ground (what GLOBAL_POSITION_INT calls relative_alt)."""
         return self.body.pose.z - self.home[2]

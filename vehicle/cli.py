@@ -112,6 +112,41 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     return 0 if result["outcome"] != "error" else 1
 
 
+def cmd_sim(args: argparse.Namespace) -> int:
+    from vehicle.agent import Agent
+    from vehicle.scene import load_scene
+    from vehicle.sim import SimOptions, SimVehicle
+    from vehicle.waypoints import load_mission, parse_points, positions
+    from vehicle.world import World
+
+    scene = load_scene(args.scene)
+    settings = settings_from(args, scene)
+    world = World(scene, args.vehicle, settings, args.start, args.heading, seed=args.seed)
+    waypoints = None
+    if args.waypoints:
+        items = load_mission(args.waypoints)
+        world.autopilot.set_mission(items)
+        waypoints = positions(items, world.datum)
+    elif "waypoints" in scene.hints:
+        waypoints = parse_points(scene.hints["waypoints"])
+    agent = Agent(world.autopilot, args.mission, settings, world.limits.radius, waypoints, autostart=args.autostart)
+    options = SimOptions(args.mavlink or ["udpout:127.0.0.1:14550"], args.sysid, args.speedup,
+                         args.failsafe_timeout, args.log)
+    sim = SimVehicle(world, agent, options)
+    start = "starting the mission now" if args.autostart else "waiting for arm + AUTO/MISSION_START or GUIDED takeoff"
+    print(f"vehicle {args.sysid}: {args.vehicle} in {Path(args.scene).name} at {world.home[0]:.1f}, "
+          f"{world.home[1]:.1f}, mission {args.mission}, x{args.speedup:g}, on {', '.join(options.urls)}; {start}",
+          flush=True)
+    try:
+        sim.run(args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        stats = ", ".join(f"{k} {v}" for k, v in sorted(sim.endpoint.stats.items()))
+        print(f"vehicle {args.sysid}: stopped at {world.time:.1f} s simulated; {stats}", flush=True)
+    return 0
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     from vehicle.missions import missions
     from vehicle.sweep import PRESETS, SweepSpec, parse_grid, run_sweep
@@ -155,6 +190,19 @@ def main(argv: list[str] | None = None) -> int:
     experiment.add_argument("--map-out", metavar="DIR", help="write the final memory map (.npy and .png)")
     experiment.add_argument("--log", metavar="FILE.tlog", help="write the run as a MAVLink telemetry log")
     experiment.set_defaults(run=cmd_experiment)
+
+    sim = commands.add_parser("sim", help="a simulated vehicle with its onboard agent, live on MAVLink")
+    add_run_options(sim)
+    sim.add_argument("--mavlink", action="append", metavar="URL",
+                     help="pymavlink connection string, repeatable (default udpout:127.0.0.1:14550)")
+    sim.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
+    sim.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    sim.add_argument("--autostart", action="store_true", help="arm and start the mission without a GCS")
+    sim.add_argument("--failsafe-timeout", type=float, default=5.0,
+                     help="wall seconds without a GCS heartbeat before the GCS failsafe (default 5)")
+    sim.add_argument("--log", metavar="FILE.tlog", help="record the vehicle's own MAVLink traffic")
+    sim.add_argument("--duration", type=float, help="stop after this many wall seconds")
+    sim.set_defaults(run=cmd_sim)
 
     from vehicle.sweep import PRESETS
 

@@ -11,9 +11,12 @@ little-endian):
   x and y in metres east and north of home) then ``<I`` (the number of the
   last delta already in it) then the zlib-compressed grid: int8 log-odds,
   rows south to north, columns west to east.
-* ``MAP_DELTA`` (32801): ``<IB`` = delta number, cell count n, then n times
-  ``<Ib`` = flat cell index (row * size + column) and its new value. Values
-  are absolute, so applying a delta twice does no harm.
+* ``MAP_DELTA`` (32801): ``<IH`` = delta number, cell count n, then a raw
+  deflate stream (zlib, wbits -15) of: n cell indices in increasing order, each
+  as the LEB128 varint of its difference from the previous one (the first from
+  0; a flat index is row * size + column), then the n new values as int8.
+  Values are absolute, so applying a delta twice does no harm. Changed cells
+  lie along sonar beams, so this packs some 60-100 cells into one payload.
 * ``PATH`` (32802): ``<HBB`` = path id, chunk index, chunk count, then up to
   15 points ``<ff`` (metres east and north of home). An empty path is one
   chunk with no points.
@@ -39,12 +42,10 @@ PAYLOAD = 128
 
 _CHUNK = struct.Struct("<HHH")
 _SNAPSHOT = struct.Struct("<BHfffIHHHH")
-_DELTA = struct.Struct("<IB")
-_CELL = struct.Struct("<Ib")
+_DELTA = struct.Struct("<IH")
 _PATH = struct.Struct("<HBB")
 _POINT = struct.Struct("<ff")
-_CELLS = np.dtype([("i", "<u4"), ("v", "i1")])
-CELLS_PER_DELTA = (PAYLOAD - _DELTA.size) // _CELL.size
+DELTA_ROOM = PAYLOAD - _DELTA.size
 POINTS_PER_CHUNK = (PAYLOAD - _PATH.size) // _POINT.size
 FORMAT_VERSION = 1
 
@@ -94,13 +95,20 @@ class MapStreamer:
         grid = self.map.grid.reshape(-1)
         changed = touched[grid[touched] != self._sent[touched]]
         self._sent[changed] = grid[changed]
-        cells = np.empty(len(changed), dtype=_CELLS)
-        cells["i"], cells["v"] = changed, grid[changed]
+        values = grid[changed]
         out = []
-        for start in range(0, len(cells), CELLS_PER_DELTA):
-            part = cells[start:start + CELLS_PER_DELTA]
+        start, guess = 0, 64
+        while start < len(changed):
+            count = min(guess, len(changed) - start)
+            while True:  # as many cells as fit, shrinking the guess until the packed form does
+                body = _pack_cells(changed[start:start + count], values[start:start + count])
+                if len(body) <= DELTA_ROOM or count == 1:
+                    break
+                count = max(1, int(count * DELTA_ROOM / len(body) * 0.95))
             self.delta_seq += 1
-            out.append((MAP_DELTA, _DELTA.pack(self.delta_seq, len(part)) + part.tobytes()))
+            out.append((MAP_DELTA, _DELTA.pack(self.delta_seq, count) + body))
+            guess = count + count // 4 + 1 if len(body) < DELTA_ROOM * 0.85 else count
+            start += count
         return out
 
     def snapshot(self) -> list[tuple[int, bytes]]:
@@ -128,6 +136,51 @@ class MapStreamer:
         groups = [rounded[i:i + POINTS_PER_CHUNK] for i in range(0, len(rounded), POINTS_PER_CHUNK)] or [[]]
         return [(PATH, _PATH.pack(self.path_id, index, len(groups)) + b"".join(_POINT.pack(*p) for p in group))
                 for index, group in enumerate(groups)]
+
+
+def _pack_cells(indices: np.ndarray, values: np.ndarray) -> bytes:
+    """Raw deflate of the varint index gaps followed by the int8 values."""
+    gaps = np.diff(indices.astype(np.int64), prepend=0)
+    return _deflate(_varints(gaps) + values.astype(np.int8).tobytes())
+
+
+def _unpack_cells(body: bytes, count: int) -> tuple[np.ndarray, np.ndarray]:
+    raw = zlib.decompress(body, -15)
+    gaps, offset = _read_varints(raw, count)
+    values = np.frombuffer(raw, dtype=np.int8, count=count, offset=offset)
+    return np.cumsum(gaps), values
+
+
+def _deflate(data: bytes) -> bytes:
+    packer = zlib.compressobj(9, zlib.DEFLATED, -15)
+    return packer.compress(data) + packer.flush()
+
+
+def _varints(numbers: np.ndarray) -> bytes:
+    """LEB128 encoding of non-negative integers below 2**35, vectorised."""
+    numbers = numbers.astype(np.int64)
+    lengths = np.ones(len(numbers), dtype=np.int64)
+    for k in range(1, 5):
+        lengths += numbers >= (1 << (7 * k))
+    owner = np.repeat(np.arange(len(numbers)), lengths)
+    k = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    more = k < lengths[owner] - 1
+    return (((numbers[owner] >> (7 * k)) & 0x7F) | (more << 7)).astype(np.uint8).tobytes()
+
+
+def _read_varints(raw: bytes, count: int) -> tuple[np.ndarray, int]:
+    """The first ``count`` LEB128 integers of ``raw`` and the offset after them."""
+    data = np.frombuffer(raw, dtype=np.uint8)
+    ends = np.flatnonzero(data < 0x80)[:count]
+    if len(ends) < count:
+        raise ValueError("truncated varints")
+    used = int(ends[-1]) + 1 if count else 0
+    starts = np.concatenate(([0], ends[:-1] + 1)) if count else np.zeros(0, dtype=np.int64)
+    if count and int((ends - starts).max()) > 4:
+        raise ValueError("varint too long")
+    k = np.arange(used) - np.repeat(starts, ends - starts + 1)
+    parts = (data[:used].astype(np.int64) & 0x7F) << (7 * k)
+    return (np.add.reduceat(parts, starts) if count else np.zeros(0, dtype=np.int64)), used
 
 
 def _chunks(kind: int, ident: int, blob: bytes) -> list[tuple[int, bytes]]:
@@ -166,14 +219,12 @@ class MapReceiver:
                 self._path_chunk(payload)
             else:
                 return False
-        except (struct.error, zlib.error, ValueError):
+        except (struct.error, zlib.error, ValueError, IndexError):
             return True  # ours but damaged: ignore, the next snapshot repairs
         return True
 
     def _delta(self, payload: bytes) -> None:
         seq, count = _DELTA.unpack_from(payload)
-        if len(payload) < _DELTA.size + count * _CELL.size:
-            raise ValueError("short delta")
         if not self.synced:
             self._pending[seq] = payload
             if len(self._pending) > 4096:  # never got a snapshot: keep only the recent ones
@@ -190,11 +241,11 @@ class MapReceiver:
 
     def _apply(self, payload: bytes) -> None:
         seq, count = _DELTA.unpack_from(payload)
-        cells = np.frombuffer(payload, dtype=_CELLS, count=count, offset=_DELTA.size)
+        indices, values = _unpack_cells(payload[_DELTA.size:], count)
         flat = self.grid.reshape(-1)
-        if count and int(cells["i"].max()) >= flat.size:
+        if count and int(indices.max()) >= flat.size:
             raise ValueError("cell index outside the map")
-        flat[cells["i"]] = cells["v"]
+        flat[indices] = values
         self.applied = seq
         self.version += 1
 

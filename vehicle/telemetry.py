@@ -2,8 +2,9 @@
 
 ``Telemetry.tick(now)`` returns the messages due at ``now`` on a per-message
 schedule (intervals can be changed, as MAV_CMD_SET_MESSAGE_INTERVAL asks).
-The clock is the caller's: wall time for a live ``vehicle sim``, simulated
-time for the log of a headless experiment; the messages are the same.
+The schedule's clock is the caller's: wall time for a live ``vehicle sim``,
+simulated time for the log of a headless experiment; the messages are the
+same, and their ``time_boot_ms`` is always the simulated time since boot.
 Conventions: LOCAL_POSITION_NED is metres from home (north, east, down);
 DISTANCE_SENSOR carries one reading, ``max_distance + 1`` meaning no echo.
 """
@@ -97,7 +98,8 @@ class Telemetry:
         }
 
     def _ms(self, now: float) -> int:
-        return int((now - self.boot) * 1000) & 0xFFFFFFFF
+        """time_boot_ms: the vehicle's simulated time since boot (as ArduPilot's SITL reports it)."""
+        return int(self.world.time * 1000) & 0xFFFFFFFF
 
     # ---- messages ------------------------------------------------------------------------------
     def heartbeat(self, now: float):

@@ -98,7 +98,9 @@ class World:
 
     def step(self) -> list[Reading]:
         """Advance one fixed step; returns the sonar readings taken at its end (when one is due)."""
-        if self.collision is not None:
+        if self.collision is not None:  # the wreck lies still; its clock goes on
+            self.steps += 1
+            self.time = self.steps * self.dt
             return []
         pose = self.body.pose
         if self._ground_stale():

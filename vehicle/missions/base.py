@@ -44,6 +44,7 @@ class Context:
     radius: float  # of the vehicle body, m
     waypoints: list[tuple[float, float]] | None = None  # given by the operator, scene metres
     time: float = 0.0
+    started: float = 0.0  # when the mission was started (simulated time)
     observation: Observation | None = None
     say: Callable[[str], None] = print
     planned_path: list[tuple[float, float]] = field(default_factory=list)  # for display
@@ -68,7 +69,7 @@ class Context:
 
     @property
     def time_left(self) -> float:
-        return self.settings.time_limit - self.time
+        return self.settings.time_limit - (self.time - self.started)
 
     def clearance_cells(self, padding: float | None = None) -> float:
         pad = self.settings.padding if padding is None else padding

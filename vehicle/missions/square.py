@@ -28,8 +28,12 @@ class Square(Mission):
 
     def begin(self) -> None:
         ctx = self.ctx
-        self.corners = ctx.waypoints or square_corners(ctx.home, ctx.settings.space_size)
         datum = ctx.vehicle.datum
+        if len(ctx.vehicle.mission) > 1:  # a mission was uploaded or loaded: fly it as it is
+            self.corners = [datum.to_local(i.lat, i.lon) for i in ctx.vehicle.mission[1:] if i.has_position]
+            self.first_corner = len(ctx.vehicle.mission) - len(self.corners)
+            return
+        self.corners = ctx.waypoints or square_corners(ctx.home, ctx.settings.space_size)
         items = [ctx.vehicle.home_item()]
         if ctx.kind is Kind.COPTER:
             items.append(MissionItem(NAV_TAKEOFF, alt=ctx.settings.altitude))

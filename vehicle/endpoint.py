@@ -1,0 +1,279 @@
+"""The vehicle on the wire: MAVLink links to ground stations, commands, parameters, missions, failsafe.
+
+It makes the simulated vehicle and its onboard agent look like ArduPilot to
+any standard ground station: every COMMAND_LONG/COMMAND_INT gets a
+COMMAND_ACK (unknown commands MAV_RESULT_UNSUPPORTED), modes use ArduPilot's
+numbers, parameters and missions follow their protocols. A mode change from a
+ground station pauses the onboard mission; AUTO + MISSION_START hands control
+back. Garbage, truncated packets and messages for other systems are counted
+and ignored. All timing here (failsafe, retries) is wall-clock time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+from vehicle.agent import Agent
+from vehicle.flightlog import TlogWriter
+from vehicle.mav import mavlink, mavutil
+from vehicle.mission_protocol import MissionServer
+from vehicle.modes import STOP_MODE, Kind, mode_name
+from vehicle.params import Parameters
+from vehicle.telemetry import Telemetry
+from vehicle.world import World
+
+ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
+DENIED = mavlink.MAV_RESULT_DENIED
+UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
+FAILED = mavlink.MAV_RESULT_FAILED
+TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+FORCE_DISARM = 21196
+GCS = mavlink.MAV_TYPE_GCS
+MISSION_MESSAGES = {"MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_COUNT",
+                    "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT"}
+POSITION_IGNORED = (mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE)
+VELOCITY_IGNORED = (mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_VY_IGNORE)
+
+
+class Endpoint:
+    def __init__(self, urls: list[str], world: World, agent: Agent, telemetry: Telemetry, sysid: int = 1,
+                 failsafe_timeout: float = 5.0, log: TlogWriter | None = None):
+        self.world = world
+        self.autopilot = world.autopilot
+        self.agent = agent
+        self.telemetry = telemetry
+        self.sysid = sysid
+        self.failsafe_timeout = failsafe_timeout
+        self.log = log
+        self.links = [mavutil.mavlink_connection(url, source_system=sysid,
+                                                 source_component=mavlink.MAV_COMP_ID_AUTOPILOT1)
+                      for url in urls]
+        for link in self.links:
+            link.mav.robust_parsing = True
+        self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)
+        self.params = Parameters(agent.settings)
+        self.missions = MissionServer(self.autopilot)
+        self.stats: Counter[str] = Counter()
+        self.gcs_seen: float | None = None  # wall time of the last GCS heartbeat
+        self.in_failsafe = False
+
+    def close(self) -> None:
+        for link in self.links:
+            link.close()
+
+    # ---- sending -------------------------------------------------------------------------------
+    def send(self, messages: list, now: float) -> None:
+        for message in messages:
+            packet = message.pack(self.packer)
+            for link in self.links:
+                try:
+                    link.write(packet)
+                except OSError:
+                    self.stats["send errors"] += 1
+            if self.log is not None:
+                self.log.write(packet, now)
+        self.stats["sent"] += len(messages)
+
+    # ---- receiving -----------------------------------------------------------------------------
+    def poll(self, now: float) -> None:
+        """Handle everything waiting on every link, then the timers (mission retries, failsafe)."""
+        for link in self.links:
+            while True:
+                try:
+                    message = link.recv_msg()
+                except (OSError, ConnectionError):
+                    self.stats["link errors"] += 1
+                    break
+                if message is None:
+                    break
+                self._receive(message, now)
+        self.send(self.missions.poll(now), now)
+        self._check_failsafe(now)
+
+    def _receive(self, message, now: float) -> None:
+        kind = message.get_type()
+        if kind == "BAD_DATA":
+            self.stats["bad packets"] += 1
+            return
+        if self.log is not None:
+            self.log.write(message.get_msgbuf(), now)
+        target = getattr(message, "target_system", 0)
+        if target not in (0, self.sysid):
+            self.stats["for other systems"] += 1
+            return
+        self.stats["received"] += 1
+        self.send(self.handle(message, now), now)
+
+    def handle(self, message, now: float) -> list:
+        """The replies to one message (already checked to be for us)."""
+        kind = message.get_type()
+        if kind == "HEARTBEAT":
+            if message.type == GCS:
+                self._gcs_heard(now)
+            return []
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
+            return self._command(message, now)
+        if kind == "SET_MODE":
+            result = self._set_mode(message.custom_mode) if message.base_mode & 1 else UNSUPPORTED
+            return [] if result == ACCEPTED else [self._text(f"Mode change refused ({result})", 4)]
+        if kind in MISSION_MESSAGES:
+            return self.missions.handle(message, now)
+        if kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
+            return self._param(message)
+        if kind == "SET_POSITION_TARGET_LOCAL_NED":
+            self._position_target_local(message)
+        elif kind == "SET_POSITION_TARGET_GLOBAL_INT":
+            self._position_target_global(message)
+        return []
+
+    # ---- commands ------------------------------------------------------------------------------
+    def _command(self, message, now: float) -> list:
+        replies: list = []
+        try:
+            result = self._run_command(message, replies)
+        except (ValueError, OverflowError):
+            result = DENIED
+        ack = mavlink.MAVLink_command_ack_message(message.command, result, 0, 0, message.get_srcSystem(),
+                                                  message.get_srcComponent())
+        return [ack, *replies]
+
+    def _run_command(self, m, replies: list) -> int:
+        cmd = m.command
+        pilot = self.autopilot
+        if cmd == mavlink.MAV_CMD_DO_SET_MODE:
+            return self._set_mode(int(m.param2)) if int(m.param1) & 1 else UNSUPPORTED
+        if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            force = int(round(m.param2)) == FORCE_DISARM
+            return pilot.arm(force) if m.param1 >= 0.5 else pilot.disarm(force)
+        if cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
+            result = pilot.takeoff(m.param7)
+            if result == ACCEPTED:
+                self.agent.start()  # GUIDED take-off is a start of the onboard mission, if it waits
+            return result
+        if cmd == mavlink.MAV_CMD_NAV_LAND:
+            return self._set_mode_named("LAND") if self.world.kind is Kind.COPTER else UNSUPPORTED
+        if cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            return self._set_mode_named("RTL")
+        if cmd == mavlink.MAV_CMD_MISSION_START:
+            return self._mission_start(int(m.param1))
+        if cmd == mavlink.MAV_CMD_DO_CHANGE_SPEED:
+            return pilot.set_speed(m.param2)
+        if cmd == mavlink.MAV_CMD_DO_REPOSITION:
+            return self._reposition(m)
+        if cmd == mavlink.MAV_CMD_CONDITION_YAW:
+            direction = -1.0 if m.param3 < 0 else 1.0
+            return pilot.set_yaw(math.radians(m.param1) * (direction if m.param4 else 1.0), relative=bool(m.param4))
+        if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            interval = None if m.param2 == 0 else (-1.0 if m.param2 < 0 else m.param2 / 1e6)
+            return ACCEPTED if self.telemetry.set_interval(int(m.param1), interval) else UNSUPPORTED
+        if cmd == mavlink.MAV_CMD_REQUEST_MESSAGE:
+            return self._request_message(int(m.param1), replies)
+        if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
+            return self._request_message(mavlink.MAVLINK_MSG_ID_HOME_POSITION, replies)
+        if cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            return self._request_message(mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION, replies)
+        return UNSUPPORTED
+
+    def _set_mode(self, number: int) -> int:
+        name = mode_name(self.world.kind, number)
+        return UNSUPPORTED if name is None else self._set_mode_named(name)
+
+    def _set_mode_named(self, name: str) -> int:
+        return self.autopilot.set_mode(name, source="gcs")
+
+    def _mission_start(self, first: int) -> int:
+        """AUTO + MISSION_START: start the onboard mission if it waits, resume it if paused, else run AUTO."""
+        if self.autopilot.mode != "AUTO":
+            return DENIED
+        if self.agent.start() or self.agent.resume():
+            return ACCEPTED
+        return self.autopilot.start_mission(first)
+
+    def _reposition(self, m) -> int:
+        if m.get_type() == "COMMAND_INT":
+            lat, lon = m.x * 1e-7, m.y * 1e-7
+        else:
+            lat, lon = m.param5, m.param6
+        if int(m.param2) & mavlink.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE and self.autopilot.mode != "GUIDED":
+            self._set_mode_named("GUIDED")
+        x, y = self.world.datum.to_local(lat, lon)
+        altitude = None if math.isnan(m.param7) else m.param7
+        return self.autopilot.goto(x, y, altitude)
+
+    def _request_message(self, message_id: int, replies: list) -> int:
+        builder = self.telemetry.builders().get(message_id)
+        if builder is None:
+            return UNSUPPORTED
+        replies.append(builder(self.world.time))
+        return ACCEPTED
+
+    # ---- guided targets -------------------------------------------------------------------------
+    def _position_target_local(self, m) -> None:
+        if m.target_system != self.sysid:
+            return
+        pose, home = self.world.pose, self.world.home
+        if m.coordinate_frame == mavlink.MAV_FRAME_LOCAL_NED:
+            x, y, altitude = home[0] + m.y, home[1] + m.x, -m.z
+        elif m.coordinate_frame == mavlink.MAV_FRAME_LOCAL_OFFSET_NED:
+            x, y, altitude = pose.x + m.y, pose.y + m.x, pose.z - home[2] - m.z
+        elif m.coordinate_frame == mavlink.MAV_FRAME_BODY_OFFSET_NED:
+            forward, right = m.x, m.y
+            sin, cos = math.sin(pose.yaw), math.cos(pose.yaw)
+            x, y = pose.x + forward * sin + right * cos, pose.y + forward * cos - right * sin
+            altitude = pose.z - home[2] - m.z
+        else:
+            self.stats["unsupported frames"] += 1
+            return
+        self._apply_target(m.type_mask, x, y, altitude, m.vx, m.vy, m.vz)
+
+    def _position_target_global(self, m) -> None:
+        if m.target_system != self.sysid:
+            return
+        x, y = self.world.datum.to_local(m.lat_int * 1e-7, m.lon_int * 1e-7)
+        self._apply_target(m.type_mask, x, y, m.alt, m.vx, m.vy, m.vz)
+
+    def _apply_target(self, mask: int, x: float, y: float, altitude: float, vn: float, ve: float,
+                      vd: float) -> None:
+        if not mask & POSITION_IGNORED:
+            self.autopilot.goto(x, y, altitude if not mask & mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE else None)
+        elif not mask & VELOCITY_IGNORED:
+            self.autopilot.set_velocity(ve, vn, -vd)
+
+    # ---- parameters ------------------------------------------------------------------------------
+    def _param(self, m) -> list:
+        kind = m.get_type()
+        if kind == "PARAM_REQUEST_LIST":
+            return [self.params.message(i) for i in range(len(self.params))]
+        index = self.params.find(m.param_id, getattr(m, "param_index", -1) if kind == "PARAM_REQUEST_READ" else -1)
+        if index is None:
+            return []  # ArduPilot stays silent about unknown parameters
+        if kind == "PARAM_SET":
+            param_id = self.params.ids[index]
+            refused = self.params.set(param_id, m.param_value)
+            if refused:
+                return [self._text(refused, mavlink.MAV_SEVERITY_WARNING), self.params.message(index)]
+            if param_id == "SCN_SPEED":
+                self.autopilot.set_speed(self.params.value(param_id))
+        return [self.params.message(index)]
+
+    # ---- GCS failsafe ------------------------------------------------------------------------------
+    def _gcs_heard(self, now: float) -> None:
+        self.gcs_seen = now
+        if self.in_failsafe:
+            self.in_failsafe = False
+            self.send([self._text("GCS failsafe cleared: ground station back")], now)
+
+    def _check_failsafe(self, now: float) -> None:
+        if self.gcs_seen is None or self.in_failsafe or now - self.gcs_seen < self.failsafe_timeout:
+            return
+        self.in_failsafe = True
+        action = "RTL" if self.world.kind is Kind.COPTER else STOP_MODE[Kind.ROVER]
+        if self.autopilot.armed:
+            self.autopilot.set_mode(action, source="failsafe")
+        self.send([self._text(f"GCS failsafe: no ground station for {self.failsafe_timeout:g} s, {action}",
+                              mavlink.MAV_SEVERITY_CRITICAL)], now)
+
+    @staticmethod
+    def _text(text: str, severity: int = mavlink.MAV_SEVERITY_INFO):
+        return mavlink.MAVLink_statustext_message(severity, text[:50].encode())

@@ -1,0 +1,93 @@
+"""``vehicle sim``: a simulated vehicle with its onboard agent, live on MAVLink links.
+
+Two clocks run side by side (see Clocks in the design): the world advances on
+simulated time, ``speedup`` times faster than the wall clock, while everything
+a ground station observes (message rates, heartbeats, the GCS failsafe, log
+timestamps) runs on the wall clock. ``time_boot_ms`` in the messages is the
+vehicle's simulated time since boot, as in ArduPilot's SITL, so tests can wait
+in simulated time.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+from vehicle.agent import Agent
+from vehicle.endpoint import Endpoint
+from vehicle.flightlog import TlogWriter
+from vehicle.telemetry import Telemetry
+from vehicle.world import World
+
+TICK = 0.01  # s of wall time between loop iterations
+MAX_LAG = 0.5  # s of wall time the simulation may fall behind before it gives up catching up
+
+
+@dataclass
+class SimOptions:
+    urls: list[str]
+    sysid: int = 1
+    speedup: float = 1.0
+    failsafe_timeout: float = 5.0
+    log: str | None = None
+
+
+class SimVehicle:
+    def __init__(self, world: World, agent: Agent, options: SimOptions):
+        self.world = world
+        self.agent = agent
+        self.options = options
+        self.telemetry = Telemetry(world, agent, start=time.time(), sysid=options.sysid)
+        self.log = TlogWriter(options.log) if options.log else None
+        self.endpoint = Endpoint(options.urls, world, agent, self.telemetry, options.sysid,
+                                 options.failsafe_timeout, self.log)
+        self.period = max(1, round(agent.settings.monitor_period / world.dt))
+        self.stop_event = threading.Event()
+        self.lagging = 0.0  # simulated seconds dropped because the machine could not keep up
+        self._crash_reported = False
+
+    def run(self, duration: float | None = None) -> None:
+        """Run until ``stop()`` (or for ``duration`` wall seconds)."""
+        started = time.monotonic()
+        sim_start = self.world.time
+        last_flush = started
+        try:
+            while not self.stop_event.is_set():
+                wall = time.monotonic()
+                if duration is not None and wall - started >= duration:
+                    break
+                now = time.time()
+                self.endpoint.poll(now)
+                target = sim_start + (wall - started) * self.options.speedup - self.lagging
+                outgoing = self._advance(target, now, deadline=wall + MAX_LAG)
+                if self.world.time < target - MAX_LAG * self.options.speedup:
+                    self.lagging += target - self.world.time  # too slow: let simulated time slip
+                outgoing += self.telemetry.tick(now)
+                self.endpoint.send(outgoing, now)
+                if self.log is not None and wall - last_flush >= 1.0:
+                    self.log.flush()
+                    last_flush = wall
+                time.sleep(max(0.0, TICK - (time.monotonic() - wall)))
+        finally:
+            self.endpoint.close()
+            if self.log is not None:
+                self.log.close()
+
+    def _advance(self, target: float, now: float, deadline: float) -> list:
+        """Step the world up to simulated time ``target``; returns the DISTANCE_SENSOR messages of its readings."""
+        world, agent = self.world, self.agent
+        messages = []
+        while world.time + world.dt / 2 <= target and time.monotonic() < deadline:
+            readings = world.step()
+            agent.collect(readings)
+            messages += [self.telemetry.distance_sensor(r, world.time) for r in readings]
+            if world.steps % self.period == 0:
+                agent.step(world.time)
+            if world.collision is not None and not self._crash_reported:
+                self._crash_reported = True
+                world.autopilot._say(f"Crash: {world.collision.describe()}"[:50], 2)
+        return messages
+
+    def stop(self) -> None:
+        self.stop_event.set()
