@@ -1,0 +1,149 @@
+"""``vehicle experiment --log FILE.tlog`` (vehicle.flightlog): a standard telemetry log on simulated time.
+
+One pathfind run in a small scene is logged twice (and its final map saved with
+``--map-out``); the log is read back with pymavlink's own ``mavlink_connection``.
+"""
+
+from collections import defaultdict
+
+import numpy as np
+import pytest
+
+from vehicle.cli import main
+from vehicle.flightlog import LOG_EPOCH
+from vehicle.mapstream import MapReceiver
+from vehicle.mav import mavlink, mavutil
+
+SCENE = """#VRML V2.0 utf8
+WorldInfo { info ["space_size=20" "waypoints=-3,6; 3,6"] }
+Transform { translation 0 0 -0.05 children Shape { geometry Box { size 80 80 0.1 } } }
+Transform { translation 0 4 2 children Shape { geometry Box { size 4 0.2 6 } } }
+Transform { translation -7 -3 2 children Shape { geometry Box { size 2 2 6 } } }
+"""
+
+
+@pytest.fixture(scope="module")
+def logged(tmp_path_factory):
+    """A folder with the scene, two logs of the same run (a.tlog, b.tlog) and the first run's maps/."""
+    folder = tmp_path_factory.mktemp("log")
+    scene = folder / "yard.wrl"
+    scene.write_text(SCENE)
+    for name, extra in (("a", ["--map-out", str(folder / "maps")]), ("b", [])):
+        code = main(["experiment", "--scene", str(scene), "--mission", "pathfind", "--time-limit", "150", "--json",
+                     "--log", str(folder / f"{name}.tlog"), *extra])
+        assert code == 0
+    return folder
+
+
+@pytest.fixture(scope="module")
+def messages(logged):
+    """Message type -> list of (timestamp, message), in log order."""
+    reader = mavutil.mavlink_connection(str(logged / "a.tlog"))
+    by_type = defaultdict(list)
+    order = []
+    while (message := reader.recv_match()) is not None:
+        if message.get_type() == "BAD_DATA":
+            pytest.fail(f"undecodable data in the log: {message}")
+        by_type[message.get_type()].append((message._timestamp, message))
+        order.append(message._timestamp)
+    reader.close()
+    by_type["_order"] = order
+    return by_type
+
+
+def intervals(entries):
+    stamps = np.array([t for t, _ in entries])
+    return np.diff(stamps)
+
+
+def test_the_log_reads_back_and_starts_at_the_log_epoch(messages):
+    order = messages["_order"]
+    assert len(order) > 1000
+    assert order[0] == pytest.approx(LOG_EPOCH, abs=0.5)  # 2026-01-01T00:00:00Z plus simulated time
+    assert all(b >= a for a, b in zip(order, order[1:], strict=False))  # never back in time
+
+
+def test_heartbeats_come_at_1_hz_of_simulated_time(messages):
+    beats = messages["HEARTBEAT"]
+    assert len(beats) >= 20
+    gaps = intervals(beats[:-1])  # the last one is the closing heartbeat
+    assert np.median(gaps) == pytest.approx(1.0, abs=0.01)
+    assert gaps.min() >= 0.9 and gaps.max() <= 1.1
+    _, first = beats[0]
+    assert first.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+    assert first.type == mavlink.MAV_TYPE_QUADROTOR
+    assert first.base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    assert any(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED for _, m in beats)  # it flew
+    assert any(m.custom_mode == 4 for _, m in beats)  # GUIDED
+
+
+def test_positions_come_at_20_hz_with_boot_times_on_the_same_clock(messages):
+    positions = messages["GLOBAL_POSITION_INT"]
+    span = positions[-2][0] - positions[0][0]
+    assert (len(positions) - 2) / span == pytest.approx(20, rel=0.05)
+    assert np.median(intervals(positions)) == pytest.approx(0.05, abs=0.002)
+    for stamp, message in positions[::50]:
+        assert message.time_boot_ms / 1000 == pytest.approx(stamp - LOG_EPOCH, abs=0.002)
+    heights = [m.relative_alt / 1000 for _, m in positions]
+    assert max(heights) == pytest.approx(4.0, abs=0.3)  # flown at the default altitude
+
+
+def test_distance_sensor_readings_are_logged(messages):
+    readings = messages["DISTANCE_SENSOR"]
+    assert len(readings) > 100
+    assert {m.type for _, m in readings} == {mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND}
+    assert len({m.orientation for _, m in readings}) == 3  # the three sonars of the default suite
+    assert any(m.current_distance <= m.max_distance for _, m in readings)  # echoes
+    assert all(m.current_distance <= m.max_distance + 1 for _, m in readings)
+
+
+def test_tunnel_payloads_rebuild_exactly_the_final_map(logged, messages):
+    tunnels = messages["TUNNEL"]
+    assert tunnels
+    receiver = MapReceiver()
+    for _, message in tunnels:
+        assert message.payload_length <= 128
+        receiver.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
+    final = np.load(next((logged / "maps").glob("*.npy")))
+    assert receiver.synced
+    assert receiver.gaps == 0
+    assert np.count_nonzero(final) > 0
+    assert np.array_equal(receiver.grid, final)
+
+
+def test_the_planned_path_is_in_the_log(messages):
+    receiver = MapReceiver()
+    paths = []
+    for _, message in messages["TUNNEL"]:
+        before = receiver.path
+        receiver.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
+        if receiver.path is not before and receiver.path:
+            paths.append(receiver.path)
+    assert paths
+    ends = {tuple(round(v) for v in path[-1]) for path in paths}
+    assert (-3, 6) in ends and (3, 6) in ends  # the waypoints, metres from home
+
+
+def test_two_logs_of_the_same_run_are_byte_identical(logged):
+    a, b = (logged / "a.tlog").read_bytes(), (logged / "b.tlog").read_bytes()
+    assert len(a) > 10000
+    assert a == b
+
+
+def test_the_log_ends_on_the_final_state(messages):
+    last_beat = messages["HEARTBEAT"][-1][1]
+    assert not last_beat.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED  # landed and disarmed
+    last_position = messages["GLOBAL_POSITION_INT"][-1][1]
+    assert last_position.relative_alt < 500  # mm: on the ground
+
+
+def test_cli_log_summary_mentions_the_log(tmp_path, capsys):
+    scene = tmp_path / "yard.wrl"
+    scene.write_text(SCENE)
+    log = tmp_path / "deep" / "run.tlog"
+    code = main(["experiment", "--scene", str(scene), "--mission", "browse", "--time-limit", "150", "--log",
+                 str(log)])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert f"log written to {log}" in out
+    assert log.stat().st_size > 0

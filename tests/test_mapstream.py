@@ -1,0 +1,253 @@
+"""The memory map and planned path over TUNNEL payloads (vehicle.mapstream).
+
+A MapStreamer turns a changing MemoryMap into payloads; a MapReceiver rebuilds it.
+The map changes through real sonar-like readings (add_readings), with simulated
+time passed to ``tick`` by the test.
+"""
+
+import math
+import struct
+
+import numpy as np
+import pytest
+
+from vehicle.mapstream import MAP_DELTA, MAP_SNAPSHOT, PATH, PAYLOAD, MapReceiver, MapStreamer
+from vehicle.memory_map import MemoryMap
+
+HOME = (12.0, -7.0)  # not the origin, so offsets from home show
+STEP = 0.25  # s between ticks
+
+
+def scan(memory: MemoryMap, rng: np.random.Generator, n: int = 40) -> None:
+    """A batch of horizontal readings from a random spot near home, some without echo."""
+    origin = np.array([HOME[0] + rng.uniform(-8, 8), HOME[1] + rng.uniform(-8, 8), 4.0])
+    angles = rng.uniform(0, 2 * math.pi, n)
+    directions = np.column_stack([np.sin(angles), np.cos(angles), np.zeros(n)])
+    distances = rng.uniform(1, 12, n)
+    distances[rng.random(n) < 0.2] = np.nan
+    memory.add_readings(np.repeat(origin[None], n, axis=0), directions, distances, np.full(n, 40.0),
+                        np.full(n, math.radians(7.5)))
+
+
+class Stream:
+    """A map, its streamer, and the payloads of every tick so far (each tagged with its tick)."""
+
+    def __init__(self, seed=0, space_size=20.0, **streamer):
+        self.rng = np.random.default_rng(seed)
+        self.map = MemoryMap(HOME, space_size, 10)
+        self.streamer = MapStreamer(self.map, HOME, **streamer)
+        self.time = 0.0
+
+    def tick(self, scans=1) -> list[tuple[int, bytes]]:
+        for _ in range(scans):
+            scan(self.map, self.rng)
+        self.time += STEP
+        return self.streamer.tick(self.time)
+
+    def run(self, seconds) -> list[tuple[int, bytes]]:
+        out = []
+        for _ in range(round(seconds / STEP)):
+            out += self.tick()
+        return out
+
+
+def feed(receiver, payloads):
+    for kind, payload in payloads:
+        assert receiver.feed(kind, payload)
+
+
+def assert_equal_maps(receiver, memory):
+    assert receiver.synced
+    assert receiver.grid is not None
+    assert receiver.grid.shape == memory.grid.shape
+    assert np.array_equal(receiver.grid, memory.grid)
+
+
+def test_a_receiver_fed_everything_equals_the_map_cell_for_cell():
+    stream = Stream()
+    receiver = MapReceiver()
+    for k in range(60):
+        feed(receiver, stream.tick())
+        if k % 4 == 3:  # whenever every change has gone out, the copy is exact
+            feed(receiver, stream.streamer.deltas())
+            assert_equal_maps(receiver, stream.map)
+    feed(receiver, stream.streamer.deltas())
+    assert_equal_maps(receiver, stream.map)
+    assert receiver.gaps == 0
+    assert receiver.geometry.size == stream.map.size
+    assert receiver.geometry.resolution == 10
+    assert receiver.geometry.origin == pytest.approx((-20.0, -20.0))  # south-west corner, from home
+
+
+def test_every_payload_fits_a_tunnel_message():
+    stream = Stream(seed=1)
+    payloads = stream.run(12)
+    assert {kind for kind, _ in payloads} == {MAP_SNAPSHOT, MAP_DELTA}
+    assert all(0 < len(p) <= PAYLOAD for _, p in payloads)
+    assert all(kind >= 32768 for kind in (MAP_SNAPSHOT, MAP_DELTA, PATH))
+
+
+def test_snapshots_come_now_and_then_and_deltas_in_between():
+    stream = Stream(seed=2, snapshot_period=5.0, delta_period=0.5)
+    ticks = [stream.tick() for _ in range(round(12 / STEP))]
+    snapshot_ticks = [i for i, out in enumerate(ticks) if any(k == MAP_SNAPSHOT for k, _ in out)]
+    delta_ticks = [i for i, out in enumerate(ticks) if any(k == MAP_DELTA for k, _ in out)]
+    assert len(snapshot_ticks) in (2, 3)  # at about 0, 5 and 10 s
+    assert len(delta_ticks) >= 12 / 0.5 - 2
+
+
+def test_a_receiver_that_joins_late_catches_up_at_the_next_snapshot():
+    stream = Stream(seed=3)
+    stream.run(7)  # the first snapshot and many deltas go by before it listens
+    receiver = MapReceiver()
+    caught_up = False
+    for _ in range(round(8 / STEP)):
+        out = stream.tick()
+        feed(receiver, out)
+        caught_up |= any(k == MAP_SNAPSHOT for k, _ in out)
+        if not caught_up:
+            assert not receiver.synced
+    assert caught_up
+    feed(receiver, stream.streamer.deltas())
+    assert_equal_maps(receiver, stream.map)
+
+
+def test_a_receiver_that_loses_a_tenth_of_the_deltas_resyncs_at_the_next_snapshot():
+    stream = Stream(seed=4)
+    loss = np.random.default_rng(99)
+    receiver = MapReceiver()
+    for _ in range(round(14 / STEP)):
+        feed(receiver, [(k, p) for k, p in stream.tick() if k != MAP_DELTA or loss.random() >= 0.1])
+    assert receiver.gaps > 0  # it did notice losses
+    # after the losses, one more snapshot and every delta after it
+    while True:
+        out = stream.tick()
+        feed(receiver, out)
+        if any(k == MAP_SNAPSHOT for k, _ in out):
+            break
+    feed(receiver, stream.run(2) + stream.streamer.deltas())
+    assert_equal_maps(receiver, stream.map)
+
+
+def test_deltas_that_arrive_before_the_snapshot_they_follow_are_applied():
+    stream = Stream(seed=5)
+    stream.run(2)
+    snapshot = stream.streamer.snapshot()
+    later = stream.run(1) + stream.streamer.deltas()
+    receiver = MapReceiver()
+    feed(receiver, later)  # out of order: the deltas first
+    assert not receiver.synced
+    feed(receiver, snapshot)
+    assert_equal_maps(receiver, stream.map)
+
+
+def test_a_delta_applied_twice_does_no_harm():
+    stream = Stream(seed=6)
+    receiver = MapReceiver()
+    payloads = stream.run(3) + stream.streamer.deltas()
+    feed(receiver, payloads)
+    feed(receiver, [(k, p) for k, p in payloads if k == MAP_DELTA][-3:])
+    assert_equal_maps(receiver, stream.map)
+
+
+def test_garbage_payloads_are_ignored_without_exceptions():
+    stream = Stream(seed=7)
+    receiver = MapReceiver()
+    feed(receiver, stream.run(3) + stream.streamer.deltas())
+    rng = np.random.default_rng(0)
+    garbage = [b"", b"\x00", b"\xff" * 3, b"\xff" * PAYLOAD, struct.pack("<IH", 1, 65535) + b"\x01" * 20]
+    garbage += [rng.bytes(int(rng.integers(1, PAYLOAD + 1))) for _ in range(300)]
+    for kind in (MAP_SNAPSHOT, MAP_DELTA):
+        for payload in garbage:
+            receiver.feed(kind, payload)  # must not raise
+    for payload in (b"", b"\x01", b"\x01\x00\x00", struct.pack("<HBB", 7, 0, 1) + b"\x00" * 5):
+        receiver.feed(PATH, payload)  # too short for a header, or a point cut short
+    assert receiver.feed(32900, b"not ours") is False
+    assert receiver.feed(0, b"") is False
+
+
+def test_damaged_copies_of_real_payloads_do_not_spoil_the_copy():
+    stream = Stream(seed=7)
+    receiver = MapReceiver()
+    good = stream.run(3) + stream.streamer.deltas()
+    feed(receiver, good)
+    for kind, payload in good:  # truncated and bit-flipped copies of everything already sent
+        receiver.feed(kind, payload[: len(payload) // 2])
+        flipped = bytearray(payload)
+        flipped[-1] ^= 0xFF
+        receiver.feed(kind, bytes(flipped))
+    feed(receiver, stream.run(1) + stream.streamer.snapshot() + stream.run(1) + stream.streamer.deltas())
+    assert_equal_maps(receiver, stream.map)
+
+
+def test_a_snapshot_chunk_from_an_unknown_format_version_is_ignored():
+    stream = Stream(seed=8)
+    stream.run(1)
+    chunks = stream.streamer.snapshot()
+    snap = [(k, p) for k, p in chunks if k == MAP_SNAPSHOT]
+    assert len(snap) >= 1
+    kind, first = snap[0]
+    broken = bytearray(first)
+    broken[6] = 99  # the blob's format version (after the <HHH chunk header)
+    receiver = MapReceiver()
+    receiver.feed(kind, bytes(broken))
+    for kind, payload in snap[1:]:
+        receiver.feed(kind, payload)
+    assert not receiver.synced
+
+
+# ---- the planned path ------------------------------------------------------------------------
+@pytest.mark.parametrize("count", [0, 1, 15, 16, 40])
+def test_a_path_round_trips_relative_to_home(count):
+    memory = MemoryMap(HOME, 20, 10)
+    streamer = MapStreamer(memory, HOME)
+    points = [(HOME[0] + 0.37 * k, HOME[1] - 1.29 * k + 0.004) for k in range(count)]
+    payloads = streamer.path(points)
+    assert all(kind == PATH and len(p) <= PAYLOAD for kind, p in payloads)
+    receiver = MapReceiver()
+    receiver.path = [(99.0, 99.0)]
+    feed(receiver, payloads)
+    assert len(receiver.path) == count
+    for (x, y), (east, north) in zip(points, receiver.path, strict=True):
+        assert east == pytest.approx(x - HOME[0], abs=0.006)
+        assert north == pytest.approx(y - HOME[1], abs=0.006)
+
+
+def test_an_unchanged_path_is_not_sent_again_unless_forced():
+    streamer = MapStreamer(MemoryMap(HOME, 20, 10), HOME)
+    points = [(13.0, -6.0), (15.0, -2.0)]
+    assert streamer.path(points)
+    assert streamer.path(points) == []
+    assert streamer.path(points, force=True)
+    assert streamer.path([*points, (16.0, 0.0)])
+
+
+def test_a_newer_path_replaces_one_half_received():
+    streamer = MapStreamer(MemoryMap(HOME, 20, 10), HOME)
+    old = streamer.path([(HOME[0] + k, HOME[1]) for k in range(30)])
+    new = streamer.path([(HOME[0], HOME[1] + 1.0)])
+    receiver = MapReceiver()
+    feed(receiver, old[:1] + new + old[1:])
+    assert receiver.path == [(0.0, 1.0)]
+
+
+# ---- size ---------------------------------------------------------------------------------------
+def test_a_full_2000_by_2000_map_snapshot_chunks_into_128_byte_payloads():
+    memory = MemoryMap((0.0, 0.0), 100, 10)
+    assert memory.grid.shape == (2000, 2000)
+    rng = np.random.default_rng(11)
+    memory.grid[:] = rng.integers(-3, 31, memory.grid.shape, dtype=np.int8)  # nothing compresses well
+    memory.grid[0, 0] = memory.grid[-1, -1] = 30  # the whole extent is in use
+    chunks = MapStreamer(memory, (0.0, 0.0)).snapshot()
+    assert all(kind == MAP_SNAPSHOT and len(payload) <= PAYLOAD for kind, payload in chunks)
+    receiver = MapReceiver()
+    feed(receiver, chunks)
+    assert_equal_maps(receiver, memory)
+
+
+def test_an_empty_map_streams_and_is_received_as_empty():
+    memory = MemoryMap(HOME, 20, 10)
+    receiver = MapReceiver()
+    feed(receiver, MapStreamer(memory, HOME).tick(0.0))
+    assert_equal_maps(receiver, memory)
+    assert not receiver.grid.any()

@@ -1,0 +1,361 @@
+"""Missions and the agent that runs them (vehicle.missions, vehicle.agent), on small scenes and simulated time.
+
+Scenes are a ground slab (top at z = 0) and a few 6 m tall boxes; the memory map is
+20 m either side of home (``space_size=20``), so a run takes a fraction of a second.
+The planning helpers of ``missions.base.Context`` are tested on hand-made maps.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from vehicle.agent import Agent, Phase
+from vehicle.experiment import Experiment, run_experiment
+from vehicle.memory_map import MemoryMap
+from vehicle.missions import mission_class, missions
+from vehicle.missions.base import UNSEEN_EXTENT, Context
+from vehicle.missions.square import square_corners
+from vehicle.monitor import Monitor
+from vehicle.settings import Settings
+from vehicle.world import World
+
+GROUND = (0, 0, -0.05, 80, 80, 0.1)
+SMALL = {"space_size": 20, "time_limit": 200}
+
+
+def wall(x, y, sx, sy):
+    """A 6 m tall box of footprint sx x sy centred at (x, y)."""
+    return (x, y, 2, sx, sy, 6)
+
+
+def enclosure(cx, cy, side):
+    """Four walls around (cx, cy), ``side`` metres apart, closed at the corners."""
+    half = side / 2
+    return [wall(cx, cy + half, side + 0.2, 0.2), wall(cx, cy - half, side + 0.2, 0.2),
+            wall(cx + half, cy, 0.2, side), wall(cx - half, cy, 0.2, side)]
+
+
+@pytest.fixture
+def scene_of(make_scene, box):
+    """A Scene of the ground and the given boxes (tuples for ``box``)."""
+    return lambda *boxes: make_scene(*(box(*b) for b in (GROUND, *boxes)))
+
+
+class Track:
+    """``on_step`` recorder: horizontal path length, farthest excursion, closest approach to points, yaw turned."""
+
+    def __init__(self, points=()):
+        self.points = list(points)
+        self.closest = [math.inf] * len(self.points)
+        self.horizontal = 0.0
+        self.farthest = 0.0
+        self.turned = 0.0
+        self.world = self.agent = None
+        self._last = None
+
+    def __call__(self, world, agent, readings):
+        self.world, self.agent = world, agent
+        pose = world.pose
+        if self._last is not None:
+            self.horizontal += math.hypot(pose.x - self._last[0], pose.y - self._last[1])
+            self.turned += abs((pose.yaw - self._last[2] + math.pi) % (2 * math.pi) - math.pi)
+        self._last = (pose.x, pose.y, pose.yaw)
+        self.farthest = max(self.farthest, math.hypot(pose.x - world.home[0], pose.y - world.home[1]))
+        for i, (px, py) in enumerate(self.points):
+            self.closest[i] = min(self.closest[i], math.hypot(pose.x - px, pose.y - py))
+
+
+def fly(scene, mission, vehicle="copter", waypoints=None, track=None, **settings):
+    experiment = Experiment("test.wrl", mission, vehicle, settings=Settings(**{**SMALL, **settings}),
+                            waypoints=waypoints)
+    return run_experiment(experiment, scene=scene, on_step=track)
+
+
+def home_distance(result):
+    x, y, _ = result["final_position"]
+    return math.hypot(x - result["start"][0], y - result["start"][1])
+
+
+# ---- the registry -----------------------------------------------------------------------------
+def test_registry_lists_the_four_missions():
+    names = list(missions())
+    assert {"square", "browse", "search", "pathfind"} <= set(names)
+    assert names == sorted(names)
+    assert all(name == name.lower() for name in names)
+    assert mission_class("Browse") is missions()["browse"]
+
+
+def test_an_unknown_mission_names_the_known_ones():
+    with pytest.raises(ValueError, match="unknown mission 'hover'") as error:
+        mission_class("hover")
+    for name in ("square", "browse", "search", "pathfind"):
+        assert name in str(error.value)
+
+
+# ---- browse -----------------------------------------------------------------------------------
+def test_browse_turns_a_full_circle_and_lands_disarmed_with_the_wall_detected(scene_of):
+    track = Track()
+    result = fly(scene_of(wall(0, 4, 8, 0.2)), "browse", track=track)
+    assert result["outcome"] == "finished", result["reason"]
+    assert track.turned >= 2 * math.pi - math.radians(5)
+    assert track.farthest < 0.5  # it turned in place
+    pilot = track.world.autopilot
+    assert not pilot.armed and not pilot.flying and pilot.mode == "LAND"
+    assert result["final_position"][2] < 0.5  # on the ground (body centre 0.35 m up)
+    points = track.agent.map.occupied_points()
+    assert result["detections"] == len(points) >= 10
+    outside_x = np.maximum(np.abs(points[:, 0]) - 4.0, 0)
+    outside_y = np.maximum(np.abs(points[:, 1] - 4.0) - 0.1, 0)
+    assert np.hypot(outside_x, outside_y).max() < 0.75  # every detection is on (or just before) the wall
+
+
+def test_browse_in_an_empty_scene_finishes_with_nothing_detected(scene_of):
+    result = fly(scene_of(), "browse", vehicle="rover")
+    assert result["outcome"] == "finished"
+    assert result["detections"] == 0
+    assert result["distance_m"] == 0
+
+
+# ---- square -----------------------------------------------------------------------------------
+@pytest.mark.parametrize("vehicle", ["copter", "rover"])
+def test_square_flies_its_corners_and_finishes_home(scene_of, vehicle):
+    corners = square_corners((0.0, 0.0), SMALL["space_size"])
+    track = Track(corners)
+    result = fly(scene_of(), "square", vehicle=vehicle, track=track)
+    assert result["outcome"] == "finished", result["reason"]
+    assert max(track.closest) <= Settings().closeness  # every corner reached (waypoint radius = closeness)
+    assert track.horizontal > 3 * 2 * abs(corners[0][0])  # at least three sides of the square
+    assert home_distance(result) < 0.5
+    if vehicle == "copter":
+        assert not track.world.autopilot.armed
+
+
+@pytest.mark.parametrize("vehicle", ["copter", "rover"])
+def test_square_with_a_wall_across_a_leg_stops_safely_and_gets_home(scene_of, vehicle):
+    # corners at +-5 m: the east leg runs from (5, 5) to (5, -5); the wall crosses it at y = 0
+    track = Track()
+    result = fly(scene_of(wall(5, 0, 4, 0.2)), "square", vehicle=vehicle, track=track)
+    assert result["outcome"] == "stopped", result["reason"]
+    assert track.world.collision is None
+    assert home_distance(result) < 0.5
+    assert result["detections"] > 0
+
+
+# ---- pathfind ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("vehicle", ["copter", "rover"])
+def test_pathfind_goes_around_a_wall_to_its_waypoint(scene_of, vehicle):
+    goal = (0.0, 10.0)
+    track = Track([goal])
+    result = fly(scene_of(wall(0, 5, 10, 0.2)), "pathfind", vehicle=vehicle, waypoints=[goal], track=track)
+    assert result["outcome"] == "finished", result["reason"]
+    assert track.world.collision is None
+    assert track.closest[0] <= Settings().closeness
+    assert track.horizontal > 1.3 * 2 * math.dist((0, 0), goal)  # there and back, around the wall
+    assert home_distance(result) < 0.5
+
+
+def test_pathfind_skips_an_unreachable_waypoint_and_names_it(scene_of):
+    waypoints = [(-5.0, 0.0), (8.0, 0.0)]  # the second lies inside a closed 4 m box
+    track = Track(waypoints)
+    result = fly(scene_of(*enclosure(8, 0, 4)), "pathfind", waypoints=waypoints, track=track)
+    assert result["outcome"] == "stopped"
+    assert "waypoints 2 unreachable" in result["reason"]
+    assert track.closest[0] <= Settings().closeness
+    assert track.world.collision is None
+    assert home_distance(result) < 0.5
+    assert any("skipping waypoint 2" in m for m in result["messages"])
+
+
+def test_pathfind_flies_the_waypoints_it_is_given(scene_of):
+    given = [(-4.0, 3.0), (4.0, 3.0)]
+    default = square_corners((0.0, 0.0), SMALL["space_size"])
+    track = Track([*given, *default])
+    result = fly(scene_of(), "pathfind", vehicle="rover", waypoints=given, track=track)
+    assert result["outcome"] == "finished", result["reason"]
+    assert max(track.closest[:2]) <= Settings().closeness
+    assert min(track.closest[2:]) > 1.0  # not the default square
+    reached = [m for m in result["messages"] if "reached waypoint" in m]
+    assert reached == ["Pathfind: reached waypoint 1", "Pathfind: reached waypoint 2"]
+
+
+# ---- search -----------------------------------------------------------------------------------
+SEARCH_SCENE = [wall(0, 10, 6, 0.3), wall(10, 0, 0.3, 6), wall(-9, -6, 4, 4)]
+
+
+def test_search_moves_away_detects_more_than_browse_and_gets_home(scene_of):
+    scene = scene_of(*SEARCH_SCENE)
+    browse = fly(scene, "browse", time_limit=150)
+    track = Track()
+    search = fly(scene, "search", track=track, time_limit=150)
+    assert browse["outcome"] == "finished"
+    assert search["outcome"] == "finished", search["reason"]
+    assert track.farthest > 4.0
+    assert search["detections"] > browse["detections"]
+    assert track.world.collision is None
+    assert home_distance(search) < 0.5
+
+
+def test_search_with_a_short_time_limit_heads_home_in_time(scene_of):
+    result = fly(scene_of(*SEARCH_SCENE), "search", time_limit=80)
+    assert result["outcome"] == "finished", result["reason"]
+    assert "time" in result["reason"]
+    assert result["sim_time_s"] < 80
+    assert home_distance(result) < 0.5
+
+
+# ---- operator takeover --------------------------------------------------------------------------
+class Flight:
+    """A World and its Agent stepped as ``run_experiment`` does, for tests that intervene mid-flight."""
+
+    def __init__(self, scene, mission, vehicle="copter", waypoints=None, **settings):
+        self.settings = Settings(**{**SMALL, **settings})
+        self.world = World(scene, vehicle, self.settings)
+        self.agent = Agent(self.world.autopilot, mission, self.settings, self.world.limits.radius, waypoints)
+        self.period = max(1, round(self.settings.monitor_period / self.world.dt))
+
+    def run(self, seconds, until=lambda: False) -> bool:
+        """Step up to ``seconds`` of simulated time; True as soon as ``until()`` holds after an agent step."""
+        end = self.world.time + seconds
+        while self.world.time < end - 1e-9:
+            self.agent.collect(self.world.step())
+            assert self.world.collision is None, self.world.collision.describe()
+            if self.world.steps % self.period == 0:
+                self.agent.step(self.world.time)
+                if until():
+                    return True
+        return False
+
+    @property
+    def xy(self):
+        return self.world.pose.x, self.world.pose.y
+
+
+def test_a_mode_change_from_the_ground_station_pauses_the_agent(scene_of):
+    flight = Flight(scene_of(), "pathfind", waypoints=[(0.0, 8.0), (8.0, 8.0)])
+    assert flight.run(30, until=lambda: flight.xy[1] > 3.0)  # on its way north
+    assert flight.world.autopilot.set_mode("BRAKE", source="gcs") == 0
+    flight.run(3)  # brakes to a stop
+    assert flight.agent.paused
+    assert any("paused" in m for m in flight.agent.messages)
+    stopped_at = flight.xy
+    flight.run(20)
+    assert math.dist(flight.xy, stopped_at) < 0.2  # the agent sends nothing while paused
+    assert flight.world.autopilot.mode == "BRAKE"
+    assert flight.agent.phase is Phase.MISSION and flight.agent.outcome is None
+
+
+def test_resume_hands_control_back_to_the_agent(scene_of):
+    flight = Flight(scene_of(), "pathfind", waypoints=[(0.0, 8.0)])
+    assert not flight.agent.resume()  # not paused: nothing to resume
+    assert flight.run(30, until=lambda: flight.xy[1] > 3.0)
+    flight.world.autopilot.set_mode("BRAKE", source="gcs")
+    flight.run(2)
+    assert flight.agent.resume()
+    assert not flight.agent.paused
+    assert flight.world.autopilot.mode == "GUIDED"
+    flight.run(1)
+    assert not flight.agent.paused  # its own mode change does not count as the operator's
+
+
+def test_an_auto_mission_resumes_when_the_operator_switches_back_to_auto_and_starts_it(scene_of):
+    flight = Flight(scene_of(), "square")
+    assert flight.run(30, until=lambda: flight.xy[1] > 2.0)  # on the first leg, to the north-west corner
+    flight.world.autopilot.set_mode("BRAKE", source="gcs")
+    flight.run(3)
+    assert flight.agent.paused
+    held = flight.xy
+    flight.run(5)
+    assert math.dist(flight.xy, held) < 0.2
+    assert flight.world.autopilot.set_mode("AUTO", source="gcs") == 0
+    flight.run(1)
+    assert flight.world.autopilot.start_mission() == 0  # MISSION_START
+    assert flight.agent.resume()
+    assert flight.run(120, until=lambda: flight.agent.done)
+    assert flight.agent.outcome == "finished", flight.agent.reason
+    assert math.dist(flight.xy, (0.0, 0.0)) < 0.5
+
+
+# ---- planning through the Context -------------------------------------------------------------
+class Planner:
+    """A Context on a hand-made memory map (20 m either side of the origin, 10 cells/m)."""
+
+    def __init__(self, scene, position=(0.0, 0.0)):
+        self.settings = Settings(space_size=20)
+        self.world = World(scene, "copter", self.settings)
+        self.map = MemoryMap((0.0, 0.0), 20, 10)
+        monitor = Monitor(self.settings, self.map, (0.0, 0.0), self.world.limits.radius)
+        self.ctx = Context(self.world.autopilot, self.map, monitor, self.settings, (0.0, 0.0),
+                           self.world.limits.radius, say=lambda text: None)
+        self.move(*position)
+
+    def move(self, x, y):
+        self.world.body.pose.x, self.world.body.pose.y = x, y
+
+    def mark(self, x0, x1, y0, y1, value=MemoryMap.LIMIT):
+        """Set every cell of the rectangle (scene metres) to ``value`` (default: surely occupied)."""
+        (r0, c0), (r1, c1) = self.map.cell_of(x0, y0), self.map.cell_of(x1, y1)
+        self.map.grid[r0:r1 + 1, c0:c1 + 1] = value
+
+    def clearance(self, path):
+        """Least distance from the polyline (current position, then ``path``) to an occupied cell centre."""
+        chain = np.array([self.ctx.position, *path], dtype=float)
+        occupied = self.map.occupied_points()
+        least = math.inf
+        for a, b in zip(chain[:-1], chain[1:], strict=True):
+            samples = a + np.linspace(0, 1, max(2, int(math.dist(a, b) * 20)))[:, None] * (b - a)
+            d = np.hypot(*(samples[:, None, :] - occupied[None, :, :]).transpose(2, 0, 1))
+            least = min(least, float(d.min()))
+        return least
+
+
+def crossing_x(path, start, y):
+    """x where the polyline from ``start`` through ``path`` first crosses the line at height y."""
+    chain = [start, *path]
+    for (ax, ay), (bx, by) in zip(chain[:-1], chain[1:], strict=True):
+        if (ay - y) * (by - y) <= 0 and ay != by:
+            return ax + (bx - ax) * (y - ay) / (by - ay)
+    return None
+
+
+def test_a_star_plans_around_a_wall(flat_scene):
+    planner = Planner(flat_scene)
+    planner.mark(-2, 2, 4.9, 5.1)
+    path, _ = planner.ctx.plan((0.0, 10.0))
+    assert path is not None and len(path) >= 2
+    assert path[-1] == (0.0, 10.0)
+    assert planner.clearance(path) >= planner.world.limits.radius + planner.settings.padding - 0.1
+    assert planner.ctx.path_clear(path, horizon=math.inf)
+    assert not planner.ctx.path_clear([(0.0, 10.0)], horizon=math.inf)  # the straight line is not
+
+
+def test_a_star_finds_no_path_to_an_enclosed_goal(flat_scene):
+    planner = Planner(flat_scene)
+    planner.mark(4, 8, -2, 2)  # a solid block, hollowed out below
+    planner.mark(4.5, 7.5, -1.5, 1.5, MemoryMap.FREE_AT)
+    path, _ = planner.ctx.plan((6.0, 0.0))
+    assert path is None
+    assert planner.ctx.is_clear((6.0, 0.0))  # the goal itself is open; there is just no way in
+
+
+def test_a_star_from_right_next_to_a_wall_plans_away_from_it(flat_scene):
+    planner = Planner(flat_scene, position=(0.0, 4.45))  # 0.45 m from the wall face: inside the clearance
+    planner.mark(-5, 5, 4.9, 5.1)
+    assert not planner.ctx.is_clear(planner.ctx.position)
+    path, _ = planner.ctx.plan((0.0, -5.0))
+    assert path is not None and path[-1] == (0.0, -5.0)
+    assert planner.clearance(path) >= planner.world.limits.radius
+
+
+def test_a_star_presumes_the_unseen_continuation_of_a_wall(flat_scene):
+    seen = Planner(flat_scene)
+    seen.mark(-2, 2, 4.9, 5.1)  # the face the sonar saw; what lies beyond its ends is unknown
+    path, _ = seen.ctx.plan((0.0, 10.0))
+    keep = 2.0 + UNSEEN_EXTENT + seen.world.limits.radius + seen.settings.padding
+    assert abs(crossing_x(path, seen.ctx.position, 5.0)) >= keep - 0.25
+
+    known = Planner(flat_scene)
+    known.mark(-8, 8, -2, 12, MemoryMap.FREE_AT)  # the same wall with free space seen all around it
+    known.mark(-2, 2, 4.9, 5.1)
+    path, _ = known.ctx.plan((0.0, 10.0))
+    assert abs(crossing_x(path, known.ctx.position, 5.0)) < keep - 0.25  # now it may pass closer

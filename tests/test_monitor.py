@@ -1,0 +1,191 @@
+"""The monitor (vehicle.monitor): vetting readings, feeding the memory map, and "too close" ahead.
+
+Readings are made by hand (a vehicle at the origin, 4 m up, travelling north unless
+said otherwise); the last test flies a vehicle at a wall with the autopilot's own
+avoidance switched off, so only the monitor can stop it.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from vehicle.agent import Agent
+from vehicle.memory_map import MemoryMap
+from vehicle.monitor import Monitor, sweep_profile
+from vehicle.sensors import Reading
+from vehicle.settings import Settings
+from vehicle.world import World
+
+RADIUS = 0.3
+NORTH, EAST, SOUTH = 0.0, math.pi / 2, math.pi
+ALTITUDE = 4.0
+
+
+def reading(dx, dy, distance, dz=0.0, origin=(0.0, 0.0, ALTITUDE), max_range=40.0):
+    """A reading from ``origin`` along (dx, dy, dz) (normalised); ``distance`` None for no echo."""
+    direction = np.array([dx, dy, dz], dtype=float)
+    direction /= np.linalg.norm(direction)
+    return Reading(0.0, 0, np.array(origin, dtype=float), direction, distance, max_range, 0.0, 7.5)
+
+
+def monitor(**settings):
+    s = Settings(space_size=20, **settings)
+    memory = MemoryMap((0.0, 0.0), s.space_size, s.resolution)
+    return Monitor(s, memory, (0.0, 0.0), RADIUS), memory
+
+
+def observe(mon, readings, travel=NORTH, x=0.0, y=0.0, time=1.0):
+    mon.collect(readings)
+    return mon.observe(time, x, y, travel)
+
+
+def occupied_at(memory, x, y):
+    return bool(memory.occupied[memory.cell_of(x, y)])
+
+
+# ---- vetting and mapping ----------------------------------------------------------------------
+def test_readings_past_farness_are_dropped_and_not_mapped():
+    mon, memory = monitor(farness=10)
+    far = reading(1, 0, 15.0)  # an echo 15 m east: past farness
+    near = reading(-1, 0, 5.0)  # an echo 5 m west
+    observation = observe(mon, [far, near])
+    assert mon.readings_dropped == 1
+    assert not occupied_at(memory, 15.0, 0.0)
+    assert not memory.ever_hit[memory.cell_of(15.05, 0.0)]
+    assert occupied_at(memory, -5.0, 0.0)
+    assert memory.detections == memory.cells_ever_hit == 1
+    kept = {r.distance for r in observation.readings}
+    assert kept == {None, 5.0}  # the far one is kept as "no echo", the near one as it is
+
+
+def test_a_reading_at_farness_is_kept():
+    mon, memory = monitor(farness=10)
+    observe(mon, [reading(1, 0, 10.0)])
+    assert mon.readings_dropped == 0
+    assert occupied_at(memory, 10.0, 0.0)
+
+
+def test_dropped_readings_are_counted_over_periods():
+    mon, _ = monitor(farness=10)
+    for k in range(3):
+        observe(mon, [reading(1, 0, 12.0 + k), reading(0, 1, 3.0), reading(0, -1, None)], time=k + 1.0)
+    assert mon.readings_dropped == 3
+    assert mon.readings_used == 9
+
+
+def test_readings_fill_the_map_with_free_space_and_obstacles():
+    mon, memory = monitor()
+    observe(mon, [reading(1, 0, 6.0)])
+    assert occupied_at(memory, 6.0, 0.0)
+    assert memory.free[memory.cell_of(3.0, 0.0)]  # the beam passed through here
+
+
+def test_an_echo_from_the_ground_is_not_an_obstacle():
+    mon, memory = monitor()
+    # pointing 45 degrees down from 4 m: the ground is met 4 m ahead, far below the band
+    observation = observe(mon, [reading(0, 1, math.sqrt(32), dz=-1)])
+    assert memory.detections == 0
+    assert observation.nearest_ahead is None and not observation.too_close
+
+
+# ---- too close ahead --------------------------------------------------------------------------
+def test_an_echo_ahead_closer_than_closeness_is_too_close():
+    mon, _ = monitor(closeness=2.0)
+    observation = observe(mon, [reading(0, 1, 1.5)], travel=NORTH)
+    assert observation.nearest_ahead == pytest.approx(1.5)
+    assert observation.too_close
+
+
+def test_an_echo_ahead_beyond_closeness_is_not_too_close():
+    mon, _ = monitor(closeness=2.0)
+    observation = observe(mon, [reading(0, 1, 3.0)], travel=NORTH)
+    assert observation.nearest_ahead == pytest.approx(3.0)
+    assert not observation.too_close
+
+
+def test_an_echo_in_the_corridor_but_off_the_heading_is_too_close():
+    mon, _ = monitor(closeness=2.0, padding=0.5)
+    # hit at (0.6, 1.2): 0.6 m to the side of the track, inside radius + padding = 0.8 m
+    observation = observe(mon, [reading(0.6, 1.2, math.hypot(0.6, 1.2))], travel=NORTH)
+    assert observation.nearest_ahead == pytest.approx(1.2)
+    assert observation.too_close
+
+
+def test_an_echo_beside_the_corridor_is_not_too_close():
+    mon, _ = monitor(closeness=2.0, padding=0.5)
+    # hit at (1.0, 1.0): 1.0 m to the side, outside radius + padding = 0.8 m
+    observation = observe(mon, [reading(1.0, 1.0, math.hypot(1.0, 1.0))], travel=NORTH)
+    assert observation.nearest_ahead is None
+    assert not observation.too_close
+
+
+def test_an_echo_behind_or_when_standing_still_is_not_too_close():
+    mon, _ = monitor(closeness=2.0)
+    assert not observe(mon, [reading(0, 1, 1.0)], travel=SOUTH).too_close
+    assert not observe(mon, [reading(0, 1, 1.0)], travel=None, time=2.0).too_close
+
+
+def test_the_corridor_follows_the_direction_of_travel():
+    mon, _ = monitor(closeness=2.0)
+    east = [reading(1, 0, 1.0, origin=(3.0, 2.0, ALTITUDE))]
+    assert observe(mon, east, travel=EAST, x=3.0, y=2.0).too_close
+    assert not observe(mon, east, travel=NORTH, x=3.0, y=2.0, time=2.0).too_close
+
+
+def test_the_nearest_echo_in_the_corridor_counts():
+    mon, _ = monitor(closeness=2.0)
+    observation = observe(mon, [reading(0, 1, 5.0), reading(0.3, 1, math.hypot(0.3, 1) * 2.5),
+                                reading(1, 0.2, 1.0)], travel=NORTH)
+    assert observation.nearest_ahead == pytest.approx(2.5)
+    assert not observation.too_close
+
+
+def test_leaving_the_allowed_space_is_reported():
+    mon, _ = monitor()
+    assert not observe(mon, [], x=19.0, y=-19.0).outside
+    assert observe(mon, [], x=20.5, y=0.0, time=2.0).outside
+
+
+def test_the_monitor_tracks_the_distance_travelled():
+    mon, _ = monitor()
+    for k, (x, y) in enumerate([(0, 0), (3, 4), (3, 0)]):
+        observe(mon, [], x=x, y=y, time=float(k))
+    assert mon.distance_travelled == pytest.approx(9.0)
+
+
+def test_sweep_profile_sorts_readings_by_heading():
+    headings, distances = sweep_profile([reading(-1, 0, 2.0), reading(1, 0, None), reading(0, 1, 3.0)])
+    assert headings == pytest.approx([0.0, math.pi / 2, 3 * math.pi / 2])
+    assert list(distances) == [3.0, math.inf, 2.0]
+
+
+# ---- the agent stops the vehicle ------------------------------------------------------------
+@pytest.mark.parametrize("vehicle", ["copter", "rover"])
+def test_the_agent_stops_the_vehicle_short_of_a_wall_when_the_monitor_says_too_close(make_scene, box, vehicle):
+    # Square flies AUTO (no planning, no avoidance of its own): its east leg from (5, 5) to (5, -5)
+    # meets a wall whose north face is at y = 0.1. Only the monitor can stop it.
+    scene = make_scene(box(0, 0, -0.05, 80, 80, 0.1), box(5, 0, 2, 4, 0.2, 6))
+    settings = Settings(space_size=20, time_limit=200)
+    world = World(scene, vehicle, settings)
+    world.autopilot.avoidance = None
+    agent = Agent(world.autopilot, "square", settings, world.limits.radius)
+    period = round(settings.monitor_period / world.dt)
+    alarm = rest = None
+    closest = math.inf
+    while world.time < 60 and (alarm is None or world.time < alarm + 3.0):
+        agent.collect(world.step())
+        assert world.collision is None, world.collision.describe()
+        closest = min(closest, abs(world.pose.y - 0.1) if 3 < world.pose.x < 7 else math.inf)
+        if alarm is not None and rest is None and world.body.speed < 0.05:
+            rest = world.time
+        if world.steps % period == 0:
+            agent.step(world.time)
+            if alarm is None and agent.ctx.observation.too_close:
+                alarm = world.time
+                assert world.pose.x == pytest.approx(5.0, abs=0.6) and 0.1 < world.pose.y < 5.0
+    assert alarm is not None, "the monitor never found the wall too close"
+    assert rest is not None and rest - alarm < 2.0  # brought to rest at once
+    assert closest > world.limits.radius  # short of the wall
+    assert agent.outcome == "stopped"
+    assert "closer than the safety distance" in agent.reason
