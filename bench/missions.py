@@ -1,0 +1,74 @@
+"""Every mission once per scene, with default settings (plus the scene's suggestions), beside the thesis.
+
+Scenes: castle.wrl from start (-40, 0) (the project's default scene when ../shared is
+absent), then the project's default, trees and house scenes from their own starts. Each
+run prints its outcome, detections (occupied cells at the end), cells ever hit, simulated
+and wall time and the speed-up, beside the thesis's Table 1 count for that mission and
+scene where there is one. Runs one after another in this process, so wall times are not
+shared with other runs. Target: a whole mission at least 500x faster than real time.
+Run: python bench/missions.py
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+from common import CASTLE, ROOT, castle_or_default, code_state, table
+
+from vehicle.experiment import Experiment, run_experiment
+from vehicle.scene import load_scene
+from vehicle.settings import load_settings
+from vehicle.sweep import THESIS_TABLE
+
+MISSIONS = ["square", "browse", "search", "pathfind"]
+TARGET = 500.0
+
+
+def scenes() -> list[tuple[Path, tuple[float, float] | None]]:
+    first = castle_or_default()
+    out = [(first, (-40.0, 0.0) if first == CASTLE else None)]
+    out += [(ROOT / "scenes" / name, None) for name in ("default.wrl", "trees.wrl", "house.wrl")]
+    return list(dict.fromkeys(out))  # the default scene once when castle is absent
+
+
+def main() -> None:
+    load = os.getloadavg()[0]
+    rows = []
+    total_sim = total_wall = 0.0
+    slowest = None
+    for path, start in scenes():
+        scene = load_scene(path)
+        settings = load_settings(scene_hints=scene.hints)
+        for mission in MISSIONS:
+            started = time.perf_counter()
+            result = run_experiment(Experiment(str(path), mission, "copter", start, None, settings), scene=scene)
+            wall = time.perf_counter() - started
+            sim = result.get("sim_time_s", 0.0)
+            total_sim += sim
+            total_wall += wall
+            speedup = sim / wall if wall > 0 else float("inf")
+            if slowest is None or speedup < slowest[0]:
+                slowest = (speedup, f"{mission} in {path.name}")
+            thesis = THESIS_TABLE[mission].get(path.stem)
+            where = f"{path.name}" + (f" @{start[0]:g},{start[1]:g}" if start else "")
+            rows.append([where, mission, result["outcome"], result["reason"], result["detections"],
+                         result["cells_ever_hit"], "-" if thesis is None else thesis, f"{sim:.1f}", f"{wall:.2f}",
+                         f"{speedup:,.0f}x"])
+    print(table(["scene", "mission", "outcome", "reason", "detections", "cells ever hit", "thesis (Table 1)",
+                 "simulated s", "wall s", "speed-up"], rows))
+    overall = total_sim / total_wall if total_wall > 0 else float("inf")
+    print()
+    print(table(["simulated s", "wall s", "overall speed-up", "slowest mission", "target"],
+                [[f"{total_sim:.0f}", f"{total_wall:.1f}", f"{overall:,.0f}x",
+                  f"{slowest[1]}: {slowest[0]:,.0f}x" if slowest else "-", f">= {TARGET:.0f}x per mission"]]))
+    print()
+    print("Copter, default settings plus each scene's suggestions (house: altitude 1.6, padding 0.1, closeness 0.8, "
+          "space_size 10, its waypoints). The thesis's figures are its best over a 48-setting sweep (its Square "
+          f"runs all collided); these are single runs. Load average before/after: {load:.1f}/{os.getloadavg()[0]:.1f} "
+          f"(other processes on the machine slow the wall times). Vehicle code: {code_state()}.")
+
+
+if __name__ == "__main__":
+    main()
