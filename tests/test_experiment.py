@@ -92,11 +92,10 @@ def test_a_collision_ends_the_run(tmp_path):
     path = tmp_path / "leg.wrl"
     path.write_text(HEADER + GROUND + LEG_WALL)
 
-    def blind(world, agent, readings):  # no avoidance in the autopilot, and a monitor that never says "too close"
-        world.autopilot.avoidance = None
+    def blind(world, agent, readings):  # no sonar: neither avoidance nor the monitor can see the wall
+        world.sonars.sensors = []
 
-    result = run_experiment(Experiment(str(path), "square", settings=SMALL.updated({"closeness": 0.05})),
-                            on_step=blind)
+    result = run_experiment(Experiment(str(path), "square", settings=SMALL), on_step=blind)
     assert result["outcome"] == "collision"
     assert "collision" in result["reason"]
     x, y, _ = result["final_position"]

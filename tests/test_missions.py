@@ -340,6 +340,7 @@ def test_a_star_finds_no_path_to_an_enclosed_goal(flat_scene):
 
 def test_a_star_from_right_next_to_a_wall_plans_away_from_it(flat_scene):
     planner = Planner(flat_scene, position=(0.0, 4.45))  # 0.45 m from the wall face: inside the clearance
+    planner.mark(-19, 19, -19, 4.8, MemoryMap.FREE_AT)  # flying up to it, the sonar saw the way free
     planner.mark(-5, 5, 4.9, 5.1)
     assert not planner.ctx.is_clear(planner.ctx.position)
     path, _ = planner.ctx.plan((0.0, -5.0))

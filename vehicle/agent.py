@@ -25,8 +25,9 @@ from vehicle.sensors import Reading
 from vehicle.settings import Settings
 
 HOME_TOLERANCE = 0.5  # m
+SETTLED = 0.1  # m/s: slower than this counts as at rest
 BLOCKED_FOR = 1.0  # s held back by avoidance before the monitor treats it as an obstacle too close
-RESERVE = 60.0  # s kept for scans, detours and landing on the way home
+RESERVE = 60.0  # s kept for scans, detours and landing on the way home (at most a sixth of the time limit)
 
 
 class Phase(StrEnum):
@@ -46,7 +47,7 @@ class Agent:
         self.settings = settings
         home = (vehicle.home[0], vehicle.home[1])
         self.map = MemoryMap(home, settings.space_size, settings.resolution)
-        self.monitor = Monitor(settings, self.map, home, radius)
+        self.monitor = Monitor(settings, self.map, home, radius, brake=vehicle.body.limits.accel)
         self.messages: list[str] = []
         self.ctx = Context(vehicle, self.map, self.monitor, settings, home, radius, waypoints, say=self.say)
         self.mission_name = mission
@@ -56,6 +57,7 @@ class Agent:
         self.reason = ""
         self.paused = False
         self._travel: Travel | None = None
+        self._settling = False
         self._blocked_since: float | None = None
         self._mode_changes = vehicle.mode_changes
 
@@ -89,16 +91,25 @@ class Agent:
         self._mode_changes = self.vehicle.mode_changes
         return True
 
+    def take_over(self, what: str) -> None:
+        """An operator steered the vehicle directly (a GUIDED target, a yaw): pause the mission."""
+        if self.phase not in (Phase.WAITING, Phase.DONE) and not self.paused:
+            self.paused = True
+            self.say(f"Agent: paused, operator {what}")
+
     def resume(self) -> bool:
         """Hand control back to the agent (the operator's AUTO + MISSION_START). False if not paused."""
         if not self.paused:
             return False
         self.paused = False
+        self._mode_changes = self.vehicle.mode_changes  # the operator's AUTO is the hand-back, not a takeover
         self.say("Agent: resuming mission")
-        if self.phase in (Phase.MISSION, Phase.HOMING) and self.mission.mode == "GUIDED":
+        if self.phase is Phase.HOMING or (self.phase is Phase.MISSION and self.mission.mode == "GUIDED"):
             self._set_mode("GUIDED")
+        if self.phase is Phase.MISSION:
+            self.mission.resume()
         if self._travel is not None:
-            self._travel.path = None
+            self._travel.resume()
         return True
 
     def _set_mode(self, mode: str) -> None:
@@ -112,7 +123,7 @@ class Agent:
         x, y = ctx.position
         wanted = self.vehicle.wanted
         travel = heading_of(*wanted) if math.hypot(*wanted) > 0.05 else None
-        observation = self.monitor.observe(now, x, y, travel)
+        observation = self.monitor.observe(now, x, y, travel, self.vehicle.body.speed)
         ctx.observation = observation
         if self._operator_took_over() and self.phase not in (Phase.DONE, Phase.WAITING):
             self.paused = True
@@ -173,7 +184,8 @@ class Agent:
             self._end_mission(status, self.mission.reason)
 
     def _time_home(self) -> float:
-        return 2.0 * self.ctx.distance_to(self.ctx.home) / self.settings.speed + RESERVE
+        reserve = min(RESERVE, self.settings.time_limit / 6)
+        return 2.0 * self.ctx.distance_to(self.ctx.home) / self.settings.speed + reserve
 
     def _end_mission(self, status: Status, reason: str) -> None:
         self.outcome = "finished" if status is Status.DONE else "stopped"
@@ -183,9 +195,14 @@ class Agent:
             self._set_mode("GUIDED")
         self.mission.stop()
         self._travel = Travel(self.ctx, self.ctx.home, HOME_TOLERANCE, relax=True)
+        self._settling = True
         self.phase = Phase.HOMING
 
     def _homing(self, now: float) -> None:
+        if self._settling:  # come to rest where the mission ended before setting off home
+            if self.vehicle.body.speed > SETTLED:
+                return
+            self._settling = False
         travel = self._travel
         status = travel.too_close() if self.ctx.observation.too_close else travel.step()
         if status is Status.RUNNING:

@@ -3,9 +3,9 @@
 It makes the simulated vehicle and its onboard agent look like ArduPilot to
 any standard ground station: every COMMAND_LONG/COMMAND_INT gets a
 COMMAND_ACK (unknown commands MAV_RESULT_UNSUPPORTED), modes use ArduPilot's
-numbers, parameters and missions follow their protocols. A mode change from a
-ground station pauses the onboard mission; AUTO + MISSION_START hands control
-back. Garbage, truncated packets and messages for other systems are counted
+numbers, parameters and missions follow their protocols. A mode change or a
+GUIDED target from a ground station pauses the onboard mission; AUTO +
+MISSION_START hands control back. Garbage, truncated packets and messages for other systems are counted
 and ignored. All timing here (failsafe, retries) is wall-clock time.
 """
 
@@ -34,6 +34,27 @@ MISSION_MESSAGES = {"MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQU
                     "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT"}
 POSITION_IGNORED = (mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE)
 VELOCITY_IGNORED = (mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_VY_IGNORE)
+
+
+class _Command:
+    """COMMAND_LONG and COMMAND_INT alike: param1..7, with COMMAND_INT's x, y, z as param5..7."""
+
+    def __init__(self, message):
+        self.command = message.command
+        self.is_int = message.get_type() == "COMMAND_INT"
+        for n in range(1, 5):
+            setattr(self, f"param{n}", float(getattr(message, f"param{n}")))
+        fifth, sixth, seventh = (message.x, message.y, message.z) if self.is_int else (
+            message.param5, message.param6, message.param7)
+        self.param5, self.param6, self.param7 = float(fifth), float(sixth), float(seventh)
+
+    @property
+    def latitude(self) -> float:
+        return self.param5 * 1e-7 if self.is_int else self.param5
+
+    @property
+    def longitude(self) -> float:
+        return self.param6 * 1e-7 if self.is_int else self.param6
 
 
 class Endpoint:
@@ -103,7 +124,12 @@ class Endpoint:
             self.stats["for other systems"] += 1
             return
         self.stats["received"] += 1
-        self.send(self.handle(message, now), now)
+        try:
+            replies = self.handle(message, now)
+        except Exception as error:  # noqa: BLE001 - one bad message must not take the vehicle down
+            self.stats["messages refused"] += 1
+            replies = [self._text(f"Refused {kind}: {type(error).__name__}", mavlink.MAV_SEVERITY_WARNING)]
+        self.send(replies, now)
 
     def handle(self, message, now: float) -> list:
         """The replies to one message (already checked to be for us)."""
@@ -138,7 +164,8 @@ class Endpoint:
                                                   message.get_srcComponent())
         return [ack, *replies]
 
-    def _run_command(self, m, replies: list) -> int:
+    def _run_command(self, message, replies: list) -> int:
+        m = _Command(message)
         cmd = m.command
         pilot = self.autopilot
         if cmd == mavlink.MAV_CMD_DO_SET_MODE:
@@ -160,8 +187,10 @@ class Endpoint:
         if cmd == mavlink.MAV_CMD_DO_CHANGE_SPEED:
             return pilot.set_speed(m.param2)
         if cmd == mavlink.MAV_CMD_DO_REPOSITION:
+            self.agent.take_over("repositioned the vehicle")
             return self._reposition(m)
         if cmd == mavlink.MAV_CMD_CONDITION_YAW:
+            self.agent.take_over("turned the vehicle")
             direction = -1.0 if m.param3 < 0 else 1.0
             return pilot.set_yaw(math.radians(m.param1) * (direction if m.param4 else 1.0), relative=bool(m.param4))
         if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
@@ -190,11 +219,8 @@ class Endpoint:
             return ACCEPTED
         return self.autopilot.start_mission(first)
 
-    def _reposition(self, m) -> int:
-        if m.get_type() == "COMMAND_INT":
-            lat, lon = m.x * 1e-7, m.y * 1e-7
-        else:
-            lat, lon = m.param5, m.param6
+    def _reposition(self, m: _Command) -> int:
+        lat, lon = m.latitude, m.longitude
         if int(m.param2) & mavlink.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE and self.autopilot.mode != "GUIDED":
             self._set_mode_named("GUIDED")
         x, y = self.world.datum.to_local(lat, lon)
@@ -235,6 +261,7 @@ class Endpoint:
 
     def _apply_target(self, mask: int, x: float, y: float, altitude: float, vn: float, ve: float,
                       vd: float) -> None:
+        self.agent.take_over("set a guided target")
         if not mask & POSITION_IGNORED:
             self.autopilot.goto(x, y, altitude if not mask & mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE else None)
         elif not mask & VELOCITY_IGNORED:

@@ -219,7 +219,7 @@ class MapReceiver:
                 self._path_chunk(payload)
             else:
                 return False
-        except (struct.error, zlib.error, ValueError, IndexError):
+        except (struct.error, zlib.error, ValueError, IndexError, KeyError):
             return True  # ours but damaged: ignore, the next snapshot repairs
         return True
 
@@ -251,6 +251,8 @@ class MapReceiver:
 
     def _snapshot_chunk(self, payload: bytes) -> None:
         ident, index, count = _CHUNK.unpack_from(payload)
+        if index >= count:
+            raise ValueError("chunk index past the chunk count")
         parts = self._parts.setdefault(ident, {})
         parts[index] = payload[_CHUNK.size:]
         for other in [k for k in self._parts if k != ident]:  # an older snapshot will not complete now
@@ -276,10 +278,14 @@ class MapReceiver:
         self.version += 1
         pending, self._pending = self._pending, {}
         for seq in sorted(s for s in pending if s > last_delta):
-            self._delta(pending[seq])
+            if seq != self.applied + 1:
+                break  # not a continuation of this snapshot (a stray or a gap): wait for the next one
+            self._apply(pending[seq])
 
     def _path_chunk(self, payload: bytes) -> None:
         ident, index, count = _PATH.unpack_from(payload)
+        if index >= count:
+            raise ValueError("chunk index past the chunk count")
         body = payload[_PATH.size:]
         points = [_POINT.unpack_from(body, i * _POINT.size) for i in range(len(body) // _POINT.size)]
         parts = self._path_parts.setdefault(ident, {})

@@ -31,11 +31,13 @@ class Observation:
 
 
 class Monitor:
-    def __init__(self, settings: Settings, memory_map: MemoryMap, home: tuple[float, float], radius: float):
+    def __init__(self, settings: Settings, memory_map: MemoryMap, home: tuple[float, float], radius: float,
+                 brake: float = 2.5):
         self.settings = settings
         self.map = memory_map
         self.home = home
         self.radius = radius
+        self.brake = brake  # m/s^2 the vehicle can decelerate at
         self.readings_dropped = 0
         self.readings_used = 0
         self.distance_travelled = 0.0
@@ -57,12 +59,14 @@ class Monitor:
         """Buffer readings taken between two monitor periods."""
         self._pending.extend(readings)
 
-    def observe(self, time: float, x: float, y: float, travel: float | None) -> Observation:
+    def observe(self, time: float, x: float, y: float, travel: float | None, speed: float = 0.0) -> Observation:
         """Run one monitor period on the readings collected since the last one.
 
         ``travel`` is the compass heading (rad) the vehicle wants to move in, None when it
         wants to stay put. An echo is "ahead" when its point lies in the corridor the
-        body sweeps along that heading (body radius plus padding either side).
+        body sweeps along that heading (body radius plus padding either side). It is
+        too close when the vehicle, moving at ``speed``, could not stop within
+        ``closeness`` of it: one more period of travel plus the braking distance.
         """
         observation = Observation(time)
         if self._last_xy is not None:
@@ -86,8 +90,9 @@ class Monitor:
             if travel is not None:
                 observation.nearest_ahead = self._nearest_ahead(x, y, travel, origins, directions, distances)
         self._pending = []
+        stopping = speed * self.settings.monitor_period + speed * speed / (2 * self.brake)
         observation.too_close = (observation.nearest_ahead is not None
-                                 and observation.nearest_ahead < self.settings.closeness)
+                                 and observation.nearest_ahead < self.settings.closeness + stopping)
         half = self.settings.space_size
         observation.outside = abs(x - self.home[0]) > half or abs(y - self.home[1]) > half
         return observation

@@ -81,11 +81,14 @@ class Context:
         """A path (scene metres, excluding the current position) to ``goal`` around known obstacles.
 
         Searches a window around start and goal first (fast), then a wider one.
-        If the goal or start sits inside the padded obstacles, retries without the
-        padding. With ``relax`` (going home), an unreachable goal is tried again
-        without padding and then without presuming unseen obstacles: getting home
-        along a tight path beats not getting home. Returns the path (None if there is
-        none) and the level of relaxation that found it, to start from next time.
+        Obstacles are grown by the body radius (hard: never entered, not even to get
+        out of a tight spot) and then by the padding (soft: A* keeps out of it, but a
+        vehicle already inside may leave through it). If the goal or start sits inside
+        the padding, it retries without. With ``relax`` (going home), an unreachable
+        goal is tried again without presuming unseen obstacles, and last with the
+        body radius soft too: getting home along a tight path beats not getting
+        home. Returns the path (None if there is none) and the level of relaxation
+        that found it, to start from next time.
         """
         start_cell = self.map.cell_of(*self.position)
         goal_cell = self.map.cell_of(*goal)
@@ -93,12 +96,14 @@ class Context:
             return None, level
         if level == 0 and self.path_clear([goal], horizon=math.inf, padding=self.settings.padding):
             return [goal], level  # in the open: no search needed
-        attempts = [(self.settings.padding, True), (0.0, True)] + ([(0.0, False)] if relax else [])
-        for index, (padding, presume) in enumerate(attempts[level:], start=level):
+        attempts = [(self.settings.padding, True, True), (0.0, True, True)]
+        if relax:
+            attempts += [(0.0, False, True), (0.0, False, False)]
+        for index, (padding, presume, hard) in enumerate(attempts[level:], start=level):
             for margin in PLAN_MARGINS:
                 window = self._window(start_cell, goal_cell, margin)
                 try:
-                    cells = self._plan_in(start_cell, goal_cell, self.clearance_cells(padding), window, presume)
+                    cells = self._plan_in(start_cell, goal_cell, padding, window, presume, hard)
                 except planning.NoPath as failure:
                     if failure.reason == planning.UNREACHABLE:
                         continue  # a wider window may find a way round
@@ -133,10 +138,21 @@ class Context:
         presumed = planning.inflate(occupied, UNSEEN_EXTENT * self.map.resolution)
         return occupied | (presumed & ~self.map.free_in(rows, cols))
 
-    def _plan_in(self, start, goal, radius_cells, window, presume) -> np.ndarray:
-        blocked, offset = self.blocked_in(*window, presume), (window[0].start, window[1].start)
-        local = planning.plan(blocked, (start[0] - offset[0], start[1] - offset[1]),
-                              (goal[0] - offset[0], goal[1] - offset[1]), radius_cells)
+    def _plan_in(self, start, goal, padding: float, window, presume: bool, hard: bool) -> np.ndarray:
+        obstacles, offset = self.blocked_in(*window, presume), (window[0].start, window[1].start)
+        local_start = (start[0] - offset[0], start[1] - offset[1])
+        if presume:  # where the body is now is no presumed obstacle, whatever the sonar has not seen
+            reach = int(math.ceil(self.radius * self.map.resolution))
+            rows = slice(max(0, local_start[0] - reach), local_start[0] + reach + 1)
+            cols = slice(max(0, local_start[1] - reach), local_start[1] + reach + 1)
+            obstacles[rows, cols] &= self.map.occupied_in(slice(rows.start + offset[0], rows.stop + offset[0]),
+                                                          slice(cols.start + offset[1], cols.stop + offset[1]))
+        local_goal = (goal[0] - offset[0], goal[1] - offset[1])
+        if hard:
+            body = planning.inflate(obstacles, self.clearance_cells(0.0))
+            local = planning.plan(body, local_start, local_goal, padding * self.map.resolution)
+        else:
+            local = planning.plan(obstacles, local_start, local_goal, self.clearance_cells(padding))
         return local + np.array(offset)
 
     def path_clear(self, points: list[tuple[float, float]], horizon: float = 15.0, padding: float = 0.0) -> bool:
@@ -162,20 +178,28 @@ class Context:
         pad = int(math.ceil(self.clearance_cells(padding))) + 1
         r0, r1 = max(0, min(rows) - pad), min(self.map.size, max(rows) + pad + 1)
         c0, c1 = max(0, min(cols) - pad), min(self.map.size, max(cols) + pad + 1)
-        blocked = planning.inflate(self.blocked_in(slice(r0, r1), slice(c0, c1)), self.clearance_cells(padding))
+        obstacles = self.blocked_in(slice(r0, r1), slice(c0, c1))
+        body = planning.inflate(obstacles, self.clearance_cells(0.0))
+        blocked = planning.inflate(body, padding * self.map.resolution)
         local = [(r - r0, c - c0) for r, c in cells]
         if blocked[local[0]]:
-            # the vehicle is already within the clearance of an obstacle (it stopped near a wall):
-            # the first leg need only be clear from where it leaves that margin
-            local[0] = self._leave_margin(local[0], local[1], blocked)
+            # the vehicle is already within the padding of an obstacle (it stopped near a wall):
+            # the first leg may cross the padding to get out, but never come within the body radius
+            exit_cell = self._leave_margin(local[0], local[1], blocked, body)
+            if exit_cell is None:
+                return False
+            local[0] = exit_cell
         return all(planning.line_is_clear(blocked, a, b) for a, b in zip(local, local[1:], strict=False))
 
     @staticmethod
-    def _leave_margin(a: tuple[int, int], b: tuple[int, int], blocked: np.ndarray) -> tuple[int, int]:
-        """The first cell on the way from a to b that is not blocked (b if there is none)."""
+    def _leave_margin(a: tuple[int, int], b: tuple[int, int], blocked: np.ndarray,
+                      body: np.ndarray) -> tuple[int, int] | None:
+        """The first cell on the way from a to b out of the padding; None if the way comes within the body radius."""
         steps = max(abs(b[0] - a[0]), abs(b[1] - a[1]))
         for k in range(1, steps + 1):
             cell = (a[0] + round((b[0] - a[0]) * k / steps), a[1] + round((b[1] - a[1]) * k / steps))
+            if body[cell]:
+                return None
             if not blocked[cell]:
                 return cell
         return b
@@ -227,6 +251,12 @@ class Mission:
         """Time to head home to make it within the limit: DONE if the plan is complete enough."""
         self.reason = "time budget spent before the plan was complete"
         return Status.STOPPED
+
+    def resume(self) -> None:
+        """The operator handed control back: send again whatever the mission was doing."""
+        for routine in (getattr(self, "scan", None), getattr(self, "travel", None)):
+            if routine is not None:
+                routine.resume()
 
     def stop(self) -> None:
         """Halt in place (GUIDED: hold the current position)."""

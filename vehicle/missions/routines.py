@@ -32,6 +32,13 @@ class Scan:
         x, y = ctx.position
         ctx.vehicle.goto(x, y, ctx.settings.altitude if ctx.kind is Kind.COPTER else None)  # hold here
 
+    def resume(self) -> None:
+        """Turn again towards the heading of the current step (an operator's mode change dropped it)."""
+        if self.done_steps >= 0:
+            x, y = self.ctx.position
+            self.ctx.vehicle.goto(x, y, self.ctx.settings.altitude if self.ctx.kind is Kind.COPTER else None)
+            self.ctx.vehicle.set_yaw((self.start + self.done_steps * self.step_rad) % (2 * math.pi))
+
     def step(self) -> bool:
         """True once the full turn is done."""
         if self.ctx.observation is not None:
@@ -99,6 +106,13 @@ class Travel:
             ctx.vehicle.goto(target[0], target[1], ctx.settings.altitude if ctx.kind is Kind.COPTER else None)
             self._sent = target
         return Status.RUNNING
+
+    def resume(self) -> None:
+        """Plan afresh and send the target again (an operator's mode change dropped it)."""
+        self.path = None
+        self._sent = None
+        if self.scan is not None:
+            self.scan.resume()
 
     def _still_clear(self) -> bool:
         """Check the path against the map again, at most once a second and only if obstacles changed.
