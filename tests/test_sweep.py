@@ -144,13 +144,15 @@ def run_result(mission, scene, outcome, detections):
             "sim_time_s": 61}
 
 
-def test_best_runs_rank_collisions_and_errors_last():
+def test_best_runs_rank_safe_endings_first_then_timeouts_then_collisions_and_errors():
     results = [run_result("square", "castle", "collision", 50), run_result("square", "castle", "stopped", 8),
                run_result("square", "castle", "error", 99), run_result("browse", "castle", "finished", 20),
-               run_result("browse", "castle", "timeout", 25)]
+               run_result("browse", "castle", "timeout", 25), run_result("search", "castle", "timeout", 5),
+               run_result("search", "castle", "collision", 90)]
     best = best_runs(results)
     assert best[("square", "castle")]["detections"] == 8
-    assert best[("browse", "castle")]["detections"] == 25
+    assert best[("browse", "castle")]["detections"] == 20
+    assert best[("search", "castle")]["outcome"] == "timeout"
 
 
 def test_the_table_shows_outcome_time_and_the_thesis_figure():

@@ -123,7 +123,9 @@ class Agent:
         x, y = ctx.position
         wanted = self.vehicle.wanted
         travel = heading_of(*wanted) if math.hypot(*wanted) > 0.05 else None
-        observation = self.monitor.observe(now, x, y, travel, self.vehicle.body.speed)
+        destination = self.vehicle.destination
+        reach = math.inf if destination is None else math.dist((x, y), destination)
+        observation = self.monitor.observe(now, x, y, travel, self.vehicle.body.speed, reach)
         ctx.observation = observation
         if self._operator_took_over() and self.phase not in (Phase.DONE, Phase.WAITING):
             self.paused = True

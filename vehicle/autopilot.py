@@ -80,6 +80,7 @@ class Autopilot:
         self._rtl_done = False
         self._descending = False
         self.wanted = (0.0, 0.0)  # horizontal velocity navigation asked for, before avoidance
+        self.destination: tuple[float, float] | None = None  # where navigation is taking the vehicle now
         self.blocked = False  # avoidance holds the vehicle back from an obstacle
         self.ground_now = home[2]  # ground height under the vehicle, set each step
         self.hold_here()
@@ -250,6 +251,7 @@ class Autopilot:
             self.body.step(dt, 0.0, 0.0, 0.0, None, ground, ground_normal, falling=falling)
             return
         self._descending = False
+        self.destination = None
         vx, vy, vz, yaw = self._navigate(dt)
         self.wanted = (vx, vy)
         self.blocked = False
@@ -334,6 +336,7 @@ class Autopilot:
                 turn_first: bool = True):
         """Velocity and heading that bring the body to (x, y, z): turn first, then move, braking to arrive."""
         pose = self.body.pose
+        self.destination = (x, y)
         dx, dy = x - pose.x, y - pose.y
         distance = math.hypot(dx, dy)
         vz = self._climb_towards(z)

@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 
+MARGIN = 0.1  # m kept between the body and any remembered echo (planning keeps at least twice that)
+
 
 class ObstacleDatabase:
     def __init__(self, margin: float, accel: float, capacity: int = 512, lifetime: float = 60.0,

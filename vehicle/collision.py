@@ -202,7 +202,7 @@ def _segment_crosses_triangle(p0, p1, tri):
         q = np.cross(s, e1)
         v = inv * _dot(direction, q)
         t = inv * _dot(e2, q)
-    return (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= 0) & (t <= 1)
+        return (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= 0) & (t <= 1)
 
 
 def segment_triangle_distance(p0: np.ndarray, p1: np.ndarray, tri: np.ndarray) -> np.ndarray:

@@ -67,7 +67,7 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
         pose = world.pose
         result.update(start=[round(world.home[0], 3), round(world.home[1], 3)],
                       sim_time_s=round(world.time, 3), distance_m=round(world.distance_travelled, 2),
-                      final_position=[round(pose.x, 2), round(pose.y, 2), round(pose.z, 2)])
+                      final_position=[round(float(v), 2) for v in pose.xyz()])
     if agent is not None:
         result.update(detections=agent.map.detections, cells_ever_hit=agent.map.cells_ever_hit,
                       messages=agent.messages[-20:])

@@ -44,22 +44,25 @@ class Monitor:
         self._last_xy: tuple[float, float] | None = None
         self._pending: list[Reading] = []
 
-    def _nearest_ahead(self, x, y, travel, origins, directions, distances) -> float | None:
-        """Distance ahead of the nearest echo inside the corridor the body sweeps along ``travel``."""
+    def _nearest_ahead(self, x, y, travel, origins, directions, distances, reach) -> float | None:
+        """Distance ahead of the nearest echo inside the corridor the body sweeps along ``travel``,
+        as far as ``reach`` metres."""
         echo = ~np.isnan(distances)
         hits = origins[echo] + directions[echo] * distances[echo, None]
         level = np.abs(hits[:, 2] - origins[echo, 2]) <= self.map.band  # not ground or ceiling
         ux, uy = math.sin(travel), math.cos(travel)
         dx, dy = hits[:, 0] - x, hits[:, 1] - y
         ahead = dx * ux + dy * uy
-        inside = level & (ahead > 0) & (np.abs(dx * uy - dy * ux) < self.radius + self.settings.padding)
+        corridor = self.radius + self.settings.padding
+        inside = level & (ahead > 0) & (ahead < reach + corridor) & (np.abs(dx * uy - dy * ux) < corridor)
         return float(ahead[inside].min()) if inside.any() else None
 
     def collect(self, readings: list[Reading]) -> None:
         """Buffer readings taken between two monitor periods."""
         self._pending.extend(readings)
 
-    def observe(self, time: float, x: float, y: float, travel: float | None, speed: float = 0.0) -> Observation:
+    def observe(self, time: float, x: float, y: float, travel: float | None, speed: float = 0.0,
+                reach: float = math.inf) -> Observation:
         """Run one monitor period on the readings collected since the last one.
 
         ``travel`` is the compass heading (rad) the vehicle wants to move in, None when it
@@ -67,6 +70,7 @@ class Monitor:
         body sweeps along that heading (body radius plus padding either side). It is
         too close when the vehicle, moving at ``speed``, could not stop within
         ``closeness`` of it: one more period of travel plus the braking distance.
+        Echoes beyond ``reach`` (where the vehicle will stop or turn) are not in the way.
         """
         observation = Observation(time)
         if self._last_xy is not None:
@@ -88,7 +92,8 @@ class Monitor:
             beams = np.radians([r.beam_angle for r in readings])
             self.map.add_readings(origins, directions, distances, max_ranges, beams)
             if travel is not None:
-                observation.nearest_ahead = self._nearest_ahead(x, y, travel, origins, directions, distances)
+                observation.nearest_ahead = self._nearest_ahead(x, y, travel, origins, directions, distances,
+                                                                reach)
         self._pending = []
         stopping = speed * self.settings.monitor_period + speed * speed / (2 * self.brake)
         observation.too_close = (observation.nearest_ahead is not None

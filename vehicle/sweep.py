@@ -183,12 +183,15 @@ def scene_name(result: dict) -> str:
 
 
 def best_runs(results: list[dict]) -> dict[tuple[str, str], dict]:
-    """The run with the most detections per (mission, scene); runs that collided or failed rank last."""
+    """The run with the most detections per (mission, scene): safe endings (finished, stopped) rank first,
+    then timeouts, then collisions and errors."""
+    def rank(r: dict) -> tuple[int, int]:
+        return ({"finished": 2, "stopped": 2, "timeout": 1}.get(r["outcome"], 0), r["detections"])
+
     best: dict[tuple[str, str], dict] = {}
     for r in results:
         key = (r["mission"], scene_name(r))
-        rank = (r["outcome"] not in ("collision", "error"), r["detections"])
-        if key not in best or rank > (best[key]["outcome"] not in ("collision", "error"), best[key]["detections"]):
+        if key not in best or rank(r) > rank(best[key]):
             best[key] = r
     return best
 

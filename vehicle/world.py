@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from vehicle.autopilot import Autopilot
+from vehicle.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.avoidance import ObstacleDatabase
 from vehicle.battery import Battery
 from vehicle.collision import Collider, Contact
@@ -55,8 +56,7 @@ class World:
         self.collider = Collider(scene.mesh, self.limits.radius, ignore_walkable=self.kind is Kind.ROVER)
         if self.collider.touches(np.array(self.body.pose.xyz())):
             raise PlacementError(f"the start x={x:g} y={y:g} is inside an obstacle")
-        margin = min(max(self.settings.padding, 0.1), 0.5)
-        self.avoidance = ObstacleDatabase(margin=margin, accel=self.limits.accel, body_radius=self.limits.radius)
+        self.avoidance = ObstacleDatabase(margin=AVOID_MARGIN, accel=self.limits.accel, body_radius=self.limits.radius)
         self.autopilot = Autopilot(self.kind, self.body, (x, y, ground), self.datum,
                                    cruise_speed=self.settings.speed, wp_radius=self.settings.closeness,
                                    avoidance=self.avoidance)

@@ -16,9 +16,11 @@ from enum import StrEnum
 from typing import ClassVar
 
 import numpy as np
+from scipy import ndimage
 
 from vehicle import planning
 from vehicle.autopilot import Autopilot
+from vehicle.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.memory_map import MemoryMap
 from vehicle.modes import Kind
 from vehicle.monitor import Monitor, Observation
@@ -71,24 +73,20 @@ class Context:
     def time_left(self) -> float:
         return self.settings.time_limit - (self.time - self.started)
 
-    def clearance_cells(self, padding: float | None = None) -> float:
-        pad = self.settings.padding if padding is None else padding
-        return (self.radius + pad) * self.map.resolution
-
     # ---- planning on the memory map ------------------------------------------------------------
     def plan(self, goal: tuple[float, float], relax: bool = False,
              level: int = 0) -> tuple[list[tuple[float, float]] | None, int]:
         """A path (scene metres, excluding the current position) to ``goal`` around known obstacles.
 
         Searches a window around start and goal first (fast), then a wider one.
-        Obstacles are grown by the body radius (hard: never entered, not even to get
-        out of a tight spot) and then by the padding (soft: A* keeps out of it, but a
-        vehicle already inside may leave through it). If the goal or start sits inside
-        the padding, it retries without. With ``relax`` (going home), an unreachable
-        goal is tried again without presuming unseen obstacles, and last with the
-        body radius soft too: getting home along a tight path beats not getting
-        home. Returns the path (None if there is none) and the level of relaxation
-        that found it, to start from next time.
+        Obstacles are grown by the body radius plus the padding (at least twice the
+        margin the autopilot's avoidance keeps, so the two never disagree); a
+        vehicle that is already closer first escapes the shortest way out. If the
+        goal sits inside that margin, it retries with the avoidance margin only.
+        With ``relax`` (going home), an unreachable goal is tried again without
+        presuming unseen obstacles: getting home along a tight path beats not
+        getting home. Returns the path (None if there is none) and the level of
+        relaxation that found it, to start from next time.
         """
         start_cell = self.map.cell_of(*self.position)
         goal_cell = self.map.cell_of(*goal)
@@ -96,14 +94,12 @@ class Context:
             return None, level
         if level == 0 and self.path_clear([goal], horizon=math.inf, padding=self.settings.padding):
             return [goal], level  # in the open: no search needed
-        attempts = [(self.settings.padding, True, True), (0.0, True, True)]
-        if relax:
-            attempts += [(0.0, False, True), (0.0, False, False)]
-        for index, (padding, presume, hard) in enumerate(attempts[level:], start=level):
+        attempts = [(self.settings.padding, True), (0.0, True)] + ([(0.0, False)] if relax else [])
+        for index, (padding, presume) in enumerate(attempts[level:], start=level):
             for margin in PLAN_MARGINS:
                 window = self._window(start_cell, goal_cell, margin)
                 try:
-                    cells = self._plan_in(start_cell, goal_cell, padding, window, presume, hard)
+                    cells = self._plan_in(start_cell, goal_cell, padding, window, presume)
                 except planning.NoPath as failure:
                     if failure.reason == planning.UNREACHABLE:
                         continue  # a wider window may find a way round
@@ -116,6 +112,11 @@ class Context:
                 if not relax:
                     return None, level  # less padding would only squeeze through gaps never seen
         return None, level
+
+    def margin_cells(self, padding: float) -> float:
+        """How far paths keep from obstacles, in cells: the body radius plus padding, and at least twice the
+        margin of the autopilot's avoidance, so that a planned path never runs into the avoidance's stop."""
+        return (self.radius + max(padding, 2 * AVOID_MARGIN)) * self.map.resolution
 
     def _window(self, a: tuple[int, int], b: tuple[int, int], margin_m: float) -> tuple[slice, slice]:
         """The rows and columns within ``margin_m`` of the box around cells a and b."""
@@ -138,7 +139,7 @@ class Context:
         presumed = planning.inflate(occupied, UNSEEN_EXTENT * self.map.resolution)
         return occupied | (presumed & ~self.map.free_in(rows, cols))
 
-    def _plan_in(self, start, goal, padding: float, window, presume: bool, hard: bool) -> np.ndarray:
+    def _plan_in(self, start, goal, padding: float, window, presume: bool) -> np.ndarray:
         obstacles, offset = self.blocked_in(*window, presume), (window[0].start, window[1].start)
         local_start = (start[0] - offset[0], start[1] - offset[1])
         if presume:  # where the body is now is no presumed obstacle, whatever the sonar has not seen
@@ -148,11 +149,7 @@ class Context:
             obstacles[rows, cols] &= self.map.occupied_in(slice(rows.start + offset[0], rows.stop + offset[0]),
                                                           slice(cols.start + offset[1], cols.stop + offset[1]))
         local_goal = (goal[0] - offset[0], goal[1] - offset[1])
-        if hard:
-            body = planning.inflate(obstacles, self.clearance_cells(0.0))
-            local = planning.plan(body, local_start, local_goal, padding * self.map.resolution)
-        else:
-            local = planning.plan(obstacles, local_start, local_goal, self.clearance_cells(padding))
+        local = planning.plan(obstacles, local_start, local_goal, self.margin_cells(padding))
         return local + np.array(offset)
 
     def path_clear(self, points: list[tuple[float, float]], horizon: float = 15.0, padding: float = 0.0) -> bool:
@@ -175,17 +172,16 @@ class Context:
             return False
         rows = [c[0] for c in cells]
         cols = [c[1] for c in cells]
-        pad = int(math.ceil(self.clearance_cells(padding))) + 1
+        pad = int(math.ceil(self.margin_cells(padding))) + 1
         r0, r1 = max(0, min(rows) - pad), min(self.map.size, max(rows) + pad + 1)
         c0, c1 = max(0, min(cols) - pad), min(self.map.size, max(cols) + pad + 1)
         obstacles = self.blocked_in(slice(r0, r1), slice(c0, c1))
-        body = planning.inflate(obstacles, self.clearance_cells(0.0))
-        blocked = planning.inflate(body, padding * self.map.resolution)
+        blocked = planning.inflate(obstacles, self.margin_cells(padding))
         local = [(r - r0, c - c0) for r, c in cells]
         if blocked[local[0]]:
-            # the vehicle is already within the padding of an obstacle (it stopped near a wall):
-            # the first leg may cross the padding to get out, but never come within the body radius
-            exit_cell = self._leave_margin(local[0], local[1], blocked, body)
+            # the vehicle is already within the margin of an obstacle (it stopped near a wall):
+            # the first leg may cross the margin to get out, as long as it never gets any closer
+            exit_cell = self._leave_margin(local[0], local[1], blocked, obstacles)
             if exit_cell is None:
                 return False
             local[0] = exit_cell
@@ -193,12 +189,15 @@ class Context:
 
     @staticmethod
     def _leave_margin(a: tuple[int, int], b: tuple[int, int], blocked: np.ndarray,
-                      body: np.ndarray) -> tuple[int, int] | None:
-        """The first cell on the way from a to b out of the padding; None if the way comes within the body radius."""
+                      obstacles: np.ndarray) -> tuple[int, int] | None:
+        """The first cell on the way from a to b out of the margin; None if on the way there the
+        distance to the nearest obstacle ever shrinks below where it started."""
+        distance = ndimage.distance_transform_edt(~obstacles)
+        start = distance[a]
         steps = max(abs(b[0] - a[0]), abs(b[1] - a[1]))
         for k in range(1, steps + 1):
             cell = (a[0] + round((b[0] - a[0]) * k / steps), a[1] + round((b[1] - a[1]) * k / steps))
-            if body[cell]:
+            if distance[cell] < start - 0.5:
                 return None
             if not blocked[cell]:
                 return cell
@@ -209,7 +208,7 @@ class Context:
         cell = self.map.cell_of(*point)
         if cell is None:
             return False
-        radius = self.clearance_cells(padding)
+        radius = self.margin_cells(self.settings.padding if padding is None else padding)
         reach = int(math.ceil(radius))
         r0, c0 = max(0, cell[0] - reach), max(0, cell[1] - reach)
         window = self.map.occupied_in(slice(r0, cell[0] + reach + 1), slice(c0, cell[1] + reach + 1))

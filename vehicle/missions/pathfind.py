@@ -24,7 +24,10 @@ class Pathfind(Mission):
         self.travel = Travel(ctx, self.waypoints[0], ctx.settings.closeness)
 
     def step(self) -> Status:
-        status = self.travel.step()
+        return self._next(self.travel.step())
+
+    def _next(self, status: Status) -> Status:
+        """After the Travel to the current waypoint reports: go on to the next one when it is over."""
         if status is Status.RUNNING:
             return status
         if status is Status.STOPPED:
@@ -42,7 +45,7 @@ class Pathfind(Mission):
         return Status.RUNNING
 
     def too_close(self) -> Status:
-        return self.travel.too_close()
+        return self._next(self.travel.too_close())
 
     def out_of_time(self) -> Status:
         self.reason = f"time budget spent at waypoint {self.index + 1} of {len(self.waypoints)}"

@@ -12,6 +12,8 @@ from vehicle.sensors import Reading
 YAW_REACHED = math.radians(2)
 PATH_POINT_REACHED = 0.5  # m: intermediate path points count as passed this close
 PATH_CHECK_PERIOD = 1.0  # s between checks of the path ahead against new obstacles
+STUCK_RADIUS = 1.0  # m: stopped again this close to the last stop counts as no progress
+STUCK_TRIES = 3  # stops without progress before giving up
 SCANNED_NEAR = 1.0  # m: a scan this close counts as having looked around here
 
 
@@ -76,6 +78,8 @@ class Travel:
         self._checked: tuple[int, int] | None = None
         self._scanned_at: tuple[float, float] | None = None
         self._next_check = 0.0
+        self._stuck_at: tuple[float, float] | None = None
+        self._stuck = 0
 
     def step(self) -> Status:
         ctx = self.ctx
@@ -128,10 +132,20 @@ class Travel:
         return self.ctx.path_clear(self.path)
 
     def too_close(self) -> Status:
-        """Stop, look around, and plan again once the scan is done."""
+        """Stop, look around, and plan again once the scan is done; give up if that keeps happening here."""
         if self.scan is None:
+            here = self.ctx.position
+            if self._stuck_at is not None and math.dist(here, self._stuck_at) < STUCK_RADIUS:
+                self._stuck += 1
+            else:
+                self._stuck_at, self._stuck = here, 1
+            if self._stuck > STUCK_TRIES:
+                self.reason = f"blocked at ({here[0]:.1f}, {here[1]:.1f}) on the way to " \
+                              f"({self.goal[0]:.1f}, {self.goal[1]:.1f})"
+                self.ctx.planned_path = []
+                return Status.STOPPED
             self.scan = Scan(self.ctx)
-            self._scanned_at = self.ctx.position
+            self._scanned_at = here
             self._sent = None
         return Status.RUNNING
 
