@@ -330,7 +330,7 @@ def collect_map(gcs, receiver, until, drop=None, rng=None, sim_timeout=120):
 def test_map_copy_equals_the_onboard_map(fly):
     gcs, sim = fly(mission="browse", autostart=True)
     streamer = sim.telemetry.streamer
-    streamer.snapshot_period = 1.0
+    streamer.snapshot_period, streamer.snapshot_budget = 1.0, 1e9
     receiver = MapReceiver()
     collect_map(gcs, receiver, lambda: sim.agent.done and receiver.synced and receiver.snapshots >= 2)
     sim.stop()
@@ -348,13 +348,13 @@ def test_map_copy_equals_the_onboard_map(fly):
 def test_a_late_and_lossy_ground_station_resynchronises(fly):
     gcs, sim = fly(mission="search", autostart=True)
     streamer = sim.telemetry.streamer
-    streamer.snapshot_period = 1.0
+    streamer.snapshot_period, streamer.snapshot_budget = 1.0, 1e9
     gcs.wait("ATTITUDE", lambda m: gcs.sim_time > 10, sim_timeout=30)  # join late
     receiver = MapReceiver()
     # lose a fifth of the map deltas and a few snapshot chunks, until a gap was noticed and a later
     # snapshot repaired it
     collect_map(gcs, receiver, lambda: receiver.gaps > 0 and receiver.synced and receiver.snapshots >= 2,
-                drop={MAP_DELTA: 0.2, MAP_SNAPSHOT: 0.01}, rng=random.Random(3))
+                drop={MAP_DELTA: 0.2, MAP_SNAPSHOT: 0.01}, rng=random.Random(3), sim_timeout=300)
     sim.stop()
     while (message := gcs.recv(timeout=0.5)) is not None:
         if message.get_type() == "TUNNEL":
