@@ -1,0 +1,204 @@
+"""The web app: the operator page, the REST API (OpenAPI at /docs), the status WebSocket and the 3D view proxy.
+
+Reading needs no secret; anything that commands a vehicle (or deletes a
+recording, or drives a replay) needs the operator token as
+``Authorization: Bearer TOKEN``. Blocking MAVLink exchanges run in worker
+threads so the event loop keeps serving the page and the stream.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import json
+import logging
+import secrets
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from fastapi import Depends, FastAPI, Header, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, RedirectResponse, Response
+from fastapi.staticfiles import StaticFiles
+from PIL import Image
+
+from groundstation.commands import Command, execute
+from groundstation.link import LinkError
+from vehicle import __version__
+from vehicle.memory_map import MemoryMap, state_image
+from vehicle.waypoints import WaypointError, mission_text, parse_mission
+
+if TYPE_CHECKING:
+    from groundstation.server import GroundStation
+
+STATIC = Path(__file__).resolve().parent.parent / "static"
+STREAM_PERIOD = 0.25  # s between status frames on /ws
+log = logging.getLogger("groundstation")
+
+
+def create_app(station: GroundStation) -> FastAPI:
+    app = FastAPI(title="scanstation ground station", version=__version__,
+                  description="Watch and command scanning rovers and copters over MAVLink.")
+
+    def operator(authorization: str | None = Header(None, description="Bearer TOKEN (the operator token)")):
+        scheme, _, token = (authorization or "").partition(" ")
+        if scheme.lower() != "bearer" or not secrets.compare_digest(token.strip(), station.token):
+            log.warning("refused a request without a valid operator token")
+            raise HTTPException(401, "the operator token is missing or wrong",
+                                headers={"WWW-Authenticate": "Bearer"})
+
+    def vehicle_or_404(sysid: int):
+        vehicle = station.fleet.get(sysid)
+        if vehicle is None:
+            raise HTTPException(404, f"no vehicle with system id {sysid}")
+        return vehicle
+
+    def live_only() -> None:
+        if station.replay is not None:
+            raise HTTPException(409, "commands are disabled in replay")
+
+    # ---- the page ---------------------------------------------------------------------------------
+    @app.get("/", include_in_schema=False)
+    def page():
+        return FileResponse(STATIC / "index.html")
+
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")
+
+    @app.get("/api/health", tags=["status"])
+    def health():
+        return {"status": "ok", "version": __version__, "mode": station.mode, "vehicles": len(station.fleet.ids()),
+                "links": station.link_urls}
+
+    @app.get("/api/auth", tags=["status"], dependencies=[Depends(operator)])
+    def auth():
+        """200 when the operator token is right (the page's sign-in uses this)."""
+        return {"ok": True}
+
+    # ---- vehicles ----------------------------------------------------------------------------------
+    @app.get("/api/vehicles", tags=["vehicles"])
+    def vehicles():
+        return station.fleet.snapshot(time.time())
+
+    @app.get("/api/vehicles/{sysid}", tags=["vehicles"])
+    def vehicle(sysid: int):
+        v = vehicle_or_404(sysid)
+        with station.fleet.lock:
+            return station.fleet.describe(v, time.time())
+
+    @app.get("/api/vehicles/{sysid}/map", tags=["vehicles"],
+             responses={200: {"content": {"image/png": {}, "application/json": {}}}})
+    def vehicle_map(sysid: int, format: str = Query("png", pattern="^(png|json)$")):
+        """The memory map: a picture (north up; unknown dark, free pale, occupied red) or the log-odds cells."""
+        v = vehicle_or_404(sysid)
+        with station.fleet.lock:
+            grid = v.map_grid()
+            source = v.map_source
+            grid = None if grid is None else (grid[0].copy(), grid[1], grid[2])
+        if grid is None:
+            raise HTTPException(404, f"vehicle {sysid} has no map yet")
+        values, resolution, origin = grid
+        if format == "json":
+            rows = np.flatnonzero(values.any(axis=1))
+            cols = np.flatnonzero(values.any(axis=0))
+            r0, c0 = (int(rows[0]), int(cols[0])) if len(rows) else (0, 0)
+            r1, c1 = (int(rows[-1]) + 1, int(cols[-1]) + 1) if len(rows) else (0, 0)
+            return {"source": source, "resolution": resolution, "origin": list(origin), "size": values.shape[0],
+                    "occupied_at": MemoryMap.OCCUPIED_AT, "free_at": MemoryMap.FREE_AT,
+                    "occupied": int(np.count_nonzero(values >= MemoryMap.OCCUPIED_AT)),
+                    "window": {"row": r0, "col": c0, "rows": r1 - r0, "cols": c1 - c0},
+                    "values": values[r0:r1, c0:c1].tolist()}
+        states = np.zeros(values.shape, dtype=np.uint8)
+        states[values <= MemoryMap.FREE_AT] = 1
+        states[values >= MemoryMap.OCCUPIED_AT] = 2
+        rgba = state_image(states)
+        background = np.full(rgba.shape, (40, 42, 48, 255), dtype=np.uint8)
+        alpha = rgba[..., 3:4] / 255.0
+        picture = (rgba * alpha + background * (1 - alpha)).astype(np.uint8)
+        buffer = io.BytesIO()
+        Image.fromarray(picture[..., :3]).save(buffer, "PNG")
+        return Response(buffer.getvalue(), media_type="image/png")
+
+    @app.post("/api/vehicles/{sysid}/commands", tags=["commands"], dependencies=[Depends(operator)],
+              responses={401: {"description": "no or wrong operator token"}, 404: {"description": "no such vehicle"},
+                         409: {"description": "replaying"}, 504: {"description": "the vehicle did not answer"}})
+    async def command(sysid: int, body: Command):
+        """Send a command; answers with the vehicle's COMMAND_ACK result."""
+        live_only()
+        v = vehicle_or_404(sysid)
+        try:
+            result = await asyncio.to_thread(execute, station.link, v, body, station.fleet.datum)
+        except LinkError as error:
+            raise HTTPException(504, str(error)) from None
+        log.info("vehicle %s: %s -> %s", sysid, body.action, result)
+        return {"action": body.action, "result": result}
+
+    @app.get("/api/vehicles/{sysid}/mission", tags=["missions"], response_class=PlainTextResponse)
+    async def get_mission(sysid: int):
+        """The AUTO mission, downloaded from the vehicle, as QGC WPL 110 text."""
+        live_only()
+        vehicle_or_404(sysid)
+        try:
+            items = await asyncio.to_thread(station.link.download_mission, sysid)
+        except LinkError as error:
+            raise HTTPException(504, str(error)) from None
+        station.note_waypoints(sysid, items)
+        return mission_text(items)
+
+    @app.put("/api/vehicles/{sysid}/mission", tags=["missions"], dependencies=[Depends(operator)])
+    async def put_mission(sysid: int, request: Request):
+        """Upload an AUTO mission (QGC WPL 110 text; item 0 is home)."""
+        live_only()
+        vehicle_or_404(sysid)
+        text = (await request.body()).decode("utf-8", "replace")
+        try:
+            items = parse_mission(text)
+        except WaypointError as error:
+            raise HTTPException(422, str(error)) from None
+        if not items:
+            raise HTTPException(422, "the mission has no items")
+        try:
+            result = await asyncio.to_thread(station.link.upload_mission, sysid, items)
+        except LinkError as error:
+            raise HTTPException(504, str(error)) from None
+        if result == "accepted":
+            station.note_waypoints(sysid, items)
+        return {"result": result, "items": len(items)}
+
+    # ---- the stream ----------------------------------------------------------------------------------
+    @app.websocket("/ws")
+    async def stream(socket: WebSocket, viewer: str | None = None):
+        await socket.accept()
+        inbox = station.subscribe(viewer)
+        try:
+            while True:
+                try:
+                    note = await asyncio.wait_for(inbox.get(), timeout=STREAM_PERIOD)
+                    await socket.send_text(json.dumps(note))
+                    continue
+                except TimeoutError:
+                    pass
+                await socket.send_text(json.dumps(station.status(time.time())))
+        except (WebSocketDisconnect, RuntimeError):
+            pass
+        finally:
+            station.unsubscribe(viewer, inbox)
+
+    # ---- the 3D view --------------------------------------------------------------------------------
+    @app.get("/viz", include_in_schema=False)
+    def viz_slash():
+        return RedirectResponse("/viz/")
+
+    @app.get("/viz/{path:path}", include_in_schema=False)
+    async def viz(request: Request, path: str):
+        return await station.proxy.http(request, path)
+
+    @app.websocket("/viz")
+    async def viz_socket(socket: WebSocket):
+        await station.proxy.websocket(socket)
+
+    @app.exception_handler(LinkError)
+    async def link_error(request: Request, error: LinkError):
+        return JSONResponse({"detail": str(error)}, status_code=504)
+
+    return app

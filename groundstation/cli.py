@@ -1,0 +1,116 @@
+"""``groundstation``: serve the ground station, run the demo, or replay a recording."""
+
+from __future__ import annotations
+
+import argparse
+import atexit
+import subprocess
+import sys
+from pathlib import Path
+
+from vehicle import __version__
+
+DEFAULT_SCENE = Path(__file__).resolve().parent.parent / "scenes" / "default.wrl"
+DEFAULT_LINK = "udpin:127.0.0.1:14550"
+
+
+def _server_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--host", default="127.0.0.1", help="address to serve on (default %(default)s)")
+    parser.add_argument("--port", type=int, default=8000, help="port of the web app (default %(default)s)")
+    parser.add_argument("--token", help="operator token (default: a new random one, printed at start)")
+    parser.add_argument("--record-dir", default="recordings", help="where session recordings go (default "
+                        "%(default)s; '' to not record)")
+    parser.add_argument("--tls-cert", help="certificate file for HTTPS")
+    parser.add_argument("--tls-key", help="private key file for HTTPS")
+
+
+def _station(args, urls: list[str], scene_path: str | None):
+    from groundstation.server import GroundStation
+    from vehicle.scene import load_scene
+
+    scene = load_scene(scene_path) if scene_path else None
+    return GroundStation(urls, scene, args.token, args.record_dir or None)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    from groundstation.server import serve
+
+    station = _station(args, args.mavlink or [DEFAULT_LINK], args.scene)
+    serve(station, args.host, args.port, args.tls_cert, args.tls_key)
+    return 0
+
+
+def demo_starts(count: int) -> list[tuple[float, float]]:
+    """Start positions a few metres apart in the default scene's open middle."""
+    spots = [(0.0, 0.0), (-4.0, -4.0), (4.0, -3.0), (-3.0, 4.0), (6.0, 6.0), (-7.0, 1.0), (1.0, -7.0), (8.0, -1.0)]
+    return [spots[i % len(spots)] for i in range(count)]
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from groundstation.server import serve
+
+    port = args.mavlink_port
+    station = _station(args, [f"udpin:127.0.0.1:{port}"], args.scene)
+    vehicles = []
+    for index, (x, y) in enumerate(demo_starts(args.vehicles)):
+        command = [sys.executable, "-m", "vehicle.cli", "sim", "--scene", args.scene, "--mission", args.mission,
+                   "--vehicle", args.vehicle, f"--start={x},{y}", "--sysid", str(index + 1), "--autostart",
+                   "--speedup", str(args.speedup), "--mavlink", f"udpout:127.0.0.1:{port}"]
+        vehicles.append(subprocess.Popen(command, stdout=subprocess.DEVNULL if args.quiet else None))
+
+    def stop_vehicles() -> None:
+        for process in vehicles:
+            process.terminate()
+        for process in vehicles:
+            try:
+                process.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                process.kill()
+
+    atexit.register(stop_vehicles)
+    print(f"demo: {args.vehicles} simulated {args.vehicle}(s) flying '{args.mission}' in {Path(args.scene).name}",
+          flush=True)
+    try:
+        serve(station, args.host, args.port, args.tls_cert, args.tls_key)
+    finally:
+        stop_vehicles()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="groundstation", description="Web ground station with a live 3D view.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    serve = commands.add_parser("serve", help="serve the ground station for vehicles on MAVLink links")
+    serve.add_argument("--mavlink", action="append", metavar="URL",
+                       help=f"pymavlink connection string, repeatable (default {DEFAULT_LINK})")
+    serve.add_argument("--scene", help="VRML scene to show (default: none, vehicles over a ground grid)")
+    _server_options(serve)
+    serve.set_defaults(run=cmd_serve)
+
+    demo = commands.add_parser("demo", help="the ground station and simulated vehicles flying a mission")
+    demo.add_argument("--scene", default=str(DEFAULT_SCENE), help="VRML scene (default: the demo scene)")
+    demo.add_argument("--mission", default="search", help="mission the vehicles fly (default %(default)s)")
+    demo.add_argument("--vehicles", type=int, default=1, help="how many (default %(default)s)")
+    demo.add_argument("--vehicle", default="copter", choices=["copter", "rover"])
+    demo.add_argument("--speedup", type=float, default=1.0, help="simulation speed-up (default %(default)s)")
+    demo.add_argument("--mavlink-port", type=int, default=14550, help="UDP port the vehicles send to")
+    demo.add_argument("--quiet", action="store_true", help="hide the vehicles' own output")
+    _server_options(demo)
+    demo.set_defaults(run=cmd_demo)
+
+    args = parser.parse_args(argv)
+    from vehicle.scene import SceneError
+
+    try:
+        return args.run(args)
+    except (SceneError, OSError, ValueError) as error:
+        print(f"groundstation {args.command}: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,49 @@
+"""Session recordings: every MAVLink packet the ground station hears or sends, in one .tlog per session.
+
+Files are standard telemetry logs (see ``vehicle.flightlog``), flushed at
+least once a second so that a server that is killed loses at most the last
+second.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from vehicle.flightlog import TlogWriter
+
+FLUSH_EVERY = 1.0  # s
+
+
+class Recorder:
+    def __init__(self, directory: str | Path):
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        path = self.directory / f"session-{stamp}.tlog"
+        suffix = 1
+        while path.exists():
+            suffix += 1
+            path = self.directory / f"session-{stamp}-{suffix}.tlog"
+        self.path = path
+        self._writer = TlogWriter(path)
+        self._lock = threading.Lock()
+        self._flushed = time.monotonic()
+        self.packets = 0
+
+    def write(self, packet: bytes, timestamp: float) -> None:
+        with self._lock:
+            self._writer.write(packet, timestamp)
+            self.packets += 1
+
+    def tick(self, now: float | None = None) -> None:
+        """Flush if a second has passed since the last flush (called by the link's loop)."""
+        if time.monotonic() - self._flushed >= FLUSH_EVERY:
+            with self._lock:
+                self._writer.flush()
+            self._flushed = time.monotonic()
+
+    def close(self) -> None:
+        with self._lock:
+            self._writer.close()

@@ -1,0 +1,135 @@
+"""The ground station assembled: fleet state, MAVLink link, recorder, 3D view, web app; and how it is served.
+
+``GroundStation`` owns the parts and what the app's handlers need from them
+(the operator token, the live/replay switch, the viewers' inboxes);
+``serve`` runs it under uvicorn and prints the page's address with the token.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import secrets
+import sys
+import time
+from pathlib import Path
+
+import uvicorn
+
+from groundstation.app import create_app
+from groundstation.link import Link
+from groundstation.proxy import VizProxy
+from groundstation.recorder import Recorder
+from groundstation.state import Fleet
+from groundstation.viz import SceneView
+from vehicle.geodesy import Datum
+from vehicle.modes import MissionItem
+from vehicle.raycast import RayCaster
+from vehicle.scene import Scene
+from vehicle.waypoints import positions
+
+
+class GroundStation:
+    def __init__(self, urls: list[str], scene: Scene | None = None, token: str | None = None,
+                 record_dir: str | Path | None = "recordings", datum: Datum | None = None, viser_port: int = 0):
+        self.token = token or secrets.token_urlsafe(16)
+        self.scene = scene
+        ground = None
+        if scene is not None and len(scene.mesh.faces):
+            caster = RayCaster(scene.mesh)
+            ground = caster.ground_height
+            datum = datum or Datum()
+        self.fleet = Fleet(datum, ground)
+        self.recorder = Recorder(record_dir) if record_dir else None
+        self.link_urls = list(urls)
+        self.link = Link(urls, self.fleet, self.recorder) if urls else None
+        self.view = SceneView(self.fleet, scene, viser_port)
+        self.proxy = VizProxy(self.view.port)
+        self.view.on_connect(self.proxy.client_connected)
+        self.view.on_target(self._target)
+        self.replay = None  # set while a recording is replayed
+        self._inboxes: dict[str | None, set[asyncio.Queue]] = {}
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    @property
+    def mode(self) -> str:
+        return "replay" if self.replay is not None else "live"
+
+    def start(self) -> None:
+        if self.link is not None:
+            self.link.start()
+        self.view.start()
+
+    def close(self) -> None:
+        if self.link is not None:
+            self.link.close()
+        self.view.close()
+        if self.recorder is not None:
+            self.recorder.close()
+
+    # ---- what the app asks for -------------------------------------------------------------------
+    def status(self, now: float) -> dict:
+        return {"type": "vehicles", "mode": self.mode, "time": now, "vehicles": self.fleet.snapshot(now),
+                "replay": None}
+
+    def note_waypoints(self, sysid: int, items: list[MissionItem]) -> None:
+        vehicle = self.fleet.get(sysid)
+        if vehicle is not None and self.fleet.datum is not None:
+            vehicle.waypoints = positions(items, self.fleet.datum)
+
+    def subscribe(self, viewer: str | None) -> asyncio.Queue:
+        self._loop = asyncio.get_running_loop()
+        inbox: asyncio.Queue = asyncio.Queue(maxsize=100)
+        self._inboxes.setdefault(viewer, set()).add(inbox)
+        return inbox
+
+    def unsubscribe(self, viewer: str | None, inbox: asyncio.Queue) -> None:
+        self._inboxes.get(viewer, set()).discard(inbox)
+
+    def _target(self, client_id: int, x: float, y: float) -> None:
+        """A viewer clicked the ground (called from viser's thread): tell that viewer's page."""
+        viewer = self.proxy.viewers.get(client_id)
+        if viewer is None or self._loop is None:
+            return
+        note = {"type": "target", "x": round(x, 2), "y": round(y, 2)}
+        for inbox in list(self._inboxes.get(viewer, ())):
+            self._loop.call_soon_threadsafe(_offer, inbox, note)
+
+
+def _offer(inbox: asyncio.Queue, note: dict) -> None:
+    if not inbox.full():
+        inbox.put_nowait(note)
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def serve(station: GroundStation, host: str = "127.0.0.1", port: int = 8000, tls_cert: str | None = None,
+          tls_key: str | None = None, announce=print) -> None:
+    """Run the web app until interrupted (blocking)."""
+    if bool(tls_cert) != bool(tls_key):
+        raise ValueError("--tls-cert and --tls-key go together")
+    scheme = "https" if tls_cert else "http"
+    if not is_loopback(host) and not tls_cert:
+        print(f"WARNING: serving on {host} without TLS: the operator token and commands cross the network "
+              "in clear text. Give --tls-cert and --tls-key, or bind to 127.0.0.1.", file=sys.stderr, flush=True)
+    config = uvicorn.Config(create_app(station), host=host, port=port, log_level="warning",
+                            ssl_certfile=tls_cert, ssl_keyfile=tls_key, ws_ping_interval=None)
+    server = uvicorn.Server(config)
+    station.start()
+    shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+    links = ", ".join(station.link_urls) or "no MAVLink links"
+    announce(f"ground station: {scheme}://{shown}:{port}/#token={station.token}  (operator token {station.token}; "
+             f"listening to {links}"
+             + (f"; recording to {station.recorder.path}" if station.recorder else "") + ")")
+    try:
+        server.run()
+    finally:
+        station.close()
+    time.sleep(0)

@@ -1,0 +1,343 @@
+"""What the ground station knows about each vehicle, rebuilt from the MAVLink messages it hears.
+
+``Fleet.apply(message, now)`` is the one entry point, for live links and for
+replayed logs alike. Any ArduPilot vehicle (rover, copter, plane; MAVLink 1 or
+2) is understood from its standard messages; our own vehicles add the memory
+map and the planned path in TUNNEL messages. A vehicle that streams no map
+still gets one: the ground station builds it from DISTANCE_SENSOR and the pose,
+with the same memory-map code the vehicle uses. Positions are kept in the scene
+frame (metres east and north of the datum, height above the vehicle's home).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vehicle.geodesy import Datum
+from vehicle.mapstream import MapReceiver
+from vehicle.mav import mavlink, mavutil
+from vehicle.memory_map import MemoryMap
+
+LINK_LOST_AFTER = 3.0  # s without a heartbeat
+TRAIL_POINTS = 2000
+TRAIL_SPACING = 0.3  # m between recorded trail points
+HITS_KEPT = 600
+MESSAGES_KEPT = 50
+OWN_MAP_SPACE = 100.0  # m around home, for maps built from DISTANCE_SENSOR
+OWN_MAP_RESOLUTION = 5.0  # cells/m
+
+TYPES = {
+    mavlink.MAV_TYPE_GROUND_ROVER: "rover", mavlink.MAV_TYPE_SURFACE_BOAT: "boat",
+    mavlink.MAV_TYPE_QUADROTOR: "copter", mavlink.MAV_TYPE_HEXAROTOR: "copter",
+    mavlink.MAV_TYPE_OCTOROTOR: "copter", mavlink.MAV_TYPE_TRICOPTER: "copter",
+    mavlink.MAV_TYPE_HELICOPTER: "copter", mavlink.MAV_TYPE_COAXIAL: "copter",
+    mavlink.MAV_TYPE_DODECAROTOR: "copter",
+    mavlink.MAV_TYPE_FIXED_WING: "plane", mavlink.MAV_TYPE_VTOL_DUOROTOR: "plane",
+    mavlink.MAV_TYPE_VTOL_QUADROTOR: "plane", mavlink.MAV_TYPE_VTOL_TILTROTOR: "plane",
+}
+VEHICLE_TYPES = set(TYPES) | {mavlink.MAV_TYPE_SUBMARINE, mavlink.MAV_TYPE_AIRSHIP}
+NOT_VEHICLES = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_TYPE_GIMBAL,
+                mavlink.MAV_TYPE_ADSB, mavlink.MAV_TYPE_CAMERA, mavlink.MAV_TYPE_ANTENNA_TRACKER}
+
+
+@dataclass
+class Sonar:
+    distance: float | None  # m, None: no echo
+    origin: tuple[float, float, float]
+    direction: tuple[float, float, float]
+    max_range: float
+    time: float
+
+
+@dataclass
+class VehicleState:
+    sysid: int
+    mav_type: int = 0
+    autopilot: int = 0
+    mode: str = "UNKNOWN"
+    custom_mode: int = -1
+    armed: bool = False
+    mavlink_version: int = 2
+    lat: float | None = None
+    lon: float | None = None
+    alt: float | None = None  # m above home
+    x: float | None = None  # scene metres east
+    y: float | None = None  # scene metres north
+    roll: float = 0.0  # rad
+    pitch: float = 0.0
+    yaw: float = 0.0  # compass, rad
+    speed: float = 0.0
+    climb: float = 0.0
+    voltage: float | None = None
+    remaining: float | None = None
+    current: float | None = None
+    home: tuple[float, float] | None = None  # scene x, y
+    home_latlon: tuple[float, float] | None = None
+    last_heartbeat: float | None = None  # receiver clock
+    last_message: float | None = None
+    messages_received: int = 0
+    time_boot_s: float | None = None
+    mission_current: int | None = None
+    mission_total: int | None = None
+    mission_reached: int | None = None
+    status: str = ""  # the latest STATUSTEXT
+    messages: deque = field(default_factory=lambda: deque(maxlen=MESSAGES_KEPT))
+    trail: deque = field(default_factory=lambda: deque(maxlen=TRAIL_POINTS))
+    sonar: dict[int, Sonar] = field(default_factory=dict)
+    hits: deque = field(default_factory=lambda: deque(maxlen=HITS_KEPT))
+    map_stream: MapReceiver = field(default_factory=MapReceiver)
+    own_map: MemoryMap | None = None  # built here when the vehicle streams none
+    waypoints: list[tuple[float, float]] = field(default_factory=list)  # the AUTO mission, scene x, y
+    version: int = 0  # bumps on every change, for views that redraw
+
+    @property
+    def kind(self) -> str:
+        return TYPES.get(self.mav_type, "other")
+
+    def link_state(self, now: float) -> str:
+        if self.last_heartbeat is None or now - self.last_heartbeat > LINK_LOST_AFTER:
+            return "lost"
+        return "ok"
+
+    @property
+    def map_source(self) -> str | None:
+        if self.map_stream.grid is not None:
+            return "vehicle"
+        return "groundstation" if self.own_map is not None else None
+
+    def map_grid(self) -> tuple[np.ndarray, float, tuple[float, float]] | None:
+        """The memory map as (log-odds grid, resolution, south-west corner in scene metres), or None."""
+        stream = self.map_stream
+        if stream.grid is not None and stream.geometry is not None and self.home is not None:
+            geometry = stream.geometry
+            return stream.grid, geometry.resolution, (self.home[0] + geometry.origin[0],
+                                                      self.home[1] + geometry.origin[1])
+        if self.own_map is not None:
+            return self.own_map.grid, self.own_map.resolution, self.own_map.origin
+        return None
+
+    def planned_path(self) -> list[tuple[float, float]]:
+        if self.home is None:
+            return []
+        return [(self.home[0] + dx, self.home[1] + dy) for dx, dy in self.map_stream.path]
+
+
+class Fleet:
+    """Every vehicle heard, by system id. Thread-safe: the link writes, views read snapshots."""
+
+    def __init__(self, datum: Datum | None = None, ground_height=None):
+        self.datum = datum  # None: the first home heard becomes the scene origin
+        self.ground_height = ground_height or (lambda x, y: 0.0)
+        self.vehicles: dict[int, VehicleState] = {}
+        self.lock = threading.RLock()
+        self.version = 0
+
+    def clear(self) -> None:
+        with self.lock:
+            self.vehicles.clear()
+            self.version += 1
+
+    def get(self, sysid: int) -> VehicleState | None:
+        return self.vehicles.get(sysid)
+
+    def ids(self) -> list[int]:
+        with self.lock:
+            return sorted(self.vehicles)
+
+    # ---- messages ---------------------------------------------------------------------------------
+    def apply(self, message, now: float) -> None:
+        kind = message.get_type()
+        if kind == "BAD_DATA":
+            return
+        sysid = message.get_srcSystem()
+        with self.lock:
+            vehicle = self.vehicles.get(sysid)
+            if vehicle is None:
+                if kind != "HEARTBEAT" or message.type in NOT_VEHICLES or message.autopilot == \
+                        mavlink.MAV_AUTOPILOT_INVALID:
+                    return  # only a vehicle's heartbeat makes a vehicle
+                vehicle = self.vehicles[sysid] = VehicleState(sysid)
+            handler = getattr(self, f"_{kind.lower()}", None)
+            vehicle.last_message = now
+            vehicle.messages_received += 1
+            if handler is not None:
+                handler(vehicle, message, now)
+                vehicle.version += 1
+                self.version += 1
+
+    def _boot(self, vehicle: VehicleState, message) -> None:
+        if hasattr(message, "time_boot_ms"):
+            vehicle.time_boot_s = message.time_boot_ms / 1000.0
+
+    def _heartbeat(self, vehicle, m, now) -> None:
+        if m.type in NOT_VEHICLES:
+            return
+        vehicle.mav_type = m.type
+        vehicle.autopilot = m.autopilot
+        vehicle.custom_mode = m.custom_mode
+        vehicle.armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        vehicle.mode = mavutil.mode_string_v10(m)
+        vehicle.mavlink_version = 2 if m.get_msgbuf()[:1] == b"\xfd" else 1
+        vehicle.last_heartbeat = now
+
+    def _ensure_datum(self, lat: float, lon: float) -> Datum:
+        if self.datum is None:
+            self.datum = Datum(lat, lon, 0.0)
+        return self.datum
+
+    def _global_position_int(self, vehicle, m, now) -> None:
+        self._boot(vehicle, m)
+        if m.lat == 0 and m.lon == 0:
+            return  # no fix
+        lat, lon = m.lat * 1e-7, m.lon * 1e-7
+        datum = self._ensure_datum(lat, lon)
+        vehicle.lat, vehicle.lon, vehicle.alt = lat, lon, m.relative_alt / 1000.0
+        vehicle.x, vehicle.y = datum.to_local(lat, lon)
+        vehicle.speed = math.hypot(m.vx, m.vy) / 100.0
+        vehicle.climb = -m.vz / 100.0
+        if m.hdg != 65535:
+            vehicle.yaw = math.radians(m.hdg / 100.0)
+        if vehicle.home is None:  # until HOME_POSITION comes, the first fix is home
+            vehicle.home = (vehicle.x, vehicle.y)
+        self._extend_trail(vehicle)
+
+    def _local_position_ned(self, vehicle, m, now) -> None:
+        self._boot(vehicle, m)
+        if vehicle.lat is not None:
+            return  # the global position is better
+        home = vehicle.home or (0.0, 0.0)
+        vehicle.home = home
+        vehicle.x, vehicle.y, vehicle.alt = home[0] + m.y, home[1] + m.x, -m.z
+        vehicle.speed = math.hypot(m.vx, m.vy)
+        vehicle.climb = -m.vz
+        self._extend_trail(vehicle)
+
+    def _extend_trail(self, vehicle) -> None:
+        point = (vehicle.x, vehicle.y, self.height(vehicle))
+        if not vehicle.trail or math.dist(vehicle.trail[-1], point) >= TRAIL_SPACING:
+            vehicle.trail.append(point)
+
+    def height(self, vehicle: VehicleState) -> float:
+        """Scene z of the vehicle: its home's ground plus its height above home."""
+        home = vehicle.home or (vehicle.x or 0.0, vehicle.y or 0.0)
+        return self.ground_height(*home) + (vehicle.alt or 0.0)
+
+    def _attitude(self, vehicle, m, now) -> None:
+        self._boot(vehicle, m)
+        vehicle.roll, vehicle.pitch = m.roll, m.pitch
+        vehicle.yaw = m.yaw % (2 * math.pi)
+
+    def _vfr_hud(self, vehicle, m, now) -> None:
+        vehicle.speed = m.groundspeed
+        vehicle.climb = m.climb
+
+    def _sys_status(self, vehicle, m, now) -> None:
+        vehicle.voltage = m.voltage_battery / 1000.0 if m.voltage_battery not in (0, 65535) else None
+        vehicle.current = m.current_battery / 100.0 if m.current_battery >= 0 else None
+        vehicle.remaining = m.battery_remaining if m.battery_remaining >= 0 else None
+
+    def _home_position(self, vehicle, m, now) -> None:
+        lat, lon = m.latitude * 1e-7, m.longitude * 1e-7
+        datum = self._ensure_datum(lat, lon)
+        vehicle.home_latlon = (lat, lon)
+        vehicle.home = datum.to_local(lat, lon)
+
+    def _statustext(self, vehicle, m, now) -> None:
+        text = m.text if isinstance(m.text, str) else m.text.decode("utf-8", "replace")
+        vehicle.status = text
+        vehicle.messages.append({"time": now, "severity": m.severity, "text": text})
+
+    def _mission_current(self, vehicle, m, now) -> None:
+        vehicle.mission_current = m.seq
+        total = getattr(m, "total", 0)
+        vehicle.mission_total = total if total and total != 65535 else vehicle.mission_total
+
+    def _mission_item_reached(self, vehicle, m, now) -> None:
+        vehicle.mission_reached = m.seq
+
+    def _tunnel(self, vehicle, m, now) -> None:
+        vehicle.map_stream.feed(m.payload_type, bytes(m.payload[:m.payload_length]))
+
+    def _distance_sensor(self, vehicle, m, now) -> None:
+        self._boot(vehicle, m)
+        if vehicle.x is None:
+            return
+        max_range = m.max_distance / 100.0
+        distance = None if m.current_distance > m.max_distance or m.current_distance == 0 else \
+            m.current_distance / 100.0
+        origin = (vehicle.x, vehicle.y, self.height(vehicle))
+        direction = beam_direction(vehicle, m.orientation, m.quaternion)
+        vehicle.sonar[m.id] = Sonar(distance, origin, direction, max_range, now)
+        if distance is not None:
+            vehicle.hits.append(tuple(o + d * distance for o, d in zip(origin, direction, strict=True)))
+        if vehicle.map_stream.grid is None and vehicle.home is not None:
+            if vehicle.own_map is None:
+                vehicle.own_map = MemoryMap(vehicle.home, OWN_MAP_SPACE, OWN_MAP_RESOLUTION)
+            vehicle.own_map.add_readings(np.array([origin]), np.array([direction]),
+                                         np.array([np.nan if distance is None else distance]),
+                                         np.array([max_range]))
+
+    # ---- views --------------------------------------------------------------------------------
+    def snapshot(self, now: float) -> list[dict]:
+        with self.lock:
+            return [self.describe(v, now) for _, v in sorted(self.vehicles.items())]
+
+    def describe(self, v: VehicleState, now: float) -> dict:
+        """The vehicle as the REST API and the page's stream show it."""
+        age = None if v.last_heartbeat is None else round(now - v.last_heartbeat, 2)
+        position = None
+        if v.x is not None:
+            position = {"lat": v.lat, "lon": v.lon, "alt": _round(v.alt), "x": _round(v.x), "y": _round(v.y),
+                        "z": _round(self.height(v))}
+        return {
+            "sysid": v.sysid, "type": v.kind, "mode": v.mode, "armed": v.armed, "position": position,
+            "attitude": {"roll": _round(math.degrees(v.roll)), "pitch": _round(math.degrees(v.pitch)),
+                         "yaw": _round(math.degrees(v.yaw))},
+            "heading": _round(math.degrees(v.yaw) % 360), "speed": _round(v.speed), "climb": _round(v.climb),
+            "battery": None if v.voltage is None else {"voltage": _round(v.voltage), "remaining": v.remaining,
+                                                       "current": _round(v.current)},
+            "link": {"state": v.link_state(now), "heartbeat_age": age, "messages": v.messages_received,
+                     "mavlink": v.mavlink_version},
+            "mission": {"current": v.mission_current, "total": v.mission_total, "reached": v.mission_reached},
+            "status": v.status,
+            "home": None if v.home is None else {"x": _round(v.home[0]), "y": _round(v.home[1])},
+            "time_boot_s": v.time_boot_s,
+            "messages": list(v.messages)[-20:],
+            "map": {"occupied": self.occupied(v), "source": v.map_source},
+        }
+
+    @staticmethod
+    def occupied(v: VehicleState) -> int | None:
+        grid = v.map_grid()
+        return None if grid is None else int(np.count_nonzero(grid[0] >= MemoryMap.OCCUPIED_AT))
+
+
+def beam_direction(vehicle: VehicleState, orientation: int, quaternion) -> tuple[float, float, float]:
+    """Unit vector (scene frame) of a DISTANCE_SENSOR beam, from the mount and the vehicle's attitude."""
+    if orientation < 8:  # NONE, YAW_45 ... YAW_315: clockwise from the nose
+        yaw_offset, pitch = math.radians(45 * orientation), 0.0
+    elif orientation == mavlink.MAV_SENSOR_ROTATION_PITCH_270:  # down
+        yaw_offset, pitch = 0.0, -math.pi / 2
+    elif orientation == mavlink.MAV_SENSOR_ROTATION_PITCH_90:  # up
+        yaw_offset, pitch = 0.0, math.pi / 2
+    elif orientation == mavlink.MAV_SENSOR_ROTATION_CUSTOM and any(quaternion):
+        w, qx, qy, qz = quaternion  # body frame forward-right-down; rotate the x axis
+        fx = 1 - 2 * (qy * qy + qz * qz)
+        fy = 2 * (qx * qy + w * qz)
+        fz = 2 * (qx * qz - w * qy)
+        yaw_offset, pitch = math.atan2(fy, fx), math.atan2(-fz, math.hypot(fx, fy))
+    else:
+        yaw_offset, pitch = 0.0, 0.0
+    heading = vehicle.yaw + yaw_offset
+    total_pitch = pitch + vehicle.pitch
+    return (math.sin(heading) * math.cos(total_pitch), math.cos(heading) * math.cos(total_pitch),
+            math.sin(total_pitch))
+
+
+def _round(value: float | None, digits: int = 2) -> float | None:
+    return None if value is None else round(float(value), digits)
