@@ -13,18 +13,20 @@ import io
 import json
 import logging
 import secrets
-import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from fastapi import Depends, FastAPI, Header, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from PIL import Image
+from pydantic import BaseModel, Field
 
 from groundstation.commands import Command, execute
+from groundstation.export import export_html
 from groundstation.link import LinkError
+from groundstation.replay import ReplayError
 from vehicle import __version__
 from vehicle.memory_map import MemoryMap, state_image
 from vehicle.waypoints import WaypointError, mission_text, parse_mission
@@ -33,6 +35,17 @@ if TYPE_CHECKING:
     from groundstation.server import GroundStation
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
+
+
+class ReplayStart(BaseModel):
+    name: str = Field(description="a recording's name, as GET /api/recordings lists it")
+
+
+class ReplayControl(BaseModel):
+    play: bool | None = None
+    speed: float | None = Field(None, ge=0.1, le=20)
+    seek: float | None = Field(None, ge=0, description="seconds from the start of the recording")
+    step: Literal[-1, 1] | None = None
 STREAM_PERIOD = 0.25  # s between status frames on /ws
 log = logging.getLogger("groundstation")
 
@@ -78,13 +91,13 @@ def create_app(station: GroundStation) -> FastAPI:
     # ---- vehicles ----------------------------------------------------------------------------------
     @app.get("/api/vehicles", tags=["vehicles"])
     def vehicles():
-        return station.fleet.snapshot(time.time())
+        return station.fleet.snapshot(station.now())
 
     @app.get("/api/vehicles/{sysid}", tags=["vehicles"])
     def vehicle(sysid: int):
         v = vehicle_or_404(sysid)
         with station.fleet.lock:
-            return station.fleet.describe(v, time.time())
+            return station.fleet.describe(v, station.now())
 
     @app.get("/api/vehicles/{sysid}/map", tags=["vehicles"],
              responses={200: {"content": {"image/png": {}, "application/json": {}}}})
@@ -165,6 +178,85 @@ def create_app(station: GroundStation) -> FastAPI:
             station.note_waypoints(sysid, items)
         return {"result": result, "items": len(items)}
 
+    # ---- recordings and replay ----------------------------------------------------------------------
+    def recording_or_404(name: str) -> Path:
+        path = station.recording_path(name)
+        if path is None:
+            raise HTTPException(404, f"no recording called {name!r}")
+        return path
+
+    @app.get("/api/recordings", tags=["recordings"])
+    def recordings():
+        """The session recordings, newest first."""
+        return station.recordings()
+
+    @app.get("/api/recordings/{name}", tags=["recordings"])
+    def recording(name: str):
+        """Download a recording (.tlog, readable by mavlogdump.py, MAVExplorer, QGroundControl)."""
+        return FileResponse(recording_or_404(name), media_type="application/octet-stream", filename=name)
+
+    @app.delete("/api/recordings/{name}", tags=["recordings"], dependencies=[Depends(operator)])
+    def delete_recording(name: str):
+        path = recording_or_404(name)
+        if station.recorder is not None and path == station.recorder.path:
+            raise HTTPException(409, "that is the session being recorded now")
+        if station.replay is not None and station.replay.index.path == path:
+            raise HTTPException(409, "that recording is being replayed")
+        path.unlink()
+        return {"deleted": name}
+
+    @app.get("/api/replay", tags=["replay"])
+    def replay_status():
+        replay = station.replay
+        return {"mode": station.mode, "replay": replay.status() if replay is not None else None}
+
+    @app.post("/api/replay", tags=["replay"], dependencies=[Depends(operator)])
+    async def start_replay(body: ReplayStart):
+        """Replay a recording in the page (instead of the live vehicles)."""
+        path = recording_or_404(body.name)
+        try:
+            replay = await asyncio.to_thread(station.start_replay, path)
+        except ReplayError as error:
+            raise HTTPException(422, str(error)) from None
+        return replay.status()
+
+    @app.post("/api/replay/control", tags=["replay"], dependencies=[Depends(operator)])
+    async def control_replay(body: ReplayControl):
+        """Play or pause, change speed, seek to a time (s from the start) or step by a tenth of a second."""
+        replay = station.replay
+        if replay is None:
+            raise HTTPException(409, "nothing is being replayed")
+        if body.speed is not None:
+            replay.speed = body.speed
+        if body.seek is not None:
+            await asyncio.to_thread(replay.seek, body.seek)
+        if body.step is not None:
+            replay.playing = False
+            await asyncio.to_thread(replay.step, body.step)
+        if body.play is not None:
+            if body.play and replay.clock >= replay.duration:
+                await asyncio.to_thread(replay.seek, 0.0)
+            replay.playing = body.play
+        return replay.status()
+
+    @app.post("/api/replay/stop", tags=["replay"], dependencies=[Depends(operator)])
+    def stop_replay():
+        """Back to the live vehicles."""
+        station.stop_replay()
+        return {"mode": station.mode}
+
+    @app.get("/api/replay/export", tags=["replay"])
+    async def export_replay():
+        """The replay as one standalone HTML file that plays offline."""
+        replay = station.replay
+        if replay is None:
+            raise HTTPException(409, "nothing is being replayed")
+        html = await asyncio.to_thread(export_html, replay.index.path, station.scene, station.live.datum,
+                                       station.live.ground_height)
+        name = Path(replay.name).stem + ".html"
+        return Response(html, media_type="text/html",
+                        headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
     # ---- the stream ----------------------------------------------------------------------------------
     @app.websocket("/ws")
     async def stream(socket: WebSocket, viewer: str | None = None):
@@ -178,7 +270,7 @@ def create_app(station: GroundStation) -> FastAPI:
                     continue
                 except TimeoutError:
                     pass
-                await socket.send_text(json.dumps(station.status(time.time())))
+                await socket.send_text(json.dumps(station.status()))
         except (WebSocketDisconnect, RuntimeError):
             pass
         finally:

@@ -77,6 +77,23 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_replay(args: argparse.Namespace) -> int:
+    from groundstation.replay import index_tlog
+    from groundstation.server import GroundStation, serve
+    from vehicle.scene import load_scene
+
+    path = Path(args.file).resolve()
+    index = index_tlog(path)  # a clear error now, before anything starts, if it is no log
+    if index.warning:
+        print(f"warning: {index.warning}", file=sys.stderr)
+    scene = load_scene(args.scene) if args.scene else None
+    station = GroundStation([], scene, args.token, record_dir=path.parent)
+    station.start_replay(path)
+    print(f"replaying {path.name}: {len(index)} messages, {index.duration:.1f} s", flush=True)
+    serve(station, args.host, args.port, args.tls_cert, args.tls_key)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="groundstation", description="Web ground station with a live 3D view.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -100,12 +117,20 @@ def main(argv: list[str] | None = None) -> int:
     _server_options(demo)
     demo.set_defaults(run=cmd_demo)
 
+    replay = commands.add_parser("replay", help="replay a recorded .tlog in the page")
+    replay.add_argument("file", help="a telemetry log (.tlog): recorded here, by vehicle experiment --log, "
+                        "or by any MAVLink tool")
+    replay.add_argument("--scene", help="VRML scene to show it in")
+    _server_options(replay)
+    replay.set_defaults(run=cmd_replay)
+
     args = parser.parse_args(argv)
+    from groundstation.replay import ReplayError
     from vehicle.scene import SceneError
 
     try:
         return args.run(args)
-    except (SceneError, OSError, ValueError) as error:
+    except (SceneError, ReplayError, OSError, ValueError) as error:
         print(f"groundstation {args.command}: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -11,6 +11,7 @@ import asyncio
 import ipaddress
 import secrets
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from groundstation.app import create_app
 from groundstation.link import Link
 from groundstation.proxy import VizProxy
 from groundstation.recorder import Recorder
+from groundstation.replay import Player, Replay
 from groundstation.state import Fleet
 from groundstation.viz import SceneView
 from vehicle.geodesy import Datum
@@ -39,15 +41,18 @@ class GroundStation:
             caster = RayCaster(scene.mesh)
             ground = caster.ground_height
             datum = datum or Datum()
-        self.fleet = Fleet(datum, ground)
-        self.recorder = Recorder(record_dir) if record_dir else None
+        self.live = Fleet(datum, ground)
+        self.record_dir = Path(record_dir) if record_dir else None
+        self.recorder = Recorder(record_dir) if record_dir and urls else None
         self.link_urls = list(urls)
-        self.link = Link(urls, self.fleet, self.recorder) if urls else None
-        self.view = SceneView(self.fleet, scene, viser_port)
+        self.link = Link(urls, self.live, self.recorder) if urls else None
+        self.view = SceneView(self.live, scene, viser_port)
         self.proxy = VizProxy(self.view.port)
         self.view.on_connect(self.proxy.client_connected)
         self.view.on_target(self._target)
-        self.replay = None  # set while a recording is replayed
+        self.replay: Replay | None = None  # set while a recording is replayed
+        self._player: Player | None = None
+        self._replay_lock = threading.Lock()
         self._inboxes: dict[str | None, set[asyncio.Queue]] = {}
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -55,12 +60,24 @@ class GroundStation:
     def mode(self) -> str:
         return "replay" if self.replay is not None else "live"
 
+    @property
+    def fleet(self) -> Fleet:
+        """The fleet the page and the API show: the live one, or the replayed one."""
+        replay = self.replay
+        return replay.fleet if replay is not None else self.live
+
+    def now(self) -> float:
+        """The clock link ages are measured on: the wall, or the replayed log's own."""
+        replay = self.replay
+        return replay.now if replay is not None else time.time()
+
     def start(self) -> None:
         if self.link is not None:
             self.link.start()
         self.view.start()
 
     def close(self) -> None:
+        self.stop_replay()
         if self.link is not None:
             self.link.close()
         self.view.close()
@@ -68,9 +85,53 @@ class GroundStation:
             self.recorder.close()
 
     # ---- what the app asks for -------------------------------------------------------------------
-    def status(self, now: float) -> dict:
+    def status(self) -> dict:
+        replay = self.replay
+        now = self.now()
         return {"type": "vehicles", "mode": self.mode, "time": now, "vehicles": self.fleet.snapshot(now),
-                "replay": None}
+                "replay": replay.status() if replay is not None else None}
+
+    # ---- recordings and replay -----------------------------------------------------------------------
+    def recordings(self) -> list[dict]:
+        if self.record_dir is None or not self.record_dir.is_dir():
+            return []
+        found = []
+        for path in sorted(self.record_dir.glob("*.tlog"), key=lambda p: p.stat().st_mtime, reverse=True):
+            stat = path.stat()
+            found.append({"name": path.name, "size": stat.st_size, "modified": stat.st_mtime,
+                          "recording": self.recorder is not None and path == self.recorder.path})
+        return found
+
+    def recording_path(self, name: str) -> Path | None:
+        """The recording called ``name`` in the record folder (no paths, only .tlog files), or None."""
+        if self.record_dir is None or Path(name).name != name or not name.endswith(".tlog"):
+            return None
+        path = self.record_dir / name
+        return path if path.is_file() else None
+
+    def start_replay(self, path: Path) -> Replay:
+        """Show a recording instead of the live vehicles (the live link goes on in the background)."""
+        with self._replay_lock:
+            replay = Replay.open(path, Fleet(self.live.datum if self.scene is not None else None,
+                                             self.live.ground_height))
+            self._stop_player()
+            self.replay = replay
+            self._player = Player(replay).start()
+            self.view.show(replay.fleet)
+            replay.playing = True
+            return replay
+
+    def stop_replay(self) -> None:
+        with self._replay_lock:
+            self._stop_player()
+            if self.replay is not None:
+                self.replay = None
+                self.view.show(self.live)
+
+    def _stop_player(self) -> None:
+        if self._player is not None:
+            self._player.stop()
+            self._player = None
 
     def note_waypoints(self, sysid: int, items: list[MissionItem]) -> None:
         vehicle = self.fleet.get(sysid)

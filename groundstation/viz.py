@@ -43,13 +43,14 @@ class SceneView:
     def __init__(self, fleet: Fleet, scene: Scene | None, port: int = 0):
         self.fleet = fleet
         self.scene = scene
-        self.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+        self.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)  # loopback: proxied only
         self.server.request_share_url = _refuse_share  # never open a public tunnel, whoever asks
         self.port = self.server.get_port()
         self.caster = RayCaster(scene.mesh) if scene is not None and len(scene.mesh.faces) else None
         self._on_target: Callable[[int, float, float], None] | None = None
         self._on_connect: list[Callable[[int], None]] = []
         self._drawn: dict[int, dict] = {}
+        self._draw_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="viz", daemon=True)
         self._setup()
@@ -57,7 +58,8 @@ class SceneView:
     # ---- setup ----------------------------------------------------------------------------------
     def _setup(self) -> None:
         server = self.server
-        server.gui.configure_theme(show_share_button=False, control_layout="collapsible", dark_mode=True)
+        server.gui.configure_theme(show_share_button=False, control_width="small", dark_mode=True)
+        server.gui.main_panel.minimize()  # the operator's panel is the page's; viser's own stays out of the way
         server.scene.set_up_direction("+z")
         if self.scene is not None and len(self.scene.mesh.faces):
             server.scene.add_mesh_trimesh("/scene", self.scene.mesh)
@@ -69,10 +71,12 @@ class SceneView:
         server.scene.add_grid("/ground", width=size, height=size, position=centre, cell_size=5.0,
                               section_size=25.0, plane="xy")
 
+        # an oblique view of the whole scene from the south-west, for every viewer and exported replays
+        server.initial_camera.position = (centre[0] - size * 0.35, centre[1] - size * 0.45, size * 0.3)
+        server.initial_camera.look_at = (centre[0], centre[1], 0.0)
+
         @server.on_client_connect
         def _connected(client: viser.ClientHandle) -> None:
-            client.camera.position = (centre[0] - size * 0.35, centre[1] - size * 0.45, size * 0.3)
-            client.camera.look_at = (centre[0], centre[1], 0.0)
             for callback in self._on_connect:
                 callback(client.client_id)
 
@@ -84,6 +88,14 @@ class SceneView:
             event.client.scene.add_icosphere("/target", radius=0.4, color=(255, 230, 0), position=point)
             if self._on_target is not None:
                 self._on_target(event.client_id, point[0], point[1])
+
+    def show(self, fleet: Fleet) -> None:
+        """Draw this fleet from now on (the live one, or a replay's), starting from a clean slate."""
+        with self._draw_lock:
+            for sysid in list(self._drawn):
+                self.server.scene.remove_by_name(f"/vehicles/{sysid}")
+            self._drawn.clear()
+            self.fleet = fleet
 
     def on_target(self, callback: Callable[[int, float, float], None]) -> None:
         """``callback(client_id, x, y)`` when a viewer clicks a point on the ground."""
@@ -112,7 +124,8 @@ class SceneView:
 
     def close(self) -> None:
         self._stop.set()
-        self._thread.join(timeout=2)
+        if self._thread.is_alive():
+            self._thread.join(timeout=2)
         self.server.stop()
 
     def _run(self) -> None:
@@ -128,7 +141,7 @@ class SceneView:
 
     def draw(self, slow: bool = True) -> None:
         """Bring the scene up to date with the fleet (called by the loop; callable directly in tests)."""
-        with self.fleet.lock:
+        with self._draw_lock, self.fleet.lock:
             vehicles = [(v.sysid, v) for v in self.fleet.vehicles.values() if v.x is not None]
             gone = set(self._drawn) - {sysid for sysid, _ in vehicles}
             with self.server.atomic():

@@ -1,0 +1,287 @@
+"""Replay of a recorded .tlog: an index of its raw framing, seeking, and playback into a Fleet.
+
+pymavlink decodes some 16,000 messages a second, so an hour at 20 Hz (about
+300,000 messages) would take twenty seconds to open that way. Opening reads
+only the framing instead: the timestamp, system id, message id and offset of
+every record (and, for TUNNEL, the payload type in its first two bytes).
+Seeking to a time then decodes only what rebuilds the state there: the
+latest of each status message, a thinned-out trail, the recent messages and
+sonar hits, and the map from its last complete snapshot on. Playing forward
+feeds the Fleet message by message, as a live link does: a log is just another
+MAVLink source, and the views cannot tell the difference.
+"""
+
+from __future__ import annotations
+
+import mmap
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from groundstation.state import Fleet
+from vehicle.mapstream import MAP_SNAPSHOT
+from vehicle.mav import mavlink
+
+V1, V2 = 0xFE, 0xFD
+SIGNED = 0x01
+EARLIEST, LATEST = 946684800, 4102444800  # plausible timestamps: 2000..2100
+TUNNEL = mavlink.MAVLINK_MSG_ID_TUNNEL
+POSES = (mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
+LATEST_ONLY = (mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_ATTITUDE, mavlink.MAVLINK_MSG_ID_VFR_HUD,
+               mavlink.MAVLINK_MSG_ID_SYS_STATUS, mavlink.MAVLINK_MSG_ID_HOME_POSITION,
+               mavlink.MAVLINK_MSG_ID_MISSION_CURRENT, mavlink.MAVLINK_MSG_ID_MISSION_ITEM_REACHED, *POSES)
+STATUSTEXT = mavlink.MAVLINK_MSG_ID_STATUSTEXT
+DISTANCE_SENSOR = mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR
+TRAIL_SAMPLES = 1500
+RECENT_TEXTS = 20
+RECENT_READINGS = 600
+
+
+class ReplayError(ValueError):
+    """The file is not a telemetry log."""
+
+
+@dataclass
+class TlogIndex:
+    """Where every record of a tlog is, without decoding it."""
+
+    path: Path
+    offsets: np.ndarray  # of each packet (after its timestamp)
+    lengths: np.ndarray
+    times: np.ndarray  # seconds since the Unix epoch
+    sysids: np.ndarray
+    msgids: np.ndarray
+    tunnel_types: np.ndarray  # TUNNEL payload type, -1 for other messages
+    warning: str = ""
+
+    @property
+    def start(self) -> float:
+        return float(self.times[0])
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1] - self.times[0])
+
+    def __len__(self) -> int:
+        return len(self.offsets)
+
+
+def index_tlog(path: str | Path) -> TlogIndex:
+    """Index a .tlog; a damaged or truncated tail is left out with a warning, a non-log is a ReplayError."""
+    path = Path(path)
+    with open(path, "rb") as handle:
+        size = handle.seek(0, 2)
+        if size < 8 + 8:
+            raise ReplayError(f"{path.name} is not a telemetry log (too short)")
+        data = mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ)
+    try:
+        return _scan(path, data, size)
+    finally:
+        data.close()
+
+
+def _scan(path: Path, data, size: int) -> TlogIndex:
+    offsets, lengths, times, sysids, msgids, tunnels = [], [], [], [], [], []
+    position = 0
+    warning = ""
+    unpack_time = struct.Struct(">Q").unpack_from
+    while position + 8 < size:
+        stamp = unpack_time(data, position)[0] / 1e6
+        start = position + 8
+        magic = data[start]
+        if magic == V2 and start + 10 <= size:
+            length = 12 + data[start + 1] + (13 if data[start + 2] & SIGNED else 0)
+            msgid = data[start + 7] | data[start + 8] << 8 | data[start + 9] << 16
+            sysid = data[start + 5]
+            body = start + 10
+        elif magic == V1 and start + 6 <= size:
+            length = 8 + data[start + 1]
+            msgid = data[start + 5]
+            sysid = data[start + 3]
+            body = start + 6
+        else:
+            warning = _damage(path, position, len(offsets))
+            break
+        if not EARLIEST < stamp < LATEST or (times and stamp + 3600 < times[-1]):
+            warning = _damage(path, position, len(offsets))
+            break
+        if start + length > size:
+            warning = f"{path.name} is truncated: the last record is cut off at byte {position}; replaying up to it"
+            break
+        offsets.append(start)
+        lengths.append(length)
+        times.append(stamp)
+        sysids.append(sysid)
+        msgids.append(msgid)
+        tunnels.append(data[body] | data[body + 1] << 8 if msgid == TUNNEL and length >= 14 else -1)
+        position = start + length
+    if not offsets:
+        raise ReplayError(f"{path.name} is not a telemetry log (no MAVLink record at its start)")
+    return TlogIndex(path, np.array(offsets, dtype=np.int64), np.array(lengths, dtype=np.int32),
+                     np.array(times), np.array(sysids, dtype=np.int32), np.array(msgids, dtype=np.int32),
+                     np.array(tunnels, dtype=np.int32), warning)
+
+
+def _damage(path: Path, position: int, records: int) -> str:
+    if records == 0:
+        raise ReplayError(f"{path.name} is not a telemetry log (no MAVLink record at its start)")
+    return f"{path.name} is damaged at byte {position}; replaying the {records} records before it"
+
+
+@dataclass
+class Replay:
+    """Plays a recording into its own Fleet: seek, play, pause, step, speed."""
+
+    index: TlogIndex
+    fleet: Fleet
+    name: str = ""
+    speed: float = 1.0
+    playing: bool = False
+    position: int = 0  # index of the next record to apply
+    clock: float = 0.0  # seconds from the start of the log
+    _data: bytes = field(default=b"", repr=False)
+    _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
+
+    @classmethod
+    def open(cls, path: str | Path, fleet: Fleet) -> Replay:
+        index = index_tlog(path)
+        replay = cls(index, fleet, Path(path).name)
+        replay._data = Path(path).read_bytes()
+        replay._decoder = mavlink.MAVLink(None)
+        replay._decoder.robust_parsing = True
+        replay.seek(0.0)
+        return replay
+
+    @property
+    def duration(self) -> float:
+        return self.index.duration
+
+    def status(self) -> dict:
+        return {"name": self.name, "time": round(self.clock, 3), "duration": round(self.duration, 3),
+                "playing": self.playing, "speed": self.speed, "warning": self.index.warning or None}
+
+    @property
+    def now(self) -> float:
+        """The log's own clock (Unix seconds) at the current replay time, for link ages and the like."""
+        return self.index.start + self.clock
+
+    # ---- decoding ---------------------------------------------------------------------------------
+    def _decode(self, i: int):
+        start = int(self.index.offsets[i])
+        packet = self._data[start:start + int(self.index.lengths[i])]
+        try:
+            message = self._decoder.decode(bytearray(packet))
+        except Exception:  # noqa: BLE001 - pymavlink raises many kinds on a damaged packet
+            return None
+        return message
+
+    def _apply(self, indices) -> None:
+        for i in indices:
+            message = self._decode(int(i))
+            if message is not None:
+                self.fleet.apply(message, float(self.index.times[i]))
+
+    # ---- seeking ----------------------------------------------------------------------------------
+    def seek(self, seconds: float) -> None:
+        """Rebuild the fleet as it was ``seconds`` into the log."""
+        with self._lock:
+            seconds = min(max(seconds, 0.0), self.duration)
+            end = int(np.searchsorted(self.index.times, self.index.start + seconds, side="right"))
+            with self.fleet.lock:
+                self.fleet.clear()
+                self._apply(self._needed(end))
+            self.position = end
+            self.clock = seconds
+
+    def _needed(self, end: int) -> np.ndarray:
+        """Indices (in time order) of the records before ``end`` that rebuild the state at ``end``."""
+        index = self.index
+        msgids, sysids = index.msgids[:end], index.sysids[:end]
+        picked: list[np.ndarray] = []
+        for sysid in np.unique(sysids):
+            mine = sysids == sysid
+            for msgid in LATEST_ONLY:
+                where = np.flatnonzero(mine & (msgids == msgid))
+                if len(where):
+                    picked.append(where[[0, -1]])  # the first heartbeat creates the vehicle
+            poses = np.flatnonzero(mine & np.isin(msgids, POSES))
+            if len(poses):
+                picked.append(poses[np.linspace(0, len(poses) - 1, min(len(poses), TRAIL_SAMPLES)).astype(int)])
+            picked.append(np.flatnonzero(mine & (msgids == STATUSTEXT))[-RECENT_TEXTS:])
+            tunnels = mine & (msgids == TUNNEL)
+            snapshot_chunks = np.flatnonzero(tunnels & (index.tunnel_types[:end] == MAP_SNAPSHOT))
+            if len(snapshot_chunks):
+                picked.append(np.flatnonzero(tunnels)[np.flatnonzero(tunnels) >= self._snapshot_start(
+                    snapshot_chunks)])
+                picked.append(np.flatnonzero(mine & (msgids == DISTANCE_SENSOR))[-RECENT_READINGS:])
+            else:  # no map from the vehicle: the ground station builds one from every reading
+                picked.append(np.flatnonzero(mine & (msgids == DISTANCE_SENSOR)))
+        return np.unique(np.concatenate(picked)) if picked else np.zeros(0, dtype=np.int64)
+
+    def _snapshot_start(self, chunks: np.ndarray) -> int:
+        """Record index where the last-but-one snapshot began (its chunk 0): the last one may be cut off
+        by the seek time, the one before it is whole, and the deltas since bring it up to date."""
+        starts = [int(i) for i in chunks if self._chunk_number(int(i)) == 0]
+        if not starts:
+            return int(chunks[0])
+        return starts[-2] if len(starts) >= 2 else starts[-1]
+
+    def _chunk_number(self, i: int) -> int:
+        """The chunk index inside a MAP_SNAPSHOT TUNNEL record, read from the raw packet."""
+        start = int(self.index.offsets[i])
+        body = start + (10 if self._data[start] == V2 else 6)
+        # TUNNEL on the wire: payload_type u16, target system, target component, payload length, payload;
+        # our chunk header in the payload: snapshot id u16, chunk index u16, chunk count u16
+        raw = self._data[body + 7:body + 9].ljust(2, b"\0")
+        return struct.unpack("<H", raw)[0]
+
+    # ---- playing ----------------------------------------------------------------------------------
+    def advance(self, seconds: float) -> None:
+        """Play forward by ``seconds`` of log time, message by message."""
+        with self._lock:
+            target = min(self.clock + seconds, self.duration)
+            end = int(np.searchsorted(self.index.times, self.index.start + target, side="right"))
+            with self.fleet.lock:
+                self._apply(range(self.position, end))
+            self.position = end
+            self.clock = target
+            if self.clock >= self.duration:
+                self.playing = False
+
+    def step(self, direction: int) -> None:
+        """One step of 1/10 s of log time forward (or back)."""
+        if direction >= 0:
+            self.advance(0.1)
+        else:
+            self.seek(self.clock - 0.1)
+
+
+class Player:
+    """Runs a Replay in real time times its speed, on its own thread."""
+
+    TICK = 0.05
+
+    def __init__(self, replay: Replay):
+        self.replay = replay
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="replay", daemon=True)
+
+    def start(self) -> Player:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2)
+
+    def _run(self) -> None:
+        last = time.monotonic()
+        while not self._stop.wait(self.TICK):
+            now = time.monotonic()
+            if self.replay.playing:
+                self.replay.advance((now - last) * self.replay.speed)
+            last = now
