@@ -60,7 +60,7 @@ class Gcs:
         wall_deadline = time.monotonic() + sim_timeout / self.speedup * 4 + 15
         last_beat = 0.0
         while time.monotonic() < wall_deadline:
-            if heartbeats and time.monotonic() - last_beat > 0.5:
+            if heartbeats and time.monotonic() - last_beat > 0.3:
                 self.heartbeat()
                 last_beat = time.monotonic()
             message = self.recv()

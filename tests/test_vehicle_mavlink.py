@@ -229,7 +229,7 @@ def test_operator_takeover_pauses_and_resume_continues(fly):
 
 
 def test_gcs_failsafe_returns_a_copter_home_and_obeys_again(fly):
-    gcs, _ = fly(failsafe_timeout=1.0)
+    gcs, _ = fly(failsafe_timeout=2.0)
     take_off(gcs)
     mark = len(gcs.texts)
     gcs.wait_text("GCS failsafe", since=mark, heartbeats=False, sim_timeout=60)
@@ -239,7 +239,7 @@ def test_gcs_failsafe_returns_a_copter_home_and_obeys_again(fly):
 
 
 def test_gcs_failsafe_holds_a_rover(fly):
-    gcs, _ = fly("rover", failsafe_timeout=1.0)
+    gcs, _ = fly("rover", failsafe_timeout=2.0)
     assert gcs.set_mode(15) == mavlink.MAV_RESULT_ACCEPTED
     assert gcs.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
     gcs.wait_text("GCS failsafe", heartbeats=False, sim_timeout=60)
