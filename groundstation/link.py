@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from groundstation.state import Fleet
-from vehicle.mav import mavlink, mavutil
+from vehicle.mav import mavlink, mavutil, pack
 from vehicle.mission_protocol import item_from, item_message
 from vehicle.modes import MissionItem
 
@@ -110,7 +110,7 @@ class Link:
     def send(self, message, sysid: int | None = None) -> None:
         """Send to the connection the vehicle was heard on (all connections if unknown or None)."""
         with self._lock:
-            packet = message.pack(self.packer)
+            packet = pack(message, self.packer)
         targets = [self.route[sysid]] if sysid in self.route else self.connections
         for connection in targets:
             try:

@@ -16,7 +16,7 @@ from collections import Counter
 
 from vehicle.agent import Agent
 from vehicle.flightlog import TlogWriter
-from vehicle.mav import mavlink, mavutil
+from vehicle.mav import mavlink, mavutil, pack
 from vehicle.mission_protocol import MissionServer
 from vehicle.modes import STOP_MODE, Kind, mode_name
 from vehicle.params import Parameters
@@ -86,7 +86,7 @@ class Endpoint:
     # ---- sending -------------------------------------------------------------------------------
     def send(self, messages: list, now: float) -> None:
         for message in messages:
-            packet = message.pack(self.packer)
+            packet = pack(message, self.packer)
             for link in self.links:
                 try:
                     link.write(packet)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
-from vehicle.mav import mavlink
+from vehicle.mav import mavlink, pack
 
 LOG_EPOCH = 1767225600.0  # 2026-01-01T00:00:00Z
 _STAMP = struct.Struct(">Q")
@@ -58,7 +58,7 @@ class ExperimentLog:
     def _write(self, messages, now: float) -> None:
         stamp = LOG_EPOCH + now
         for message in messages:
-            self.writer.write(message.pack(self.packer), stamp)
+            self.writer.write(pack(message, self.packer), stamp)
         self.messages += len(messages)
 
     def close(self) -> None:

@@ -16,4 +16,17 @@ from pymavlink import mavutil  # noqa: E402 - must follow the environment settin
 mavutil.set_dialect("ardupilotmega")
 mavlink = mavutil.mavlink
 
-__all__ = ["mavlink", "mavutil"]
+
+
+def pack(message, packer) -> bytes:
+    """The message's bytes from ``packer`` (a MAVLink instance), advancing its sequence number.
+
+    pymavlink's ``message.pack`` does not count: only ``MAVLink.send`` does, and
+    that wants a file to write to. Receivers detect loss from the sequence.
+    """
+    packet = message.pack(packer)
+    packer.seq = (packer.seq + 1) % 256
+    return packet
+
+
+__all__ = ["mavlink", "mavutil", "pack"]

@@ -50,6 +50,7 @@ class MemoryMap:
         self.grid = np.zeros((self.size, self.size), dtype=np.int8)
         self.ever_hit = np.zeros((self.size, self.size), dtype=bool)
         self.occupied_version = 0  # counts cells becoming or ceasing to be occupied, so users can skip rechecks
+        self.version = 0  # counts updates of any kind, for views that redraw
         self._changed: list[np.ndarray] = []
 
     # ---- geometry ----------------------------------------------------------------------------
@@ -88,6 +89,7 @@ class MemoryMap:
         directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         if not len(origins):
             return 0
+        self.version += 1
         echo = ~np.isnan(distances)
         lengths = np.where(echo, distances, np.minimum(max_ranges, self.NO_ECHO_CLEARS))
         vertical = np.abs(directions[:, 2] * lengths)
