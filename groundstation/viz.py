@@ -23,8 +23,8 @@ from vehicle.memory_map import MemoryMap, state_image
 from vehicle.raycast import RayCaster
 from vehicle.scene import Scene
 
-RATE = 15.0  # frames per second at most
-SLOW_EVERY = 4  # trails, sonar and labels every this many frames
+RATE = 30.0  # frames per second at most (poses); trails, sonar and maps far less often
+SLOW_EVERY = 8  # trails, sonar, maps and labels every this many frames
 MAP_PIXELS = 512  # a map image is at most this many pixels a side
 COLOURS = [(230, 90, 40), (40, 150, 240), (120, 200, 60), (220, 60, 200), (240, 200, 40), (60, 220, 200)]
 

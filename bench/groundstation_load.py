@@ -1,0 +1,184 @@
+"""The ground station under load: pose-to-browser latency, and CPU and memory with ten vehicles and viewers.
+
+Runs ``groundstation serve`` as its own process and feeds it ten synthetic
+vehicles (HEARTBEAT at 1 Hz; GLOBAL_POSITION_INT and ATTITUDE at 20 Hz) over
+loopback UDP. Nine viewers read the 3D view's websocket through the app's
+proxy and one real browser (headless Chromium with Playwright) shows the page.
+Vehicle 1 moves 10 cm east with every pose, so a viewer that decodes the
+viser frames can tell which pose a frame shows and how long it took to get
+there. Targets: latency p50 < 30 ms and p99 < 100 ms at 20 Hz; the server
+under one core and 400 MB RSS. Run: python bench/groundstation_load.py [--seconds 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import websockets
+import zstandard
+from common import table
+
+from vehicle.geodesy import Datum
+from vehicle.mav import mavlink, pack
+
+TICKS = os.sysconf("SC_CLK_TCK")
+STEP = 0.1  # m east per pose of vehicle 1
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+
+
+def free_port(kind=socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def process_figures(pid: int) -> tuple[float, float]:
+    """CPU seconds used so far, and resident memory in MB."""
+    with open(f"/proc/{pid}/stat") as handle:
+        fields = handle.read().rsplit(")", 1)[1].split()
+    with open(f"/proc/{pid}/status") as handle:
+        rss = next(int(line.split()[1]) for line in handle if line.startswith("VmRSS"))
+    return (int(fields[11]) + int(fields[12])) / TICKS, rss / 1024
+
+
+class Vehicles(threading.Thread):
+    """Ten synthetic vehicles at 20 Hz; remembers when each pose of vehicle 1 was sent."""
+
+    def __init__(self, port: int, count: int = 10):
+        super().__init__(daemon=True)
+        self.address = ("127.0.0.1", port)
+        self.count = count
+        self.sent: dict[int, float] = {}  # pose number of vehicle 1 -> send time (perf_counter)
+        self.stop = threading.Event()
+        self.datum = Datum()
+
+    def run(self) -> None:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        packers = [mavlink.MAVLink(None, srcSystem=i + 1, srcComponent=1) for i in range(self.count)]
+        k = 0
+        next_tick = time.perf_counter()
+        while not self.stop.is_set():
+            for index, packer in enumerate(packers):
+                x = k * STEP if index == 0 else 5.0 * index
+                lat, lon = self.datum.to_global(x, 10.0 * index)
+                messages = [mavlink.MAVLink_global_position_int_message(k * 50, int(round(lat * 1e7)),
+                                                                        int(round(lon * 1e7)), 588000, 4000,
+                                                                        0, 200, 0, 9000),
+                            mavlink.MAVLink_attitude_message(k * 50, 0.0, 0.0, 1.57, 0.0, 0.0, 0.0)]
+                if k % 20 == 0:
+                    messages.insert(0, mavlink.MAVLink_heartbeat_message(2, 3, 217, 4, 4, 3))
+                for message in messages:
+                    sock.sendto(pack(message, packer), self.address)
+            self.sent[k] = time.perf_counter()
+            k += 1
+            next_tick += 0.05
+            time.sleep(max(0.0, next_tick - time.perf_counter()))
+
+
+def decode_frame(frame: bytes) -> list[dict]:
+    size = int.from_bytes(frame[:8], "little")
+    compressed = int.from_bytes(frame[8:16], "little")
+    inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + compressed], max_output_size=size)
+    return msgspec.msgpack.decode(inner)["messages"]
+
+
+def body_x(messages: list[dict]) -> float | None:
+    """The last x position of vehicle 1's body in a viser frame, if the frame moves it."""
+    found = None
+    for message in messages:
+        if message.get("name") == "/vehicles/1/body":
+            props = message.get("updates") or message.get("props") or message
+            position = props.get("position") if isinstance(props, dict) else None
+            if position is not None:
+                found = float(position[0])
+    return found
+
+
+async def viewer(url: str, vehicles: Vehicles, latencies: list[float] | None, until: float) -> int:
+    frames = 0
+    async with websockets.connect(url, subprotocols=["viser-v1.1.1"], max_size=None) as socket_:
+        while time.perf_counter() < until:
+            try:
+                frame = await asyncio.wait_for(socket_.recv(), timeout=1.0)
+            except TimeoutError:
+                continue
+            arrived = time.perf_counter()
+            frames += 1
+            if latencies is None or not isinstance(frame, bytes):
+                continue
+            x = body_x(decode_frame(frame))
+            if x is not None:
+                sent = vehicles.sent.get(round(x / STEP))
+                if sent is not None:
+                    latencies.append(arrived - sent)
+    return frames
+
+
+async def viewers(url: str, vehicles: Vehicles, count: int, seconds: float) -> tuple[list[float], int]:
+    latencies: list[float] = []
+    until = time.perf_counter() + seconds
+    frames = await asyncio.gather(*(viewer(url, vehicles, latencies if i == 0 else None, until)
+                                    for i in range(count)))
+    return latencies, sum(frames)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--seconds", type=float, default=30.0)
+    args = parser.parse_args()
+    web, udp = free_port(), free_port(socket.SOCK_DGRAM)
+    with tempfile.TemporaryDirectory() as records:
+        server = subprocess.Popen([sys.executable, "-m", "groundstation.cli", "serve", "--mavlink",
+                                   f"udpin:127.0.0.1:{udp}", "--port", str(web), "--token", "bench",
+                                   "--record-dir", records], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                  text=True)
+        vehicles = Vehicles(udp)
+        try:
+            for line in server.stdout:
+                if "ground station:" in line:
+                    break
+            vehicles.start()
+            time.sleep(2.0)
+            from playwright.sync_api import sync_playwright
+
+            with sync_playwright() as playwright:
+                browser = playwright.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+                page = browser.new_page()
+                page.goto(f"http://127.0.0.1:{web}/#token=bench")
+                time.sleep(3.0)
+                cpu0, _ = process_figures(server.pid)
+                started = time.perf_counter()
+                latencies, frames = asyncio.run(viewers(f"ws://127.0.0.1:{web}/viz", vehicles, 9, args.seconds))
+                wall = time.perf_counter() - started
+                cpu1, rss = process_figures(server.pid)
+                browser.close()
+        finally:
+            vehicles.stop.set()
+            server.terminate()
+            server.wait(timeout=10)
+    ms = np.array(latencies) * 1000
+    print(f"10 vehicles at 20 Hz, 9 websocket viewers + 1 browser, {wall:.0f} s; {frames} frames to the "
+          f"viewers; {len(ms)} poses of vehicle 1 timed")
+    print(table(["what", "figure", "target"], [
+        ["pose -> viewer frame, p50", f"{np.percentile(ms, 50):.1f} ms" if len(ms) else "-", "< 30 ms"],
+        ["pose -> viewer frame, p99", f"{np.percentile(ms, 99):.1f} ms" if len(ms) else "-", "< 100 ms"],
+        ["server CPU", f"{(cpu1 - cpu0) / wall:.2f} core", "< 1 core"],
+        ["server RSS", f"{rss:.0f} MB", "< 400 MB"],
+    ]))
+
+
+if __name__ == "__main__":
+    main()
