@@ -21,7 +21,7 @@ from vehicle.missions.base import Context, Status
 from vehicle.missions.routines import Travel
 from vehicle.modes import Kind
 from vehicle.monitor import Monitor
-from vehicle.sensors import Reading
+from vehicle.sensors import Reading, Servo
 from vehicle.settings import Settings
 
 HOME_TOLERANCE = 0.5  # m
@@ -42,14 +42,16 @@ class Phase(StrEnum):
 
 class Agent:
     def __init__(self, vehicle: Autopilot, mission: str, settings: Settings, radius: float,
-                 waypoints: list[tuple[float, float]] | None = None, autostart: bool = True):
+                 waypoints: list[tuple[float, float]] | None = None, autostart: bool = True,
+                 servo: Servo | None = None):
         self.vehicle = vehicle
         self.settings = settings
         home = (vehicle.home[0], vehicle.home[1])
         self.map = MemoryMap(home, settings.space_size, settings.resolution)
         self.monitor = Monitor(settings, self.map, home, radius, brake=vehicle.body.limits.accel)
         self.messages: list[str] = []
-        self.ctx = Context(vehicle, self.map, self.monitor, settings, home, radius, waypoints, say=self.say)
+        self.ctx = Context(vehicle, self.map, self.monitor, settings, home, radius, waypoints, say=self.say,
+                           servo=servo)
         self.mission_name = mission
         self.mission = mission_class(mission)(self.ctx)
         self.phase = Phase.PREFLIGHT if autostart else Phase.WAITING

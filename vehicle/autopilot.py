@@ -68,6 +68,7 @@ class Autopilot:
         self.mission: list[MissionItem] = [self.home_item()]
         self.current = 1
         self.mission_running = False
+        self.servos: dict[int, int] = {}  # output channel -> PWM, as MAV_CMD_DO_SET_SERVO sets them
         self.events: deque[Event] = deque(maxlen=256)  # drained by telemetry; bounded when nobody listens
         self.time = 0.0
         self._target: tuple[float, float, float] | None = None  # GUIDED position
@@ -210,6 +211,13 @@ class Autopilot:
         if speed <= 0 or speed > self.body.limits.max_speed:
             return DENIED
         self.speed = speed
+        return ACCEPTED
+
+    def set_servo(self, channel: int, pwm: int) -> int:
+        """MAV_CMD_DO_SET_SERVO: drive an output (a servo that turns a sonar, say)."""
+        if not 1 <= channel <= 32 or not 500 <= pwm <= 2500:
+            return DENIED
+        self.servos[channel] = int(pwm)
         return ACCEPTED
 
     def set_mission(self, items: list[MissionItem]) -> None:

@@ -24,7 +24,9 @@ def _point(text: str) -> tuple[float, float]:
 def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = True) -> None:
     """Options shared by ``experiment`` and ``sim``: what to fly, where, and with which settings."""
     from vehicle.missions import missions
+    from vehicle.sensors import SENSOR_SUITES
     from vehicle.settings import Settings
+    from vehicle.world import DEFAULT_SUITE
 
     names = list(missions())
     parser.add_argument("--scene", default=str(DEFAULT_SCENE), help="VRML scene (default: %(default)s)")
@@ -40,6 +42,9 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--config", help="TOML file of mission parameters")
     parser.add_argument("--waypoints", help="QGC WPL 110 file of waypoints (square, pathfind)")
     parser.add_argument("--seed", type=int, default=0, help="seed for sensor noise and random choices")
+    parser.add_argument("--sensors", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
+                        help="; ".join(f"{name}: {text}" for name, text in SENSOR_SUITES.items())
+                        + " (default %(default)s)")
 
 
 def settings_from(args: argparse.Namespace, scene, **extra):
@@ -86,7 +91,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     settings = settings_from(args, scene, time_limit=args.time_limit)
     waypoints = load_positions(args.waypoints, Datum()) if args.waypoints else None
     experiment = Experiment(args.scene, args.mission, args.vehicle, args.start, args.heading, settings, args.seed,
-                            waypoints)
+                            waypoints, args.sensors)
     log = None
     if args.log:
         from vehicle.flightlog import ExperimentLog
@@ -115,13 +120,15 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 def cmd_sim(args: argparse.Namespace) -> int:
     from vehicle.agent import Agent
     from vehicle.scene import load_scene
+    from vehicle.sensors import sensor_suite
     from vehicle.sim import SimOptions, SimVehicle
     from vehicle.waypoints import load_mission, parse_points, positions
     from vehicle.world import World
 
     scene = load_scene(args.scene)
     settings = settings_from(args, scene)
-    world = World(scene, args.vehicle, settings, args.start, args.heading, seed=args.seed)
+    world = World(scene, args.vehicle, settings, args.start, args.heading, seed=args.seed,
+                  sensors=sensor_suite(args.sensors))
     waypoints = None
     if args.waypoints:
         items = load_mission(args.waypoints)
@@ -129,7 +136,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         waypoints = positions(items, world.datum)
     elif "waypoints" in scene.hints:
         waypoints = parse_points(scene.hints["waypoints"])
-    agent = Agent(world.autopilot, args.mission, settings, world.limits.radius, waypoints, autostart=args.autostart)
+    agent = Agent(world.autopilot, args.mission, settings, world.limits.radius, waypoints, autostart=args.autostart,
+                  servo=world.servo)
     options = SimOptions(args.mavlink or ["udpout:127.0.0.1:14550"], args.sysid, args.speedup,
                          args.failsafe_timeout, args.log)
     sim = SimVehicle(world, agent, options)

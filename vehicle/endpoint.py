@@ -193,6 +193,8 @@ class Endpoint:
             self.agent.take_over("turned the vehicle")
             direction = -1.0 if m.param3 < 0 else 1.0
             return pilot.set_yaw(math.radians(m.param1) * (direction if m.param4 else 1.0), relative=bool(m.param4))
+        if cmd == mavlink.MAV_CMD_DO_SET_SERVO:
+            return pilot.set_servo(int(m.param1), int(m.param2))
         if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             interval = None if m.param2 == 0 else (-1.0 if m.param2 < 0 else m.param2 / 1e6)
             return ACCEPTED if self.telemetry.set_interval(int(m.param1), interval) else UNSUPPORTED

@@ -15,9 +15,10 @@ from vehicle import __version__
 from vehicle.agent import Agent
 from vehicle.modes import Kind
 from vehicle.scene import Scene, load_scene
+from vehicle.sensors import sensor_suite
 from vehicle.settings import Settings
 from vehicle.waypoints import parse_points
-from vehicle.world import World
+from vehicle.world import DEFAULT_SUITE, World
 
 OUTCOMES = ("finished", "stopped", "collision", "timeout", "error")
 
@@ -34,6 +35,7 @@ class Experiment:
     settings: Settings = field(default_factory=Settings)
     seed: int = 0
     waypoints: list[tuple[float, float]] | None = None
+    sensors: str = DEFAULT_SUITE
 
 
 def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: str | Path | None = None,
@@ -45,6 +47,7 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
         "mission": experiment.mission,
         "scene": Path(experiment.scene).name,
         "vehicle": experiment.vehicle,
+        "sensors": experiment.sensors,
         "seed": experiment.seed,
         "version": __version__,
         "settings": settings.model_dump(),
@@ -54,11 +57,12 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
     try:
         scene = scene or load_scene(experiment.scene)
         world = World(scene, Kind(experiment.vehicle), settings, experiment.start, experiment.heading,
-                      seed=experiment.seed)
+                      seed=experiment.seed, sensors=sensor_suite(experiment.sensors))
         waypoints = experiment.waypoints
         if waypoints is None and "waypoints" in scene.hints:
             waypoints = parse_points(scene.hints["waypoints"])
-        agent = Agent(world.autopilot, experiment.mission, settings, world.limits.radius, waypoints)
+        agent = Agent(world.autopilot, experiment.mission, settings, world.limits.radius, waypoints,
+                      servo=world.servo)
         outcome, reason = _fly(world, agent, on_step)
     except Exception as error:  # noqa: BLE001 - any failure is an outcome of the run, reported, not raised
         outcome, reason = "error", f"{type(error).__name__}: {error}"

@@ -28,6 +28,7 @@ class Servo:
     angle_min: float = -90.0
     angle_max: float = 90.0
     pwm: int = 1500
+    channel: int = 9  # autopilot output that drives it (MAV_CMD_DO_SET_SERVO)
 
     def angle(self) -> float:
         span = (self.pwm - self.pwm_min) / (self.pwm_max - self.pwm_min)
@@ -167,6 +168,7 @@ class SonarArray:
 SENSOR_SUITES = {
     "single": "one sonar looking forward (the thesis's vehicle)",
     "triple": "three sonars: forward and 45 degrees to each side (sees walls alongside the path)",
+    "servo": "one sonar on a servo that sweeps it 90 degrees either side (the thesis's servo option)",
 }
 
 
@@ -176,6 +178,8 @@ def sensor_suite(name: str) -> list[Sonar]:
         return [Sonar("front")]
     if name == "triple":
         return [Sonar("front"), Sonar("left", mount_yaw=-45.0), Sonar("right", mount_yaw=45.0)]
+    if name == "servo":
+        return [Sonar("sweep", servo=Servo())]
     raise ValueError(f"unknown sensor suite {name!r}; suites: {', '.join(SENSOR_SUITES)}")
 
 

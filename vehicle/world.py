@@ -21,7 +21,7 @@ from vehicle.modes import Kind
 from vehicle.physics import Body, Limits, Pose
 from vehicle.raycast import RayCaster
 from vehicle.scene import Scene
-from vehicle.sensors import Reading, Sonar, SonarArray, sensor_suite
+from vehicle.sensors import Reading, Servo, Sonar, SonarArray, sensor_suite
 from vehicle.settings import Settings
 
 DEFAULT_STEP = 0.05  # s
@@ -68,6 +68,11 @@ class World:
         self._ground_xy = (x, y)
         self.sonar_rate = sonar_rate
         self._next_reading = 0.0
+
+    @property
+    def servo(self) -> Servo | None:
+        """The servo that turns a sonar, if the vehicle has one (the onboard agent scans with it)."""
+        return next((s.servo for s in self.sonars.sensors if s.servo is not None), None)
 
     @property
     def pose(self) -> Pose:
@@ -124,6 +129,9 @@ class World:
         if self.time + 1e-9 < self._next_reading:
             return []
         self._next_reading += 1.0 / self.sonar_rate
+        for sensor in self.sonars.sensors:  # servos follow the autopilot's outputs
+            if sensor.servo is not None and sensor.servo.channel in self.autopilot.servos:
+                sensor.servo.pwm = self.autopilot.servos[sensor.servo.channel]
         readings = self.sonars.read(pose, self.time)
         for reading in readings:
             hit = reading.hit

@@ -24,6 +24,7 @@ from vehicle.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.memory_map import MemoryMap
 from vehicle.modes import Kind
 from vehicle.monitor import Monitor, Observation
+from vehicle.sensors import Servo
 from vehicle.settings import Settings
 
 PLAN_MARGINS = (15.0, 40.0)  # m around start and goal that planning searches, the small window first
@@ -50,6 +51,7 @@ class Context:
     observation: Observation | None = None
     say: Callable[[str], None] = print
     planned_path: list[tuple[float, float]] = field(default_factory=list)  # for display
+    servo: Servo | None = None  # a servo turning the sonar, if the vehicle has one
 
     @property
     def kind(self) -> Kind:

@@ -7,7 +7,7 @@ it shows whether the vehicle and its sensor work without going anywhere.
 from __future__ import annotations
 
 from vehicle.missions.base import Mission, Status
-from vehicle.missions.routines import Scan
+from vehicle.missions.routines import scan
 
 
 class Browse(Mission):
@@ -15,7 +15,7 @@ class Browse(Mission):
     help = "turn in place at home in yaw_step increments, scanning one full circle"
 
     def begin(self) -> None:
-        self.scan = Scan(self.ctx)
+        self.scan = scan(self.ctx)
 
     def step(self) -> Status:
         return Status.DONE if self.scan.step() else Status.RUNNING

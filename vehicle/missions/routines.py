@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from vehicle.geodesy import wrap_pi
 from vehicle.missions.base import Context, Status
 from vehicle.modes import Kind
@@ -55,6 +57,59 @@ class Scan:
         return False
 
 
+class ServoScan:
+    """Sweep a servo-mounted sonar across its range in ``yaw_step`` increments, turn the vehicle by that
+    range, sweep back, and so on until the sweeps have covered a full circle.
+
+    The thesis's other way to browse: only the sensor turns, so the vehicle turns
+    far less (by the servo's range between sweeps, not in every step).
+    """
+
+    def __init__(self, ctx: Context):
+        self.ctx = ctx
+        servo = ctx.servo
+        step = ctx.settings.yaw_step
+        angles = list(np.arange(servo.angle_min, servo.angle_max + 1e-9, step))
+        coverage = servo.angle_max - servo.angle_min + step
+        sweeps = max(1, math.ceil(360.0 / coverage))
+        start = ctx.vehicle.body.pose.yaw
+        self.plan = [((start + math.radians(k * coverage)) % (2 * math.pi), angle)
+                     for k in range(sweeps) for angle in (angles if k % 2 == 0 else angles[::-1])]
+        self.index = -1
+        self.readings: list[Reading] = []
+        x, y = ctx.position
+        ctx.vehicle.goto(x, y, ctx.settings.altitude if ctx.kind is Kind.COPTER else None)  # hold here
+
+    def resume(self) -> None:
+        if self.index >= 0:
+            x, y = self.ctx.position
+            self.ctx.vehicle.goto(x, y, self.ctx.settings.altitude if self.ctx.kind is Kind.COPTER else None)
+            self.ctx.vehicle.set_yaw(self.plan[self.index][0])
+
+    def step(self) -> bool:
+        """True once the sweeps are done (the servo is then centred again)."""
+        ctx = self.ctx
+        if ctx.observation is not None:
+            self.readings.extend(ctx.observation.readings)
+        if self.index >= 0 and abs(wrap_pi(ctx.vehicle.body.pose.yaw - self.plan[self.index][0])) > YAW_REACHED:
+            return False  # still turning to this sweep's heading
+        self.index += 1
+        servo = ctx.servo
+        if self.index >= len(self.plan):
+            ctx.vehicle.set_servo(servo.channel, servo.pwm_for(0.0))
+            return True
+        heading, angle = self.plan[self.index]
+        if self.index == 0 or heading != self.plan[self.index - 1][0]:
+            ctx.vehicle.set_yaw(heading)
+        ctx.vehicle.set_servo(servo.channel, servo.pwm_for(angle))
+        return False
+
+
+def scan(ctx: Context) -> Scan | ServoScan:
+    """Look around from here: with the servo if the sonar has one, else by turning the vehicle."""
+    return ServoScan(ctx) if ctx.servo is not None else Scan(ctx)
+
+
 class Travel:
     """Get to ``goal`` along a path planned on the memory map, replanning when it turns out blocked.
 
@@ -71,7 +126,7 @@ class Travel:
         self.goal = goal
         self.tolerance = tolerance
         self.path: list[tuple[float, float]] | None = None
-        self.scan: Scan | None = None
+        self.scan: Scan | ServoScan | None = None
         self.reason = ""
         self.replans = 0
         self._sent: tuple[float, float] | None = None
@@ -144,7 +199,7 @@ class Travel:
                               f"({self.goal[0]:.1f}, {self.goal[1]:.1f})"
                 self.ctx.planned_path = []
                 return Status.STOPPED
-            self.scan = Scan(self.ctx)
+            self.scan = scan(self.ctx)
             self._scanned_at = here
             self._sent = None
         return Status.RUNNING

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from vehicle.missions.base import Mission, Status
-from vehicle.missions.routines import Scan, Travel
+from vehicle.missions.routines import Scan, ServoScan, Travel, scan
 from vehicle.monitor import sweep_profile
 
 OPEN_ARC = (math.radians(10), math.radians(40))  # where "beside" an echo is, either side
@@ -33,7 +33,7 @@ class Search(Mission):
     help = "scan, move towards far detections with open space beside them at a stand-off distance, repeat"
 
     def begin(self) -> None:
-        self.scan: Scan | None = Scan(self.ctx)
+        self.scan: Scan | ServoScan | None = scan(self.ctx)
         self.travel: Travel | None = None
         self.visited: list[tuple[float, float]] = [self.ctx.position]
         self.visited_radius = min(VISITED_MAX, VISITED_FRACTION * self.ctx.settings.space_size)
@@ -47,7 +47,7 @@ class Search(Mission):
         status = self.travel.step()
         if status is Status.RUNNING:
             return status
-        self.scan = Scan(self.ctx)  # arrived, or no way there: look around again
+        self.scan = scan(self.ctx)  # arrived, or no way there: look around again
         self.visited.append(self.ctx.position)
         return Status.RUNNING
 
@@ -107,7 +107,7 @@ class Search(Mission):
         """Close to a new object: stop and scan again from here."""
         self.stop()
         self.travel = None
-        self.scan = Scan(self.ctx)
+        self.scan = scan(self.ctx)
         self.visited.append(self.ctx.position)
         return Status.RUNNING
 
