@@ -179,7 +179,7 @@ class SceneView:
             return
         points = np.array(v.trail, dtype=np.float32)
         segments = np.stack([points[:-1], points[1:]], axis=1)
-        self.server.scene.add_line_segments(f"{root}/trail", segments, colors=colour, line_width=2.0)
+        self.server.scene.add_line_segments(f"{root}/trail", segments, colors=colour, thickness=2.0, thickness_units="screen")
         drawn["trail"] = len(v.trail)
 
     def _draw_sonar(self, v: VehicleState, root: str) -> None:
@@ -193,7 +193,7 @@ class SceneView:
             rays.append((sonar.origin, end))
         if rays:
             self.server.scene.add_line_segments(f"{root}/rays", np.array(rays, dtype=np.float32),
-                                                colors=(255, 80, 80), line_width=1.5)
+                                                colors=(255, 80, 80), thickness=1.5, thickness_units="screen")
         if v.hits:
             self.server.scene.add_point_cloud(f"{root}/hits", np.array(v.hits, dtype=np.float32),
                                               colors=(255, 60, 60), point_size=0.12)
@@ -211,7 +211,7 @@ class SceneView:
             if len(path) >= 2:
                 points = np.array([(x, y, height) for x, y in path], dtype=np.float32)
                 scene.add_line_segments(f"{root}/path", np.stack([points[:-1], points[1:]], axis=1),
-                                        colors=(255, 230, 0), line_width=3.0)
+                                        colors=(255, 230, 0), thickness=3.0, thickness_units="screen")
             else:
                 scene.remove_by_name(f"{root}/path")
         if v.waypoints and drawn.get("waypoints") != v.waypoints:

@@ -67,6 +67,7 @@ class Track:
 
 
 def fly(scene, mission, vehicle="copter", waypoints=None, track=None, **settings):
+    """One mission in a hand-made scene, with the small test settings."""
     experiment = Experiment("test.wrl", mission, vehicle, settings=Settings(**{**SMALL, **settings}),
                             waypoints=waypoints)
     return run_experiment(experiment, scene=scene, on_step=track)
@@ -360,3 +361,13 @@ def test_a_star_presumes_the_unseen_continuation_of_a_wall(flat_scene):
     known.mark(-2, 2, 4.9, 5.1)
     path, _ = known.ctx.plan((0.0, 10.0))
     assert abs(crossing_x(path, known.ctx.position, 5.0)) < keep - 0.25  # now it may pass closer
+
+
+def test_browse_with_a_servo_sweeps_the_sonar_and_turns_the_vehicle_only_between_sweeps(scene_of):
+    track = Track()
+    experiment = Experiment("test.wrl", "browse", "copter", settings=Settings(**SMALL), sensors="servo")
+    result = run_experiment(experiment, scene=scene_of(wall(0, 4, 8, 0.2)), on_step=track)
+    assert result["outcome"] == "finished", result["reason"]
+    assert result["detections"] >= 10
+    assert math.radians(150) < track.turned < math.radians(200)  # two sweeps with about a half-turn between them
+    assert track.world.servo.angle() == pytest.approx(0.0, abs=1.0)  # centred again

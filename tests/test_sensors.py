@@ -173,7 +173,7 @@ def test_the_triple_suite_has_three_sensors_forward_and_45_degrees_each_side():
     assert len(suite) == 3
     assert sorted(s.mount_yaw for s in suite) == [-45.0, 0.0, 45.0]
     assert len(sensor_suite("single")) == 1
-    assert set(SENSOR_SUITES) == {"single", "triple"}
+    assert set(SENSOR_SUITES) == {"single", "triple", "servo"}
     with pytest.raises(ValueError, match="unknown sensor suite"):
         sensor_suite("octo")
 
@@ -237,3 +237,15 @@ def test_sonar_axis_matches_the_reading_direction(walls):
     (reading,) = read(walls, [sonar], pose=pose)
     assert reading.direction == pytest.approx(sonar.axis(pose), abs=1e-12)
     assert reading.origin == pytest.approx([1.0, -2.0, HEIGHT])
+
+
+def test_the_servo_suite_turns_its_sonar_with_the_autopilot_output(walls):
+    world = World(walls, Kind.COPTER, start=(0.0, 0.0), sensors=sensor_suite("servo"))
+    servo = world.servo
+    assert servo is not None and servo.angle() == 0.0
+    world.autopilot.set_servo(servo.channel, servo.pwm_for(90.0))
+    readings = []
+    while not readings:
+        readings = world.step()
+    assert readings[0].yaw_offset == pytest.approx(90.0)
+    assert readings[0].direction[0] == pytest.approx(1.0, abs=1e-6)  # facing north, the beam looks east
