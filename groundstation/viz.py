@@ -179,7 +179,8 @@ class SceneView:
             return
         points = np.array(v.trail, dtype=np.float32)
         segments = np.stack([points[:-1], points[1:]], axis=1)
-        self.server.scene.add_line_segments(f"{root}/trail", segments, colors=colour, thickness=2.0, thickness_units="screen")
+        self.server.scene.add_line_segments(f"{root}/trail", segments, colors=colour, thickness=2.0,
+                                            thickness_units="screen")
         drawn["trail"] = len(v.trail)
 
     def _draw_sonar(self, v: VehicleState, root: str) -> None:
