@@ -18,6 +18,7 @@ import numpy as np
 
 UNKNOWN, FREE, OCCUPIED = 0, 1, 2
 FREE_SPREAD = 0.7  # share of a beam's half-angle at which its sides are marked free
+SIDE_REACH = 8.0  # m: further out the sides add little beyond the centre line, and cost as much
 
 
 def _turn(vectors: np.ndarray, angles: np.ndarray) -> np.ndarray:
@@ -77,7 +78,8 @@ class MemoryMap:
         its max range, at most ``NO_ECHO_CLEARS``). A sonar hears the nearest echo in
         its cone, so the whole cone is free up to the distance measured (the classic
         sonar model): besides the centre line, two lines at ``FREE_SPREAD`` of the
-        half-angle ``beams`` (radians) either side are marked free. The echo itself is
+        half-angle ``beams`` (radians) either side are marked free, up to ``SIDE_REACH``
+        where the cone is narrow enough to matter (doorways). The echo itself is
         placed on the centre line. A batch is one monitor period: each cell that any
         line passes loses ``MISS`` once, each cell an echo ends in gains ``HIT`` once
         (readings of one period see the same thing, so they are one piece of
@@ -99,9 +101,10 @@ class MemoryMap:
         ends = origins[:, :2] + directions[:, :2] * lengths[:, None]
         hit_of_ray = np.where(echo, self._flat_cells(ends[:, 0], ends[:, 1]), -1)
         starts, stops, owners = origins[:, :2], ends, np.arange(len(origins))
-        if beams is not None:  # the cone's sides, as far as the centre line reaches
+        if beams is not None:  # the cone's sides, as far as the centre line reaches (and SIDE_REACH at most)
             spread = FREE_SPREAD * np.asarray(beams)
-            sides = [_turn(directions[:, :2], sign * spread) * lengths[:, None] + starts for sign in (-1, 1)]
+            side_lengths = np.minimum(lengths, SIDE_REACH)[:, None]
+            sides = [_turn(directions[:, :2], sign * spread) * side_lengths + starts for sign in (-1, 1)]
             starts = np.concatenate([starts] * 3)
             stops = np.concatenate([stops, *sides])
             owners = np.concatenate([owners] * 3)
