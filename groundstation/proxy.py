@@ -4,7 +4,8 @@ viser is not an ASGI app and has no authentication, so it listens on loopback
 only and is reached through here. The proxy also ties each viser client to the
 operator page that embeds it: the page opens the 3D view with ``?viewer=ID``
 in its websocket URL, and the proxy connects one viewer at a time, so the
-viser client id that appears next belongs to that viewer. That is how a click
+viser client id that appears next belongs to that viewer (viser reports a
+client after its first message, so the relay runs while the proxy waits). That is how a click
 in the 3D view reaches the right page (and never commands a vehicle by itself).
 """
 
@@ -57,9 +58,11 @@ class VizProxy:
                 await client.close(code=1011)
                 return
             await client.accept(subprotocol=upstream.subprotocol)
+            # relay at once: viser reports a client only after its first message (the camera)
+            relay = asyncio.create_task(self._relay(client, upstream))
             await asyncio.to_thread(self._connected.wait, CONNECT_WAIT)
             self._pending = None
-        await self._relay(client, upstream)
+        await relay
 
     @staticmethod
     async def _relay(client: WebSocket, upstream) -> None:
@@ -91,5 +94,5 @@ class VizProxy:
             await upstream.close()
             try:
                 await client.close()
-            except RuntimeError:
-                pass
+            except (RuntimeError, WebSocketDisconnect):
+                pass  # the page already went
