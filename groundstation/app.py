@@ -18,7 +18,14 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from fastapi import Depends, FastAPI, Header, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
-from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, RedirectResponse, Response
+from fastapi.responses import (
+    FileResponse,
+    JSONResponse,
+    PlainTextResponse,
+    RedirectResponse,
+    Response,
+    StreamingResponse,
+)
 from fastapi.staticfiles import StaticFiles
 from PIL import Image
 from pydantic import BaseModel, Field
@@ -48,6 +55,18 @@ class ReplayControl(BaseModel):
     step: Literal[-1, 1] | None = None
 STREAM_PERIOD = 0.25  # s between status frames on /ws
 log = logging.getLogger("groundstation")
+
+
+def _read_prefix(path: Path, size: int, chunk: int = 1 << 16):
+    """The first ``size`` bytes of a file, in chunks."""
+    with open(path, "rb") as handle:
+        left = size
+        while left > 0:
+            data = handle.read(min(chunk, left))
+            if not data:
+                return
+            left -= len(data)
+            yield data
 
 
 def create_app(station: GroundStation) -> FastAPI:
@@ -192,8 +211,16 @@ def create_app(station: GroundStation) -> FastAPI:
 
     @app.get("/api/recordings/{name}", tags=["recordings"])
     def recording(name: str):
-        """Download a recording (.tlog, readable by mavlogdump.py, MAVExplorer, QGroundControl)."""
-        return FileResponse(recording_or_404(name), media_type="application/octet-stream", filename=name)
+        """Download a recording (.tlog, readable by mavlogdump.py, MAVExplorer, QGroundControl).
+
+        The session being recorded goes on growing: its download is the file as it
+        was when the request came (its last record may be cut short; replay reads
+        up to it)."""
+        path = recording_or_404(name)
+        size = path.stat().st_size
+        return StreamingResponse(_read_prefix(path, size), media_type="application/octet-stream",
+                                 headers={"Content-Length": str(size),
+                                          "Content-Disposition": f'attachment; filename="{name}"'})
 
     @app.delete("/api/recordings/{name}", tags=["recordings"], dependencies=[Depends(operator)])
     def delete_recording(name: str):

@@ -6,7 +6,8 @@ only the framing instead: the timestamp, system id, message id and offset of
 every record (and, for TUNNEL, the payload type in its first two bytes).
 Seeking to a time then decodes only what rebuilds the state there: the
 latest of each status message, a thinned-out trail, the recent messages and
-sonar hits, and the map from its last complete snapshot on. Playing forward
+sonar hits, and the map from its last complete snapshot on (found from the
+chunk headers in the raw TUNNEL payloads). Playing forward
 feeds the Fleet message by message, as a live link does: a log is just another
 MAVLink source, and the views cannot tell the difference.
 """
@@ -119,6 +120,8 @@ def _scan(path: Path, data, size: int) -> TlogIndex:
         msgids.append(msgid)
         tunnels.append(data[body] | data[body + 1] << 8 if msgid == TUNNEL and length >= 14 else -1)
         position = start + length
+    if not warning and position < size and offsets:
+        warning = f"{path.name} is truncated: the last record is cut off at byte {position}; replaying up to it"
     if not offsets:
         raise ReplayError(f"{path.name} is not a telemetry log (no MAVLink record at its start)")
     return TlogIndex(path, np.array(offsets, dtype=np.int64), np.array(lengths, dtype=np.int32),
@@ -223,21 +226,36 @@ class Replay:
         return np.unique(np.concatenate(picked)) if picked else np.zeros(0, dtype=np.int64)
 
     def _snapshot_start(self, chunks: np.ndarray) -> int:
-        """Record index where the last-but-one snapshot began (its chunk 0): the last one may be cut off
-        by the seek time, the one before it is whole, and the deltas since bring it up to date."""
-        starts = [int(i) for i in chunks if self._chunk_number(int(i)) == 0]
-        if not starts:
-            return int(chunks[0])
-        return starts[-2] if len(starts) >= 2 else starts[-1]
+        """Record index where the last complete snapshot among ``chunks`` began (its first chunk).
 
-    def _chunk_number(self, i: int) -> int:
-        """The chunk index inside a MAP_SNAPSHOT TUNNEL record, read from the raw packet."""
+        A snapshot cut off by the seek time, or one that lost a chunk on the way,
+        cannot be applied; the deltas after an earlier whole one bring the map up
+        to date just the same.
+        """
+        seen: dict[int, set[int]] = {}
+        first: dict[int, int] = {}
+        counts: dict[int, int] = {}
+        best = None
+        for i in chunks:
+            ident, number, count = self._chunk_header(int(i))
+            if number == 0 or ident not in first:
+                first[ident], seen[ident], counts[ident] = int(i), set(), count
+            seen[ident].add(number)
+            if len(seen[ident]) == counts[ident]:
+                best = first[ident]
+        return best if best is not None else int(chunks[0])
+
+    def _chunk_header(self, i: int) -> tuple[int, int, int]:
+        """Snapshot id, chunk index and chunk count inside a MAP_SNAPSHOT TUNNEL record, from the raw packet."""
         start = int(self.index.offsets[i])
         body = start + (10 if self._data[start] == V2 else 6)
         # TUNNEL on the wire: payload_type u16, target system, target component, payload length, payload;
         # our chunk header in the payload: snapshot id u16, chunk index u16, chunk count u16
-        raw = self._data[body + 7:body + 9].ljust(2, b"\0")
-        return struct.unpack("<H", raw)[0]
+        raw = self._data[body + 5:body + 11].ljust(6, b"\0")
+        return struct.unpack("<HHH", raw)
+
+    def _chunk_number(self, i: int) -> int:
+        return self._chunk_header(i)[1]
 
     # ---- playing ----------------------------------------------------------------------------------
     def advance(self, seconds: float) -> None:

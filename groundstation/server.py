@@ -185,6 +185,8 @@ def serve(station: GroundStation, host: str = "127.0.0.1", port: int = 8000, tls
     server = uvicorn.Server(config)
     station.start()
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+    if ":" in shown:
+        shown = f"[{shown}]"  # an IPv6 address in a URL
     links = ", ".join(station.link_urls) or "no MAVLink links"
     announce(f"ground station: {scheme}://{shown}:{port}/#token={station.token}  (operator token {station.token}; "
              f"listening to {links}"
