@@ -1,0 +1,688 @@
+"""The ground station's REST API, status stream and page, against simulated vehicles over real UDP sockets.
+
+One station (GroundStation + its app under uvicorn on loopback) serves the
+whole module; simulated vehicles (``vehicle sim``'s SimVehicle on threads)
+send to its MAVLink port. Vehicle 1 flies (a copter taken off through the
+API), vehicle 2 waits on the ground, vehicle 3 stops answering, and hand-made
+MAVLink 1 packets play an ArduPilot copter (7) and a plane (8) that stream no
+map. Waits on a vehicle are bounded in its simulated time.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import math
+import os
+import selectors
+import socket
+import subprocess
+import sys
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+import websockets.sync.client
+from groundstation_harness import (
+    TOKEN,
+    RunningStation,
+    free_tcp_port,
+    small_scene,
+    start_sim,
+    take_off,
+    wait_armed,
+    wait_mode,
+    wait_wall,
+)
+from mavlink_gcs import free_udp_port
+from PIL import Image
+from pymavlink.dialects.v10 import ardupilotmega as mavlink1
+
+from groundstation.server import is_loopback
+from vehicle.geodesy import Datum
+from vehicle.waypoints import parse_mission
+
+ROOT = Path(__file__).resolve().parent.parent
+STOPPED_SYSID = 3
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return small_scene()
+
+
+@pytest.fixture(scope="module")
+def station(scene, tmp_path_factory):
+    with RunningStation(scene, tmp_path_factory.mktemp("recordings")) as running:
+        yield running
+
+
+@pytest.fixture(scope="module")
+def api(station):
+    with station.api() as client:
+        yield client
+
+
+def seen(api, sysid: int) -> dict:
+    return api.wait_vehicle(sysid, lambda v: v["link"]["state"] == "ok" and v["position"] is not None,
+                            sim_timeout=10, what="first heartbeat and position")
+
+
+@pytest.fixture(scope="module")
+def flyer(station, api, scene):
+    """Vehicle 1: a copter flying at 4 m in GUIDED (the onboard mission paused by the operator)."""
+    with start_sim(station, scene, sysid=1, start=(0.0, 0.0)) as sim:
+        seen(api, 1)
+        take_off(api, 1)
+        yield sim
+
+
+@pytest.fixture(scope="module")
+def grounded(station, api, scene):
+    """Vehicle 2: a copter on the ground, disarmed, south-west of vehicle 1."""
+    with start_sim(station, scene, sysid=2, start=(-4.0, -4.0)) as sim:
+        seen(api, 2)
+        yield sim
+
+
+@dataclass
+class Stopped:
+    at: float  # wall time (monotonic) the vehicle stopped
+    command: Future  # POST rtl to it, sent as it stopped: (response, seconds it took)
+
+
+@pytest.fixture(scope="module")
+def stopped(station, api, scene):
+    """Vehicle 3: heard for a while, then its simulation stops. A command is sent to it at once, in the
+    background, so its retries run while the link-loss test waits."""
+    running = start_sim(station, scene, sysid=STOPPED_SYSID, start=(-4.0, 3.0))
+    running.__enter__()
+    try:
+        seen(api, STOPPED_SYSID)
+    finally:
+        running.__exit__(None, None, None)
+    at = time.monotonic()
+
+    def rtl():
+        with station.api() as client:
+            started = time.monotonic()
+            response = client.command(STOPPED_SYSID, action="rtl")
+            return response, time.monotonic() - started
+
+    with ThreadPoolExecutor(1) as pool:
+        yield Stopped(at, pool.submit(rtl))
+
+
+def airborne(api, sysid: int = 1) -> dict:
+    """Make sure the vehicle flies, in GUIDED at about 4 m (after a test that changed its mode)."""
+    vehicle = api.vehicle(sysid)
+    if vehicle["position"]["alt"] < 3.0:
+        return take_off(api, sysid)
+    if vehicle["mode"] != "GUIDED":
+        assert api.command(sysid, action="set_mode", mode="GUIDED").json()["result"] == "accepted"
+        vehicle = wait_mode(api, sysid, "GUIDED")
+    return vehicle
+
+
+def goto_and_wait(api, sysid: int, x: float, y: float, tolerance: float = 0.3, sim_timeout: float = 40) -> dict:
+    response = api.command(sysid, action="goto", x=x, y=y)
+    assert response.status_code == 200 and response.json()["result"] == "accepted", response.text
+    return api.wait_vehicle(
+        sysid, lambda v: math.hypot(v["position"]["x"] - x, v["position"]["y"] - y) < tolerance,
+        sim_timeout=sim_timeout, what=f"arrival at ({x}, {y})")
+
+
+# ---- hand-made MAVLink 1 vehicles (ArduPilot-like, no map of their own) ----------------------------
+class Mavlink1Vehicle:
+    """Sends MAVLink 1 packets as ``sysid`` to the station's UDP port, as a plain ArduPilot would."""
+
+    def __init__(self, station: RunningStation, sysid: int):
+        self.mav = mavlink1.MAVLink(None, srcSystem=sysid, srcComponent=1)
+        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.address = ("127.0.0.1", station.mavlink_port)
+        self.boot_ms = 0
+
+    def send(self, message) -> None:
+        self.socket.sendto(message.pack(self.mav), self.address)
+
+    def heartbeat(self, mav_type: int, custom_mode: int, armed: bool = True) -> None:
+        base = mavlink1.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mavlink1.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+        self.send(self.mav.heartbeat_encode(mav_type, mavlink1.MAV_AUTOPILOT_ARDUPILOTMEGA, base, custom_mode,
+                                            mavlink1.MAV_STATE_ACTIVE, 3))
+
+    def pose(self, datum: Datum, x: float, y: float, alt: float, yaw_deg: float) -> None:
+        self.boot_ms += 100
+        lat, lon = datum.to_global(x, y)
+        self.send(self.mav.global_position_int_encode(self.boot_ms, int(round(lat * 1e7)), int(round(lon * 1e7)),
+                                                      int((584 + alt) * 1000), int(alt * 1000), 0, 0, 0,
+                                                      int(yaw_deg * 100)))
+        self.send(self.mav.attitude_encode(self.boot_ms, 0.0, 0.0, math.radians(yaw_deg), 0.0, 0.0, 0.0))
+
+    def distance(self, cm: int, orientation: int = 0, sensor: int = 0) -> None:
+        self.send(self.mav.distance_sensor_encode(self.boot_ms, 2, 4000, cm,
+                                                  mavlink1.MAV_DISTANCE_SENSOR_ULTRASOUND, sensor, orientation, 0))
+
+    def close(self) -> None:
+        self.socket.close()
+
+
+ARDU_XY = (25.0, -30.0)  # where the hand-made copter hovers
+ARDU_ECHO = 5.1  # m, straight ahead (north)
+
+
+@pytest.fixture(scope="module")
+def ardupilot_copter(station, api):
+    """System 7: an ArduPilot copter (MAVLink 1) hovering north-up, its forward sonar seeing something 5.1 m ahead."""
+    vehicle = Mavlink1Vehicle(station, 7)
+    datum = station.station.live.datum
+    try:
+        vehicle.heartbeat(mavlink1.MAV_TYPE_QUADROTOR, 5)  # LOITER
+        wait_wall(lambda: api.vehicle(7), 5, "the station hears system 7")
+        for _ in range(5):
+            vehicle.pose(datum, *ARDU_XY, 4.0, 0.0)
+            vehicle.heartbeat(mavlink1.MAV_TYPE_QUADROTOR, 5)
+            vehicle.distance(int(ARDU_ECHO * 100))
+            time.sleep(0.02)
+        wait_wall(lambda: (api.vehicle(7) or {}).get("map", {}).get("occupied"), 5, "a map for system 7")
+        yield vehicle
+    finally:
+        vehicle.close()
+
+
+@pytest.fixture(scope="module")
+def plane(station, api):
+    """System 8: an ArduPilot plane (MAVLink 1) in RTL, with a position and no sonar."""
+    vehicle = Mavlink1Vehicle(station, 8)
+    try:
+        vehicle.heartbeat(mavlink1.MAV_TYPE_FIXED_WING, 11)
+        vehicle.pose(station.station.live.datum, 40.0, 40.0, 60.0, 90.0)
+        wait_wall(lambda: (api.vehicle(8) or {}).get("position"), 5, "the plane's position")
+        yield vehicle
+    finally:
+        vehicle.close()
+
+
+# ---- status ----------------------------------------------------------------------------------------
+def test_health(station, api, flyer):
+    response = api.get("/api/health")
+    assert response.status_code == 200
+    health = response.json()
+    assert health["status"] == "ok" and health["mode"] == "live"
+    assert health["vehicles"] >= 1
+    assert health["links"] == [station.url]
+    assert health["version"]
+
+
+def test_vehicles_lists_a_flying_vehicle(api, flyer):
+    vehicle = airborne(api)
+    vehicles = api.get("/api/vehicles").json()
+    assert isinstance(vehicles, list)
+    one = next(v for v in vehicles if v["sysid"] == 1)
+    assert one["type"] == "copter" and one["mode"] == "GUIDED" and one["armed"] is True
+    position = one["position"]
+    assert {"x", "y", "z", "lat", "lon", "alt"} <= set(position)
+    assert position["z"] == pytest.approx(vehicle["position"]["z"], abs=0.5)
+    assert 3.0 < position["alt"] < 5.0 and position["z"] > 3.0
+    assert abs(position["x"]) < 3 and abs(position["y"]) < 3
+    assert set(one["attitude"]) == {"roll", "pitch", "yaw"}
+    assert isinstance(one["speed"], float)
+    assert one["link"]["state"] == "ok"
+    assert 0 <= one["link"]["heartbeat_age"] < 3.0
+    assert one["link"]["mavlink"] == 2 and one["link"]["messages"] > 0
+    assert set(one["mission"]) == {"current", "total", "reached"}
+    texts = [m["text"] for m in one["messages"]]
+    assert "Arming motors" in texts and any(t.startswith("Takeoff") for t in texts)
+    assert one["battery"]["voltage"] > 10
+    assert one["home"] == {"x": pytest.approx(0, abs=0.05), "y": pytest.approx(0, abs=0.05)}
+    assert one["time_boot_s"] > 0
+
+
+def test_one_vehicle_and_unknown_ids(api, flyer):
+    one = api.get("/api/vehicles/1")
+    assert one.status_code == 200
+    assert one.json()["sysid"] == 1 and one.json()["type"] == "copter"
+    missing = api.get("/api/vehicles/99")
+    assert missing.status_code == 404
+    assert "99" in missing.json()["detail"]
+    assert api.get("/api/vehicles/not-a-number").status_code == 422
+
+
+def test_map_as_png(api, flyer):
+    api.wait_vehicle(1, lambda v: (v["map"]["occupied"] or 0) > 0, sim_timeout=30, what="an occupied cell")
+    response = api.get("/api/vehicles/1/map")
+    assert response.status_code == 200
+    assert response.headers["content-type"] == "image/png"
+    picture = Image.open(io.BytesIO(response.content))
+    picture.load()
+    assert picture.format == "PNG"
+    assert picture.size == (400, 400)  # space_size 20 m at 10 cells/m
+    pixels = np.asarray(picture.convert("RGB"))
+    assert len(np.unique(pixels.reshape(-1, 3), axis=0)) >= 2  # not blank: something was seen
+
+
+def test_map_as_json(api, flyer):
+    api.wait_vehicle(1, lambda v: (v["map"]["occupied"] or 0) > 0, sim_timeout=30, what="an occupied cell")
+    response = api.get("/api/vehicles/1/map", params={"format": "json"})
+    assert response.status_code == 200
+    body = response.json()
+    assert body["source"] == "vehicle"
+    assert body["resolution"] == 10.0
+    assert body["origin"] == [pytest.approx(-20.0, abs=0.05), pytest.approx(-20.0, abs=0.05)]
+    assert body["size"] == 400
+    window, values = body["window"], np.array(body["values"])
+    assert values.shape == (window["rows"], window["cols"])
+    assert 0 <= window["row"] and window["row"] + window["rows"] <= 400
+    assert 0 <= window["col"] and window["col"] + window["cols"] <= 400
+    assert body["occupied"] == int((values >= body["occupied_at"]).sum()) > 0
+    # the wall north of the start (south face at y = 8) is where the occupied cells are
+    rows, cols = np.nonzero(values >= body["occupied_at"])
+    ys = body["origin"][1] + (window["row"] + rows + 0.5) / body["resolution"]
+    assert np.median(ys) == pytest.approx(8.0, abs=1.0)
+
+
+def test_map_errors(api, flyer, plane):
+    assert api.get("/api/vehicles/8/map").status_code == 404  # a plane with no sonar has no map yet
+    assert "no map" in api.get("/api/vehicles/8/map", params={"format": "json"}).json()["detail"]
+    assert api.get("/api/vehicles/99/map").status_code == 404
+    assert api.get("/api/vehicles/1/map", params={"format": "jpeg"}).status_code == 422
+
+
+# ---- commands: authentication and validation ---------------------------------------------------------
+def test_commands_need_the_operator_token(api, flyer, caplog):
+    caplog.set_level(logging.WARNING, logger="groundstation")
+    body = {"action": "rtl"}
+    missing = api.post("/api/vehicles/1/commands", json=body)
+    assert missing.status_code == 401
+    assert missing.headers["www-authenticate"] == "Bearer"
+    wrong = api.post("/api/vehicles/1/commands", json=body, headers={"Authorization": "Bearer not-the-token"})
+    assert wrong.status_code == 401
+    assert wrong.headers["www-authenticate"] == "Bearer"
+    basic = api.post("/api/vehicles/1/commands", json=body, headers={"Authorization": f"Basic {TOKEN}"})
+    assert basic.status_code == 401
+    assert any("token" in record.getMessage() for record in caplog.records)  # refusals are logged
+    assert api.vehicle(1)["mode"] != "RTL"  # nothing was sent
+
+
+@pytest.mark.parametrize("body", [
+    {"action": "explode"},
+    {"action": "takeoff"},
+    {"action": "kill"},
+    {"action": "kill", "confirm": False},
+    {"action": "set_mode"},
+    {"action": "goto", "x": 1.0},
+    {"action": "speed", "speed": -1},
+    {"action": "takeoff", "altitude": 0},
+    {},
+])
+def test_bad_command_payloads_are_422(api, flyer, body):
+    response = api.command(1, **body)
+    assert response.status_code == 422, response.text
+
+
+def test_command_to_an_unknown_vehicle_is_404(api, flyer):
+    response = api.command(99, action="rtl")
+    assert response.status_code == 404
+
+
+# ---- commands that fly ---------------------------------------------------------------------------
+def test_rtl(api, flyer):
+    airborne(api)
+    goto_and_wait(api, 1, 3.0, 3.0)
+    response = api.command(1, action="rtl")
+    assert response.status_code == 200
+    assert response.json() == {"action": "rtl", "result": "accepted"}
+    wait_mode(api, 1, "RTL")
+    # home, landed, disarmed, as ArduPilot's RTL does
+    landed = api.wait_vehicle(1, lambda v: not v["armed"] and v["position"]["alt"] < 0.5, sim_timeout=60,
+                              what="landed at home")
+    assert math.hypot(landed["position"]["x"], landed["position"]["y"]) < 0.5
+    airborne(api)
+
+
+def test_abort_brakes_a_copter(api, flyer):
+    airborne(api)
+    goto = api.command(1, action="goto", x=-3.0, y=-3.0)
+    assert goto.json()["result"] == "accepted"
+    api.wait_vehicle(1, lambda v: v["speed"] > 0.5, sim_timeout=10, what="moving")
+    assert api.command(1, action="abort").json()["result"] == "accepted"
+    wait_mode(api, 1, "BRAKE")
+    stopped = api.wait_vehicle(1, lambda v: v["speed"] < 0.05, sim_timeout=10, what="standstill")
+    later = api.wait_sim(1, 3.0)
+    assert later["mode"] == "BRAKE"
+    assert math.dist((later["position"]["x"], later["position"]["y"]),
+                     (stopped["position"]["x"], stopped["position"]["y"])) < 0.1
+    airborne(api)
+
+
+def test_set_mode(api, flyer):
+    airborne(api)
+    assert api.command(1, action="set_mode", mode="LOITER").json()["result"] == "accepted"
+    wait_mode(api, 1, "LOITER")
+    assert api.command(1, action="set_mode", mode="guided").json()["result"] == "accepted"  # any case
+    wait_mode(api, 1, "GUIDED")
+    assert api.command(1, action="set_mode", mode="NO_SUCH_MODE").json()["result"] == "unsupported"
+    assert api.vehicle(1)["mode"] == "GUIDED"
+
+
+def test_goto_moves_the_vehicle_there(api, flyer):
+    airborne(api)
+    arrived = goto_and_wait(api, 1, 3.0, -4.0)
+    assert arrived["mode"] == "GUIDED"
+    assert arrived["position"]["alt"] == pytest.approx(4.0, abs=0.5)  # keeps its height
+    back = goto_and_wait(api, 1, 0.0, 0.0)
+    assert abs(back["position"]["x"]) < 0.3 and abs(back["position"]["y"]) < 0.3
+
+
+def test_speed_limits_the_cruise_speed(api, flyer):
+    airborne(api)
+    response = api.command(1, action="speed", speed=1.0)
+    assert response.status_code == 200 and response.json()["result"] == "accepted"
+    try:
+        fastest = 0.0
+
+        def there(v):
+            nonlocal fastest
+            fastest = max(fastest, v["speed"])
+            return math.hypot(v["position"]["x"] + 5, v["position"]["y"]) < 0.3
+
+        assert api.command(1, action="goto", x=-5.0, y=0.0).json()["result"] == "accepted"
+        api.wait_vehicle(1, there, sim_timeout=30, what="arrival at (-5, 0)")
+        assert 0.5 < fastest <= 1.15
+    finally:
+        assert api.command(1, action="speed", speed=2.5).json()["result"] == "accepted"
+    goto_and_wait(api, 1, 0.0, 0.0)
+
+
+def test_arm_and_disarm_answer_with_result_words(api, grounded, flyer):
+    assert api.command(2, action="arm").json()["result"] == "accepted"
+    wait_armed(api, 2)
+    assert api.command(2, action="disarm").json()["result"] == "accepted"
+    wait_armed(api, 2, False)
+    airborne(api)
+    assert api.command(1, action="disarm").json()["result"] == "failed"  # flying: ArduPilot refuses
+    after = api.wait_sim(1, 1.0)
+    assert after["armed"] and after["position"]["alt"] > 3.0
+
+
+def test_kill_force_disarms_in_the_air(api, grounded):
+    take_off(api, 2, altitude=3.0)
+    refused = api.command(2, action="kill")
+    assert refused.status_code == 422
+    assert "confirm" in refused.text
+    response = api.command(2, action="kill", confirm=True)
+    assert response.status_code == 200 and response.json()["result"] == "accepted"
+    wait_armed(api, 2, False)
+    api.wait_vehicle(2, lambda v: v["position"]["alt"] < 0.6, sim_timeout=10, what="fell")
+
+
+# ---- missions ------------------------------------------------------------------------------------------
+def waypoints(text: str) -> list[tuple[int, float, float, float]]:
+    return [(item.command, item.lat, item.lon, item.alt) for item in parse_mission(text)]
+
+
+def test_mission_download_is_qgc_wpl(api, grounded):
+    response = api.get("/api/vehicles/2/mission")
+    assert response.status_code == 200
+    assert response.headers["content-type"].startswith("text/plain")
+    lines = response.text.splitlines()
+    assert lines[0] == "QGC WPL 110"
+    assert len(lines) >= 2  # item 0 is home
+    home = waypoints(response.text)[0]
+    lat, lon = Datum().to_global(-4.0, -4.0)
+    assert home[1] == pytest.approx(lat, abs=1e-6) and home[2] == pytest.approx(lon, abs=1e-6)
+    assert api.get("/api/vehicles/99/mission").status_code == 404
+
+
+def test_mission_upload_round_trips(api, grounded):
+    datum = Datum()
+    points = [datum.to_global(x, y) for x, y in ((-4.0, 0.0), (0.0, -6.0), (-7.5, -7.5))]
+    home = datum.to_global(-4.0, -4.0)
+    lines = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{home[0]:.8f}\t{home[1]:.8f}\t0.000000\t1"]
+    lines += [f"{i}\t0\t3\t16\t0\t0\t0\t0\t{lat:.8f}\t{lon:.8f}\t4.000000\t1" for i, (lat, lon) in
+              enumerate(points, start=1)]
+    text = "\n".join(lines) + "\n"
+    response = api.put("/api/vehicles/2/mission", content=text, headers=api.operator)
+    assert response.status_code == 200, response.text
+    assert response.json() == {"result": "accepted", "items": 4}
+    back = api.get("/api/vehicles/2/mission")
+    assert back.status_code == 200
+    got = waypoints(back.text)
+    assert len(got) == 4
+    for (command, lat, lon, alt), (want_lat, want_lon) in zip(got[1:], points, strict=True):
+        assert command == 16
+        assert lat == pytest.approx(want_lat, abs=1e-6) and lon == pytest.approx(want_lon, abs=1e-6)
+        assert alt == pytest.approx(4.0)
+
+
+def test_mission_upload_errors(api, grounded):
+    text = "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.36326100\t149.16523000\t0.000000\t1\n"
+    assert api.put("/api/vehicles/2/mission", content=text).status_code == 401
+    wrong = api.put("/api/vehicles/2/mission", content=text, headers={"Authorization": "Bearer nope"})
+    assert wrong.status_code == 401
+    garbage = api.put("/api/vehicles/2/mission", content=b"this is not a mission\n\x00\xff", headers=api.operator)
+    assert garbage.status_code == 422
+    bad_line = api.put("/api/vehicles/2/mission", content="QGC WPL 110\n0\t1\tnot numbers\n", headers=api.operator)
+    assert bad_line.status_code == 422
+    empty = api.put("/api/vehicles/2/mission", content="QGC WPL 110\n", headers=api.operator)
+    assert empty.status_code == 422
+    assert api.put("/api/vehicles/99/mission", content=text, headers=api.operator).status_code == 404
+
+
+# ---- sign-in -------------------------------------------------------------------------------------------
+def test_auth(api):
+    assert api.get("/api/auth", headers=api.operator).status_code == 200
+    assert api.get("/api/auth", headers=api.operator).json() == {"ok": True}
+    missing = api.get("/api/auth")
+    assert missing.status_code == 401 and missing.headers["www-authenticate"] == "Bearer"
+    assert api.get("/api/auth", headers={"Authorization": "Bearer wrong"}).status_code == 401
+    assert api.get("/api/auth", headers={"Authorization": "Bearer"}).status_code == 401
+
+
+# ---- the status stream -------------------------------------------------------------------------------
+def test_websocket_streams_the_vehicles_while_they_fly(station, api, flyer):
+    airborne(api)
+    assert api.command(1, action="speed", speed=1.5).json()["result"] == "accepted"
+    assert api.command(1, action="goto", x=-10.0, y=-12.0).json()["result"] == "accepted"  # 15 m: 10 s simulated
+    frames = []
+    try:
+        with websockets.sync.client.connect(f"ws://127.0.0.1:{station.http_port}/ws", open_timeout=5) as socket_:
+            deadline = time.monotonic() + 10
+            while len(frames) < 4 and time.monotonic() < deadline:
+                frame = json.loads(socket_.recv(timeout=5))
+                if frame.get("type") == "vehicles":
+                    frames.append(frame)
+    finally:
+        assert api.command(1, action="speed", speed=2.5).json()["result"] == "accepted"
+    assert len(frames) == 4
+    assert all(frame["mode"] == "live" and isinstance(frame["vehicles"], list) for frame in frames)
+    assert all(frame["replay"] is None and frame["time"] > 0 for frame in frames)
+    positions = [next(v for v in frame["vehicles"] if v["sysid"] == 1)["position"] for frame in frames]
+    moves = [math.dist((a["x"], a["y"]), (b["x"], b["y"])) for a, b in zip(positions, positions[1:], strict=False)]
+    assert sum(m > 0.05 for m in moves) >= 2, positions  # it moves between frames
+    goto_and_wait(api, 1, 0.0, 0.0)
+
+
+# ---- the page, the docs, the 3D view -----------------------------------------------------------------
+def test_the_page_docs_and_3d_view(api):
+    page = api.get("/")
+    assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+    assert 'id="view"' in page.text and "<iframe" in page.text
+    assert api.get("/static/app.js").status_code == 200
+    docs = api.get("/docs")
+    assert docs.status_code == 200 and "swagger" in docs.text.lower()
+    schema = api.get("/openapi.json")
+    assert schema.status_code == 200
+    paths = schema.json()["paths"]
+    for path in ("/api/health", "/api/vehicles", "/api/vehicles/{sysid}/commands", "/api/vehicles/{sysid}/map",
+                 "/api/vehicles/{sysid}/mission", "/api/recordings", "/api/replay"):
+        assert path in paths
+    viz = api.get("/viz/")
+    assert viz.status_code == 200
+    assert viz.headers["content-type"].startswith("text/html")
+    assert "<html" in viz.text.lower()
+    redirect = api.get("/viz", follow_redirects=False)
+    assert redirect.status_code in (301, 302, 307, 308) and redirect.headers["location"].endswith("/viz/")
+
+
+# ---- a vehicle that stops answering ------------------------------------------------------------------
+def test_link_loss_is_reported_within_seconds(api, stopped, flyer):
+    began = time.monotonic()
+    lost = wait_wall(lambda: (v := api.vehicle(STOPPED_SYSID)) and v["link"]["state"] == "lost" and v, 10,
+                     "link lost")
+    if began - stopped.at < 3.0:  # (unless this test ran long after the vehicle stopped)
+        assert time.monotonic() - stopped.at <= 5.0  # the 3 s threshold is on the wall clock
+    assert lost["link"]["heartbeat_age"] >= 3.0
+    assert api.vehicle(1)["link"]["state"] == "ok"  # the others are unaffected
+
+
+def test_command_to_a_silent_vehicle_is_504_after_retries(stopped):
+    response, elapsed = stopped.command.result(timeout=30)
+    assert response.status_code == 504
+    assert "did not answer" in response.json()["detail"]
+    assert elapsed >= 2.5  # three tries of a second each, not one
+
+
+# ---- vehicles that are not ours ---------------------------------------------------------------------
+def test_an_ardupilot_copter_gets_a_map_built_here(api, ardupilot_copter):
+    vehicle = api.vehicle(7)
+    assert vehicle["type"] == "copter" and vehicle["mode"] == "LOITER" and vehicle["armed"]
+    assert vehicle["link"]["mavlink"] == 1
+    assert vehicle["position"]["x"] == pytest.approx(ARDU_XY[0], abs=0.05)
+    assert vehicle["position"]["y"] == pytest.approx(ARDU_XY[1], abs=0.05)
+    assert vehicle["map"]["source"] == "groundstation" and vehicle["map"]["occupied"] >= 1
+    body = api.get("/api/vehicles/7/map", params={"format": "json"}).json()
+    assert body["source"] == "groundstation"
+    values = np.array(body["values"])
+    rows, cols = np.nonzero(values >= body["occupied_at"])
+    assert len(rows) >= 1
+    xs = body["origin"][0] + (body["window"]["col"] + cols + 0.5) / body["resolution"]
+    ys = body["origin"][1] + (body["window"]["row"] + rows + 0.5) / body["resolution"]
+    nearest = np.min(np.hypot(xs - ARDU_XY[0], ys - (ARDU_XY[1] + ARDU_ECHO)))
+    assert nearest < 0.3  # the echo 5.1 m north of it
+    free = np.count_nonzero(values <= body["free_at"])
+    assert free >= 10  # the beam before the echo is free space
+    png = api.get("/api/vehicles/7/map")
+    assert png.status_code == 200 and png.headers["content-type"] == "image/png"
+
+
+def test_a_plane_heartbeat_shows_a_plane(api, plane):
+    vehicle = api.vehicle(8)
+    assert vehicle["type"] == "plane"
+    assert vehicle["mode"] == "RTL"
+    assert vehicle["link"]["mavlink"] == 1
+    assert vehicle["position"]["x"] == pytest.approx(40.0, abs=0.05)
+    assert vehicle["position"]["alt"] == pytest.approx(60.0, abs=0.01)
+    assert vehicle["heading"] == pytest.approx(90.0, abs=0.5)
+    assert vehicle["map"]["source"] is None
+
+
+def test_a_gcs_heartbeat_makes_no_vehicle(station, api):
+    other = Mavlink1Vehicle(station, 42)
+    try:
+        other.send(other.mav.heartbeat_encode(mavlink1.MAV_TYPE_GCS, mavlink1.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+        time.sleep(0.3)
+    finally:
+        other.close()
+    assert api.vehicle(42) is None
+    assert api.get("/api/vehicles/42").status_code == 404
+
+
+# ---- binding --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("host", "loopback"), [
+    ("127.0.0.1", True), ("127.1.2.3", True), ("localhost", True), ("::1", True),
+    ("0.0.0.0", False), ("::", False), ("192.168.1.10", False), ("example.org", False),
+])
+def test_is_loopback(host, loopback):
+    assert is_loopback(host) is loopback
+
+
+def read_until(process: subprocess.Popen, marker: str, timeout: float) -> tuple[str, str]:
+    """Read the process's stdout and stderr until ``marker`` appears on stdout (or it exits, or time runs out)."""
+    streams = {process.stdout: [], process.stderr: []}
+    chooser = selectors.DefaultSelector()
+    for stream in streams:
+        chooser.register(stream, selectors.EVENT_READ)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and marker not in b"".join(streams[process.stdout]).decode(errors="replace"):
+        for key, _ in chooser.select(timeout=0.2):
+            data = os.read(key.fileobj.fileno(), 65536)
+            if data:
+                streams[key.fileobj].append(data)
+            else:
+                chooser.unregister(key.fileobj)
+        if process.poll() is not None and not chooser.get_map():
+            break
+    chooser.close()
+    return tuple(b"".join(streams[s]).decode(errors="replace") for s in (process.stdout, process.stderr))
+
+
+def test_serving_beyond_loopback_without_tls_warns(tmp_path):
+    port = free_tcp_port()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "groundstation.cli", "serve", "--host", "0.0.0.0", "--port", str(port),
+         "--token", TOKEN, "--record-dir", "", "--mavlink", f"udpin:127.0.0.1:{free_udp_port()}"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"})
+    try:
+        out, err = read_until(process, "ground station:", timeout=30)
+        assert process.poll() is None, (out, err)
+        health = wait_wall(lambda: _health(port), 10, "the served app answers")
+        assert health["status"] == "ok"
+    finally:
+        process.terminate()
+        try:
+            rest = process.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            rest = process.communicate()
+    err += rest[1].decode(errors="replace")
+    assert "WARNING: serving on 0.0.0.0 without TLS" in err
+    assert "--tls-cert" in err or "127.0.0.1" in err  # it says what to do about it
+    assert f"#token={TOKEN}" in out
+    assert not list(tmp_path.iterdir())  # --record-dir '' records nothing
+
+
+def _health(port: int) -> dict | None:
+    try:
+        response = httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=2)
+    except httpx.HTTPError:
+        return None
+    return response.json() if response.status_code == 200 else None
+
+
+@pytest.mark.parametrize(("host", "tls", "warned"), [
+    ("127.0.0.1", False, False), ("localhost", False, False), ("0.0.0.0", False, True),
+    ("192.0.2.7", False, True), ("0.0.0.0", True, False),
+])
+def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, host, tls, warned):
+    """serve() itself, with uvicorn's run replaced: the warning depends on the host and TLS alone."""
+    import uvicorn
+
+    from groundstation import server
+
+    ran = []
+    monkeypatch.setattr(uvicorn.Server, "run", lambda self, *a, **k: ran.append(self.config))
+    station = server.GroundStation([], None, TOKEN, record_dir=None)
+    lines = []
+    cert = ("cert.pem", "key.pem") if tls else (None, None)
+    server.serve(station, host, 8123, *cert, announce=lines.append)
+    err = capsys.readouterr().err
+    assert ("without TLS" in err) is warned
+    assert len(ran) == 1 and ran[0].host == host
+    assert lines and (f"{'https' if tls else 'http'}://" in lines[0]) and f"#token={TOKEN}" in lines[0]
+
+
+def test_serve_refuses_half_a_tls_setup():
+    from groundstation import server
+
+    station = server.GroundStation([], None, TOKEN, record_dir=None)
+    try:
+        with pytest.raises(ValueError, match="tls"):
+            server.serve(station, "127.0.0.1", 8123, tls_cert="cert.pem", tls_key=None)
+    finally:
+        station.close()

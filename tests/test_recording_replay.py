@@ -1,0 +1,816 @@
+"""Session recordings and replay: the .tlog a live ground station writes, the recordings API, and replaying
+recordings (ours, `vehicle experiment --log`'s, and logs of vehicles that are not ours) in the ground station.
+
+One station records a simulated copter flying the ``search`` mission for the
+whole module; while it flies, the test notes what the live station shows
+(pose and map copy, with the log time of the last message it applied), so a
+replay of the recording can be held against it.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import shutil
+import struct
+import subprocess
+import sys
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from groundstation_harness import (
+    SCENE_TEXT,
+    Api,
+    RunningStation,
+    command_ok,
+    small_scene,
+    start_sim,
+    wait_wall,
+)
+from pymavlink.dialects.v10 import ardupilotmega as mavlink1
+
+from groundstation.replay import Replay, ReplayError, index_tlog
+from groundstation.state import Fleet
+from vehicle.geodesy import Datum
+from vehicle.mapstream import MAP_SNAPSHOT, MapReceiver
+from vehicle.mav import mavlink, mavutil
+
+ROOT = Path(__file__).resolve().parent.parent
+BIN = Path(sys.executable).parent
+TLOG_STAMP = struct.Struct(">Q")
+
+
+# ---- the recorded flight ------------------------------------------------------------------------
+@dataclass
+class Moment:
+    """What the live ground station showed for vehicle 1 at one moment."""
+
+    time: float  # receiver time of the last message it applied (= that record's tlog timestamp)
+    x: float
+    y: float
+    mode: str
+    armed: bool
+    grid: np.ndarray | None
+    synced: bool
+    applied: int
+
+
+@dataclass
+class Flight:
+    running: RunningStation
+    api: Api
+    moments: list[Moment]
+    sizes: list[int]  # the session file's size, sampled while the vehicle flew
+
+    @property
+    def station(self):
+        return self.running.station
+
+    @property
+    def session(self) -> Path:
+        return self.station.recorder.path
+
+    @property
+    def record_dir(self) -> Path:
+        return self.station.record_dir
+
+
+def note(station) -> Moment | None:
+    live = station.live
+    with live.lock:
+        vehicle = live.get(1)
+        if vehicle is None or vehicle.x is None:
+            return None
+        stream = vehicle.map_stream
+        return Moment(vehicle.last_message, vehicle.x, vehicle.y, vehicle.mode, vehicle.armed,
+                      None if stream.grid is None else stream.grid.copy(), stream.synced, stream.applied)
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    """A station recording a copter that flies `search` (map snapshots every second) for about 6 wall seconds;
+    the vehicle keeps running (landed once done) until the module ends."""
+    scene = small_scene()
+    record_dir = tmp_path_factory.mktemp("recordings")
+    with RunningStation(scene, record_dir) as running, running.api() as api:
+        vehicle = start_sim(running, scene, sysid=1, mission="search", autostart=True)
+        vehicle.sim.telemetry.streamer.snapshot_period = 1.0
+        with vehicle:
+            api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok" and v["map"]["source"] == "vehicle",
+                             sim_timeout=20, what="heartbeat and map")
+            command_ok(api, 1, action="speed", speed=2.5)  # a COMMAND_LONG from the ground station, in the log
+            moments, sizes = [], []
+            for _ in range(6):
+                time.sleep(0.7)
+                moment = note(running.station)
+                if moment is not None and moment.grid is not None:
+                    moments.append(moment)
+                sizes.append(running.station.recorder.path.stat().st_size)
+            yield Flight(running, api, moments, sizes)
+
+
+def records(path: Path) -> list[tuple[float, bytes]]:
+    """(timestamp, packet) of every whole record of a tlog, by its framing (for checks and for cutting logs)."""
+    index = index_tlog(path)
+    data = path.read_bytes()
+    return [(float(t), data[int(o):int(o) + int(n)]) for t, o, n in
+            zip(index.times, index.offsets, index.lengths, strict=True)]
+
+
+def decoded(path: Path) -> list:
+    """Every message of a tlog as pymavlink decodes it sequentially (``_timestamp`` is the record's time)."""
+    reader = mavutil.mavlink_connection(str(path))
+    messages = []
+    try:
+        while (message := reader.recv_msg()) is not None:
+            if message.get_type() != "BAD_DATA":
+                messages.append(message)
+    finally:
+        reader.close()
+    return messages
+
+
+# ---- recording ---------------------------------------------------------------------------------------
+def test_the_session_log_appears_and_grows_while_recording(flight):
+    assert flight.session.parent == flight.record_dir
+    assert flight.session.name.startswith("session-") and flight.session.suffix == ".tlog"
+    assert flight.sizes[0] > 0
+    assert all(b >= a for a, b in zip(flight.sizes, flight.sizes[1:], strict=False)), flight.sizes
+    assert flight.sizes[-1] > flight.sizes[len(flight.sizes) // 2] > flight.sizes[0], flight.sizes
+    # flushed within about a second: a record stamped in the last 1.5 s is already on disk
+    started = time.time()
+    fresh = wait_wall(lambda: (tail := records(flight.session)[-1][0]) > started - 1.5 and tail, 3,
+                      "a fresh record on disk")
+    assert fresh > started - 1.5
+    size = flight.session.stat().st_size
+    wait_wall(lambda: flight.session.stat().st_size > size, 2.5, "the log grows")
+
+
+def test_the_session_log_holds_both_directions(flight):
+    messages = decoded(flight.session)
+    kinds = Counter((m.get_type(), m.get_srcSystem()) for m in messages)
+    for kind in ("HEARTBEAT", "GLOBAL_POSITION_INT", "ATTITUDE", "DISTANCE_SENSOR", "TUNNEL", "COMMAND_ACK",
+                 "STATUSTEXT"):
+        assert kinds[(kind, 1)] > 0, kind
+    assert kinds[("HEARTBEAT", 255)] >= 2  # the ground station's own heartbeats, once a second
+    assert kinds[("COMMAND_LONG", 255)] >= 1
+    gcs_beat = next(m for m in messages if m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 255)
+    assert gcs_beat.type == mavlink.MAV_TYPE_GCS
+    command = next(m for m in messages if m.get_type() == "COMMAND_LONG")
+    assert command.command == mavlink.MAV_CMD_DO_CHANGE_SPEED and command.target_system == 1
+    stamps = np.array([m._timestamp for m in messages])
+    assert stamps[0] == pytest.approx(time.time(), abs=120)  # wall-clock stamps of this session
+    assert np.diff(stamps).min() > -0.01  # in time order (but for a packet sent while one was received)
+
+
+def test_mavlogdump_reads_the_session_log(flight):
+    result = subprocess.run([sys.executable, str(BIN / "mavlogdump.py"), "--types", "HEARTBEAT,COMMAND_LONG",
+                             str(flight.session)], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert any("HEARTBEAT" in line for line in lines)
+    assert any("COMMAND_LONG" in line for line in lines)
+    assert sum("HEARTBEAT" in line for line in lines) >= 4
+
+
+# ---- the recordings API ---------------------------------------------------------------------------------
+def test_recordings_are_listed(flight):
+    listed = flight.api.get("/api/recordings")
+    assert listed.status_code == 200
+    session = next(r for r in listed.json() if r["name"] == flight.session.name)
+    assert session["recording"] is True
+    assert session["size"] > 0 and session["modified"] == pytest.approx(time.time(), abs=60)
+
+
+def test_a_finished_recording_downloads_byte_for_byte(flight):
+    finished = flight.record_dir / "finished-copy.tlog"
+    shutil.copyfile(flight.session, finished)
+    try:
+        listed = {r["name"]: r for r in flight.api.get("/api/recordings").json()}
+        assert listed["finished-copy.tlog"]["recording"] is False
+        response = flight.api.get("/api/recordings/finished-copy.tlog")
+        assert response.status_code == 200
+        assert response.content == finished.read_bytes()
+        assert response.headers["content-type"] == "application/octet-stream"
+        assert "finished-copy.tlog" in response.headers["content-disposition"]
+    finally:
+        finished.unlink(missing_ok=True)
+
+
+def test_deleting_recordings(flight):
+    api = flight.api
+    doomed = flight.record_dir / "old-session.tlog"
+    shutil.copyfile(flight.session, doomed)
+    assert api.delete("/api/recordings/old-session.tlog").status_code == 401
+    assert api.delete("/api/recordings/old-session.tlog", headers={"Authorization": "Bearer no"}).status_code == 401
+    assert doomed.exists()
+    busy = api.delete(f"/api/recordings/{flight.session.name}", headers=api.operator)
+    assert busy.status_code == 409
+    assert flight.session.exists()
+    gone = api.delete("/api/recordings/old-session.tlog", headers=api.operator)
+    assert gone.status_code == 200 and gone.json() == {"deleted": "old-session.tlog"}
+    assert not doomed.exists()
+    assert api.delete("/api/recordings/old-session.tlog", headers=api.operator).status_code == 404
+    assert "old-session.tlog" not in [r["name"] for r in api.get("/api/recordings").json()]
+
+
+def test_recording_names_cannot_leave_the_folder(flight, tmp_path):
+    api = flight.api
+    outside = flight.record_dir.parent / "outside.tlog"
+    outside.write_bytes(flight.session.read_bytes()[:4096])
+    try:
+        for name in ("../outside.tlog", "..%2Foutside.tlog", "%2E%2E%2Foutside.tlog", "..\\outside.tlog",
+                     "%2E%2E%5Coutside.tlog", "missing.tlog", "README.md", "..%2F..%2Fetc%2Fpasswd"):
+            assert api.get(f"/api/recordings/{name}").status_code == 404, name
+            assert api.delete(f"/api/recordings/{name}", headers=api.operator).status_code == 404, name
+        for name in ("../outside.tlog", "/etc/passwd", "sub/x.tlog", "x.txt", "..", ""):
+            assert flight.station.recording_path(name) is None, name
+        replay = api.post("/api/replay", json={"name": "../outside.tlog"}, headers=api.operator)
+        assert replay.status_code == 404
+    finally:
+        outside.unlink()
+    assert outside.parent.exists()
+
+
+# ---- replay equals live -------------------------------------------------------------------------------
+def sequential_maps(path: Path, stamps: list[float]) -> dict[float, tuple[np.ndarray | None, bool, int]]:
+    """Vehicle 1's map as a MapReceiver fed every TUNNEL of the log in order, up to and including each stamp."""
+    receiver = MapReceiver()
+    wanted = sorted(stamps)
+    maps = {}
+    for message in decoded(path):
+        while wanted and message._timestamp > wanted[0]:
+            stamp = wanted.pop(0)
+            maps[stamp] = (None if receiver.grid is None else receiver.grid.copy(), receiver.synced, receiver.applied)
+        if not wanted:
+            break
+        if message.get_type() == "TUNNEL" and message.get_srcSystem() == 1:
+            receiver.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
+    for stamp in wanted:
+        maps[stamp] = (None if receiver.grid is None else receiver.grid.copy(), receiver.synced, receiver.applied)
+    return maps
+
+
+def tlog_time(t: float) -> float:
+    """A receiver time as its tlog record stores it (whole microseconds)."""
+    return int(t * 1e6) / 1e6
+
+
+def map_losses(path: Path) -> tuple[int, int]:
+    """(missing map deltas, incomplete map snapshots) of vehicle 1 in a log: what UDP loss took from its map."""
+    deltas, chunks = [], {}
+    for message in decoded(path):
+        if message.get_type() != "TUNNEL" or message.get_srcSystem() != 1:
+            continue
+        payload = bytes(message.payload[:message.payload_length])
+        if message.payload_type == 32801:
+            deltas.append(struct.unpack_from("<I", payload)[0])
+        elif message.payload_type == MAP_SNAPSHOT:
+            ident, index, count = struct.unpack_from("<HHH", payload)
+            chunks.setdefault(ident, [count, set()])[1].add(index)
+    missing = (max(deltas) - min(deltas) + 1 - len(set(deltas))) if deltas else 0
+    incomplete = sum(len(got) < count for count, got in list(chunks.values())[:-1])  # the last may be cut off
+    return missing, incomplete
+
+
+def finished_copy(flight: Flight, path: Path) -> Path:
+    """Every whole record of the session on disk, once the last moment noted has been flushed."""
+    wait_wall(lambda: records(flight.session)[-1][0] > flight.moments[-1].time, 5, "the recorder's flush")
+    path.write_bytes(b"".join(TLOG_STAMP.pack(round(t * 1e6)) + p for t, p in records(flight.session)))
+    return path
+
+
+def test_replay_equals_live(flight, tmp_path):
+    assert len(flight.moments) >= 4
+    assert len({(round(m.x, 1), round(m.y, 1)) for m in flight.moments}) >= 3  # it went places
+    path = finished_copy(flight, tmp_path / "flight.tlog")
+    lossless = map_losses(path) == (0, 0)  # on a loaded machine UDP may drop some of the map stream
+    live = flight.station.live
+    replay = Replay.open(path, Fleet(live.datum, live.ground_height))
+    assert replay.index.warning == ""
+    assert replay.index.start + replay.duration > flight.moments[-1].time
+    stamps = [tlog_time(m.time) for m in flight.moments]
+    sequential = sequential_maps(path, stamps)
+    compared_live = compared_sequential = 0
+    for moment, stamp in zip(flight.moments, stamps, strict=True):
+        replay.seek(stamp - replay.index.start + 5e-7)  # up to and including the record at ``stamp``
+        vehicle = replay.fleet.get(1)
+        assert vehicle is not None
+        assert vehicle.last_message == pytest.approx(stamp, abs=1e-6)
+        assert math.hypot(vehicle.x - moment.x, vehicle.y - moment.y) < 0.03, (moment.time, vehicle.x, moment.x)
+        assert (vehicle.mode, vehicle.armed) == (moment.mode, moment.armed)
+        stream = vehicle.map_stream
+        grid, synced, applied = sequential[stamp]
+        if lossless:
+            assert stream.synced and synced and moment.synced
+        if stream.synced and synced:  # sequential decoding of the same log, from its start, to the same record
+            assert applied == stream.applied
+            assert np.array_equal(grid, stream.grid)
+            compared_sequential += 1
+        if stream.synced and moment.synced and moment.applied == stream.applied:  # what the live station showed
+            assert np.array_equal(moment.grid, stream.grid)
+            compared_live += 1
+    if lossless:
+        assert compared_live == compared_sequential == len(flight.moments)
+    else:
+        assert compared_live >= 1 and compared_sequential >= 1
+    assert np.count_nonzero(flight.moments[-1].grid >= 6) > 10  # the walls are in the map
+
+
+def test_playing_forward_equals_seeking(flight, tmp_path):
+    path = finished_copy(flight, tmp_path / "flight.tlog")
+    lossless = map_losses(path) == (0, 0)
+    live = flight.station.live
+    played = Replay.open(path, Fleet(live.datum, live.ground_height))
+    sought = Replay.open(path, Fleet(live.datum, live.ground_height))
+    assert played.duration > 3.0
+    played.seek(1.0)
+    for target in (2.0, played.duration / 2 + 0.5, played.duration - 0.3):
+        for _ in range(1000):
+            if played.clock >= target - 1e-9:
+                break
+            played.advance(min(0.25, target - played.clock))
+        assert played.clock == pytest.approx(target)
+        sought.seek(target)
+        a, b = played.fleet.get(1), sought.fleet.get(1)
+        assert (a.x, a.y, a.mode, a.armed) == (b.x, b.y, b.mode, b.armed)
+        if lossless:
+            assert a.map_stream.synced and b.map_stream.synced
+        if a.map_stream.synced and b.map_stream.synced:
+            assert a.map_stream.applied == b.map_stream.applied
+            assert np.array_equal(a.map_stream.grid, b.map_stream.grid)
+
+
+# ---- replay through the API -------------------------------------------------------------------------------
+PLANE_SYSID = 9
+CIRCLE_RADIUS = 80.0  # m
+CIRCLE_PERIOD = 30.0  # s
+PLANE_CENTRE = (-35.3600000, 149.1700000)
+PLANE_START = 1714564800.0  # 2024-05-01T12:00:00Z
+
+
+def plane_log(path: Path, duration: float = 30.0) -> list[tuple[float, float, float]]:
+    """A tlog as an ArduPlane (MAVLink 1) flying a circle would give a ground station: dozens of message types
+    we do not use, GLOBAL_POSITION_INT at 10 Hz, and the station's own traffic. Returns (time, lat, lon) of each
+    GLOBAL_POSITION_INT."""
+    centre = Datum(*PLANE_CENTRE, 0.0)
+    plane = mavlink1.MAVLink(None, srcSystem=PLANE_SYSID, srcComponent=1)
+    gcs = mavlink1.MAVLink(None, srcSystem=255, srcComponent=190)
+    rng = random.Random(5)
+    out = []
+    fixes = []
+    clock = [0]  # microseconds of the last record: each record a little after the one before, as received
+
+    def write(t: float, message, packer=plane) -> float:
+        stamp = max(int(round((PLANE_START + t) * 1e6)), clock[0] + 20)
+        clock[0] = stamp
+        out.append(TLOG_STAMP.pack(stamp) + message.pack(packer))
+        return stamp / 1e6
+
+    armed = mavlink1.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink1.MAV_MODE_FLAG_SAFETY_ARMED
+    steps = int(duration * 10)
+    for step in range(steps + 1):
+        t = step * 0.1
+        ms = int(t * 1000) + 60_000
+        angle = 2 * math.pi * t / CIRCLE_PERIOD
+        x, y = CIRCLE_RADIUS * math.sin(angle), CIRCLE_RADIUS * math.cos(angle)
+        lat, lon = centre.to_global(x, y)
+        lat_i, lon_i = int(round(lat * 1e7)), int(round(lon * 1e7))
+        heading = (math.degrees(angle) + 90) % 360
+        speed = 2 * math.pi * CIRCLE_RADIUS / CIRCLE_PERIOD
+        vx, vy = speed * math.cos(math.radians(heading)), speed * math.sin(math.radians(heading))  # north, east
+        if step % 10 == 0:
+            write(t, plane.heartbeat_encode(mavlink1.MAV_TYPE_FIXED_WING, mavlink1.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                            armed, 10, mavlink1.MAV_STATE_ACTIVE, 3))
+            write(t, gcs.heartbeat_encode(mavlink1.MAV_TYPE_GCS, mavlink1.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3), gcs)
+            write(t, plane.home_position_encode(int(PLANE_CENTRE[0] * 1e7), int(PLANE_CENTRE[1] * 1e7), 584000,
+                                                0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
+            write(t, plane.sys_status_encode(0x3FFFFF, 0x3FFFFF, 0x3FFFFF, 300, 12400, 1500, 80 - step // 50,
+                                             0, 0, 0, 0, 0, 0))
+            write(t, plane.system_time_encode(int((PLANE_START + t) * 1e6), ms))
+            write(t, plane.meminfo_encode(0, 65535))
+            write(t, plane.power_status_encode(5000, 5100, 3))
+            write(t, plane.ekf_status_report_encode(0x1FF, 0.1, 0.1, 0.1, 0.05, 0.0))
+            write(t, plane.vibration_encode(ms * 1000, 2.0, 2.1, 2.3, 0, 0, 0))
+            write(t, plane.terrain_report_encode(lat_i, lon_i, 100, 12.5, 87.5, 0, 56))
+            write(t, plane.hwstatus_encode(5000, 0))
+            write(t, plane.wind_encode(270.0, 3.5, 0.0))
+            write(t, plane.battery_status_encode(0, 0, 1, 2500, [4100] * 10, 1500, 1200, -1, 80))
+            write(t, plane.mission_current_encode(2))
+            write(t, plane.gps_global_origin_encode(int(PLANE_CENTRE[0] * 1e7), int(PLANE_CENTRE[1] * 1e7),
+                                                    584000))
+            write(t, plane.sensor_offsets_encode(10, -20, 30, 0.2, 100000, 2500, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+            write(t, plane.fence_status_encode(0, 0, 0, 0))
+            write(t, plane.radio_status_encode(200, 190, 90, 40, 35, 0, 0))
+            write(t, gcs.request_data_stream_encode(PLANE_SYSID, 1, 0, 4, 1), gcs)
+        if step % 50 == 0:
+            write(t, plane.param_value_encode(b"WP_RADIUS", 90.0, mavlink1.MAV_PARAM_TYPE_REAL32, 1200, step // 50))
+            write(t, plane.statustext_encode(mavlink1.MAV_SEVERITY_INFO, f"Reached waypoint #{step // 50}".encode()))
+        if step % 2 == 0:
+            write(t, plane.raw_imu_encode(ms * 1000, 1, -2, -1000, 3, 4, 5, 200, -100, 400))
+            write(t, plane.scaled_imu2_encode(ms, 1, -2, -1000, 3, 4, 5, 200, -100, 400))
+            write(t, plane.scaled_pressure_encode(ms, 945.5, 0.3, 2650))
+            write(t, plane.gps_raw_int_encode(ms * 1000, 3, lat_i, lon_i, 684000, 90, 120, int(speed * 100),
+                                              int(heading * 100), 14))
+            write(t, plane.rc_channels_encode(ms, 16, *([1500] * 18), 255))
+            write(t, plane.rc_channels_raw_encode(ms, 0, *([1500] * 8), 255))
+            write(t, plane.servo_output_raw_encode(ms * 1000, 0, *([1500] * 8)))
+            write(t, plane.nav_controller_output_encode(-25.0, 2.0, int(heading), int(heading), 150, 0.5, 0.2, 1.1))
+            write(t, plane.vfr_hud_encode(speed + 1, speed, int(heading), 55, 684.0, 0.1))
+            write(t, plane.ahrs_encode(0.0, 0.0, 0.0, 0.9, 1.0, 0.01, 0.02))
+            write(t, plane.ahrs2_encode(-0.4, 0.03, math.radians(heading), 684.0, lat_i, lon_i))
+            write(t, plane.simstate_encode(-0.4, 0.03, math.radians(heading), 0, 0, -9.8, 0, 0, 0.2, lat_i, lon_i))
+            write(t, plane.rangefinder_encode(rng.uniform(0, 40), 1.2))
+        stamp = write(t, plane.global_position_int_encode(ms, lat_i, lon_i, 684000, 100000, int(vx * 100),
+                                                          int(vy * 100), 0, int(heading * 100)))
+        write(t, plane.attitude_encode(ms, -0.4, 0.03, math.radians(heading), 0.0, 0.0, 0.2))
+        write(t, plane.local_position_ned_encode(ms, y, x, -100.0, vx, vy, 0.0))
+        fixes.append((stamp, lat_i * 1e-7, lon_i * 1e-7))
+    path.write_bytes(b"".join(out))
+    return fixes
+
+
+@dataclass
+class PlaneLog:
+    path: Path
+    fixes: list[tuple[float, float, float]]
+
+    @property
+    def name(self) -> str:
+        return self.path.name
+
+
+@pytest.fixture(scope="module")
+def plane_in_record_dir(flight):
+    path = flight.record_dir / "ardupilot-plane.tlog"
+    return PlaneLog(path, plane_log(path))
+
+
+def fix_at(fixes, when: float) -> tuple[float, float, float]:
+    """The last GLOBAL_POSITION_INT at or before ``when`` (Unix seconds)."""
+    return [f for f in fixes if f[0] <= when + 1e-7][-1]
+
+
+def test_a_foreign_plane_log_indexes_and_replays(tmp_path):
+    path = tmp_path / "plane.tlog"
+    fixes = plane_log(path)
+    index = index_tlog(path)
+    kinds = Counter(m.get_type() for m in decoded(path))
+    assert len(kinds) >= 35  # dozens of message types
+    assert len(index) == sum(kinds.values()) and index.warning == ""
+    assert index.duration == pytest.approx(30.0, abs=0.01)
+    replay = Replay.open(path, Fleet())  # no scene: the first home heard is the origin
+    for seconds in (0.5, 3.33, 7.5, 15.0, 22.25, 30.0):
+        replay.seek(seconds)
+        plane = replay.fleet.get(PLANE_SYSID)
+        assert plane is not None and replay.fleet.ids() == [PLANE_SYSID]  # the GCS is no vehicle
+        assert plane.kind == "plane" and plane.mode == "AUTO" and plane.armed
+        assert plane.mavlink_version == 1
+        when, lat, lon = fix_at(fixes, replay.index.start + seconds)
+        assert (plane.lat, plane.lon) == (pytest.approx(lat, abs=1e-9), pytest.approx(lon, abs=1e-9))
+        x, y = Datum(*PLANE_CENTRE, 0.0).to_local(lat, lon)
+        assert math.hypot(plane.x - x, plane.y - y) < 0.05
+        assert math.hypot(plane.x, plane.y) == pytest.approx(CIRCLE_RADIUS, abs=0.5)
+        assert plane.alt == pytest.approx(100.0)
+        assert plane.map_grid() is None and not plane.sonar  # no scene, no sonar, no map
+        assert plane.voltage == pytest.approx(12.4)
+        assert plane.time_boot_s == pytest.approx(60.0 + round(seconds * 10) / 10, abs=0.11)
+        assert plane.last_message <= replay.index.start + seconds + 1e-6
+        assert plane.status.startswith("Reached waypoint")
+        assert len(plane.trail) >= 1
+    replay.seek(15.0)
+    replay.advance(7.25)  # playing forward lands in the same place as seeking
+    when, lat, lon = fix_at(fixes, replay.index.start + 22.25)
+    assert replay.fleet.get(PLANE_SYSID).lat == pytest.approx(lat, abs=1e-9)
+
+
+def test_replay_through_the_api(flight, plane_in_record_dir):
+    api = flight.api
+    name = plane_in_record_dir.name
+    assert api.get("/api/replay").json() == {"mode": "live", "replay": None}
+    assert api.post("/api/replay/control", json={"play": True}, headers=api.operator).status_code == 409
+    assert api.get("/api/replay/export").status_code == 409
+    assert api.post("/api/replay", json={"name": name}).status_code == 401
+    assert api.post("/api/replay", json={"name": "nope.tlog"}, headers=api.operator).status_code == 404
+    assert api.post("/api/replay", json={}, headers=api.operator).status_code == 422
+    started = api.post("/api/replay", json={"name": name}, headers=api.operator)
+    assert started.status_code == 200, started.text
+    status = started.json()
+    assert status["name"] == name and status["duration"] == pytest.approx(30.0, abs=0.01)
+    try:
+        assert api.get("/api/health").json()["mode"] == "replay"
+        assert [v["sysid"] for v in api.get("/api/vehicles").json()] == [PLANE_SYSID]
+        assert api.get("/api/vehicles/1").status_code == 404  # the live vehicle is not shown
+        plane = api.vehicle(PLANE_SYSID)
+        assert plane["type"] == "plane" and plane["mode"] == "AUTO" and plane["link"]["mavlink"] == 1
+        control = "/api/replay/control"
+
+        # pause: the time stays
+        paused = api.post(control, json={"play": False}, headers=api.operator).json()
+        assert paused["playing"] is False
+        time.sleep(0.3)
+        assert api.get("/api/replay").json()["replay"]["time"] == paused["time"]
+        # seek
+        sought = api.post(control, json={"seek": 10.0}, headers=api.operator).json()
+        assert sought["time"] == pytest.approx(10.0) and sought["playing"] is False
+        position = api.vehicle(PLANE_SYSID)["position"]
+        _, lat, lon = fix_at(plane_in_record_dir.fixes, PLANE_START + 10.0)
+        x, y = flight.station.live.datum.to_local(lat, lon)  # the scene's datum places the log
+        assert (position["lat"], position["lon"]) == (pytest.approx(lat, abs=1e-9), pytest.approx(lon, abs=1e-9))
+        assert (position["x"], position["y"]) == (pytest.approx(x, abs=0.01), pytest.approx(y, abs=0.01))
+        centre = flight.station.live.datum.to_local(*PLANE_CENTRE)
+        assert math.dist((x, y), centre) == pytest.approx(CIRCLE_RADIUS, abs=0.5)
+        # the link age is on the log's clock
+        assert api.vehicle(PLANE_SYSID)["link"]["state"] == "ok"
+        # step forward and back, a tenth of a second each, and pause
+        stepped = api.post(control, json={"step": 1}, headers=api.operator).json()
+        assert stepped["time"] == pytest.approx(10.1) and stepped["playing"] is False
+        back = api.post(control, json={"step": -1}, headers=api.operator).json()
+        assert back["time"] == pytest.approx(10.0)
+        # play at 20x: the time moves
+        playing = api.post(control, json={"play": True, "speed": 20}, headers=api.operator).json()
+        assert playing["playing"] is True and playing["speed"] == 20
+        moved = wait_wall(lambda: (t := api.get("/api/replay").json()["replay"]["time"]) > 12.0 and t, 5,
+                          "replay time moves")
+        assert moved > 12.0
+        later = api.vehicle(PLANE_SYSID)["position"]
+        assert math.dist((later["x"], later["y"]), (position["x"], position["y"])) > 5.0
+        # bad controls
+        for body in ({"speed": 25}, {"speed": 0.05}, {"seek": -1}, {"step": 2}):
+            assert api.post(control, json=body, headers=api.operator).status_code == 422, body
+        assert api.post(control, json={"play": False}).status_code == 401
+        # commands and missions are refused in replay
+        refused = api.command(PLANE_SYSID, action="rtl")
+        assert refused.status_code == 409
+        assert api.command(1, action="rtl").status_code == 409
+        assert api.get(f"/api/vehicles/{PLANE_SYSID}/mission").status_code == 409
+        assert api.put(f"/api/vehicles/{PLANE_SYSID}/mission", content="QGC WPL 110\n",
+                       headers=api.operator).status_code == 409
+        # the file being replayed cannot be deleted
+        assert api.delete(f"/api/recordings/{name}", headers=api.operator).status_code == 409
+        # at the end it stops, and playing again starts over
+        api.post(control, json={"seek": 29.9, "play": True}, headers=api.operator)
+        ended = wait_wall(lambda: (r := api.get("/api/replay").json()["replay"])["playing"] is False and r, 5,
+                          "the end")
+        assert ended["time"] == ended["duration"] == pytest.approx(30.0, abs=0.01)
+        again = api.post(control, json={"play": True}, headers=api.operator).json()
+        assert again["playing"] is True and again["time"] < 1.0
+        api.post(control, json={"play": False}, headers=api.operator)
+    finally:
+        stopped = api.post("/api/replay/stop", headers=api.operator)
+    assert stopped.status_code == 200 and stopped.json() == {"mode": "live"}
+    assert api.get("/api/health").json()["mode"] == "live"
+    assert 1 in [v["sysid"] for v in api.get("/api/vehicles").json()]
+    assert PLANE_SYSID not in [v["sysid"] for v in api.get("/api/vehicles").json()]
+    assert api.post("/api/replay/stop").status_code == 401
+
+
+def test_replaying_a_file_that_is_no_log_is_422(flight):
+    api = flight.api
+    fake = flight.record_dir / "not-a-log.tlog"
+    fake.write_bytes((ROOT / "README.md").read_bytes())
+    try:
+        response = api.post("/api/replay", json={"name": fake.name}, headers=api.operator)
+        assert response.status_code == 422
+        assert "not a telemetry log" in response.json()["detail"]
+        assert api.get("/api/health").json()["mode"] == "live"
+    finally:
+        fake.unlink()
+
+
+def test_the_stream_follows_the_replay(flight, plane_in_record_dir):
+    import json
+
+    import websockets.sync.client
+
+    api = flight.api
+    assert api.post("/api/replay", json={"name": plane_in_record_dir.name}, headers=api.operator).status_code == 200
+    try:
+        api.post("/api/replay/control", json={"seek": 5.0, "play": False}, headers=api.operator)
+        url = f"ws://127.0.0.1:{flight.running.http_port}/ws"
+        with websockets.sync.client.connect(url, open_timeout=5) as socket_:
+            frame = json.loads(socket_.recv(timeout=5))
+        assert frame["type"] == "vehicles" and frame["mode"] == "replay"
+        assert frame["replay"]["name"] == plane_in_record_dir.name and frame["replay"]["time"] == pytest.approx(5.0)
+        assert [v["sysid"] for v in frame["vehicles"]] == [PLANE_SYSID]
+        assert frame["time"] == pytest.approx(PLANE_START + 5.0)
+    finally:
+        api.post("/api/replay/stop", headers=api.operator)
+
+
+def test_export_is_one_html_file(flight, plane_in_record_dir):
+    api = flight.api
+    assert api.post("/api/replay", json={"name": plane_in_record_dir.name}, headers=api.operator).status_code == 200
+    try:
+        exported = api.get("/api/replay/export", timeout=120)
+    finally:
+        api.post("/api/replay/stop", headers=api.operator)
+    assert exported.status_code == 200
+    assert exported.headers["content-type"].startswith("text/html")
+    assert 'filename="ardupilot-plane.html"' in exported.headers["content-disposition"]
+    assert "__VISER_EMBED_DATA__" in exported.text
+    assert exported.text.lstrip().lower().startswith("<!doctype html") or "<html" in exported.text[:2000].lower()
+
+
+# ---- logs from elsewhere -----------------------------------------------------------------------------------
+def test_an_experiment_log_replays(tmp_path):
+    scene = tmp_path / "walls.wrl"
+    scene.write_text(SCENE_TEXT)
+    log = tmp_path / "run.tlog"
+    result = subprocess.run(
+        [str(BIN / "vehicle"), "experiment", "--scene", str(scene), "--mission", "browse", "--set", "space_size=20",
+         "--time-limit", "60", "--map-out", str(tmp_path / "map"), "--log", str(log)],
+        capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    index = index_tlog(log)
+    assert index.warning == "" and len(index) > 1000
+    assert index.start == pytest.approx(1767225600.0, abs=1)  # simulated time from 2026-01-01
+    replay = Replay.open(log, Fleet(Datum()))
+    replay.seek(replay.duration)
+    vehicle = replay.fleet.get(1)
+    assert vehicle is not None and vehicle.kind == "copter"
+    final = np.load(next((tmp_path / "map").glob("*.npy")))
+    assert vehicle.map_stream.synced
+    assert np.array_equal(vehicle.map_stream.grid, final)  # the replayed map is the run's final map
+    assert math.hypot(vehicle.x, vehicle.y) < 0.5  # it went home
+    replay.seek(replay.duration / 2)
+    middle = replay.fleet.get(1)
+    assert middle.alt > 3.0 and middle.armed  # mid-scan, in the air
+
+
+@pytest.mark.parametrize("where", ["after the header", "half way", "one byte short"])
+def test_a_truncated_log_replays_up_to_the_cut(tmp_path, where):
+    whole = tmp_path / "whole.tlog"
+    fixes = plane_log(whole)
+    full = index_tlog(whole)
+    keep = len(full) // 2
+    length = int(full.lengths[keep])
+    into = {"after the header": 6 + 1, "half way": length // 2, "one byte short": length - 1}[where]
+    cut_at = int(full.offsets[keep]) + into  # into the packet of record ``keep``
+    cut = tmp_path / "cut.tlog"
+    cut.write_bytes(whole.read_bytes()[:cut_at])
+    index = index_tlog(cut)
+    assert "truncated" in index.warning and "cut.tlog" in index.warning
+    assert len(index) == keep
+    assert np.array_equal(index.offsets, full.offsets[:keep])
+    replay = Replay.open(cut, Fleet())
+    assert replay.status()["warning"] == index.warning
+    assert replay.duration == pytest.approx(float(full.times[keep - 1] - full.times[0]))
+    replay.seek(replay.duration)
+    plane = replay.fleet.get(PLANE_SYSID)
+    when, lat, lon = fix_at(fixes, float(index.times[-1]))
+    assert plane.lat == pytest.approx(lat, abs=1e-9) and plane.lon == pytest.approx(lon, abs=1e-9)
+
+
+@pytest.mark.parametrize("into", [9, 11])  # bytes into the record: into the packet's header
+def test_a_log_cut_in_a_packet_header_replays_with_a_warning(tmp_path, into):
+    whole = tmp_path / "whole.tlog"
+    plane_log(whole)
+    full = index_tlog(whole)
+    cut = tmp_path / "cut.tlog"
+    cut.write_bytes(whole.read_bytes()[:int(full.offsets[500]) - 8 + into])
+    index = index_tlog(cut)
+    assert index.warning and "cut.tlog" in index.warning
+    assert len(index) == 500
+    replay = Replay.open(cut, Fleet())
+    replay.seek(replay.duration)
+    assert replay.fleet.get(PLANE_SYSID) is not None
+
+
+def test_a_partly_corrupt_log_replays_up_to_the_damage(tmp_path):
+    whole = tmp_path / "whole.tlog"
+    plane_log(whole)
+    full = index_tlog(whole)
+    damage_at = int(full.offsets[3000]) - 8  # the start of record 3000 (its timestamp)
+    data = whole.read_bytes()
+    garbage = random.Random(11).randbytes(500)
+    corrupt = tmp_path / "corrupt.tlog"
+    corrupt.write_bytes(data[:damage_at] + garbage + data[damage_at:])
+    index = index_tlog(corrupt)
+    assert "damaged" in index.warning and str(damage_at) in index.warning
+    assert len(index) == 3000
+    assert np.array_equal(index.offsets, full.offsets[:3000])
+    replay = Replay.open(corrupt, Fleet())
+    assert replay.duration == pytest.approx(float(full.times[2999] - full.times[0]))
+    replay.seek(replay.duration)
+    plane = replay.fleet.get(PLANE_SYSID)
+    assert plane is not None and plane.kind == "plane"
+    # a damaged packet inside a record (a flipped payload byte: bad CRC) is skipped, not fatal
+    flipped = bytearray(data)
+    flipped[int(full.offsets[100]) + 8] ^= 0xFF
+    broken = tmp_path / "flipped.tlog"
+    broken.write_bytes(bytes(flipped))
+    replay = Replay.open(broken, Fleet())
+    replay.seek(replay.duration)
+    assert replay.fleet.get(PLANE_SYSID) is not None
+
+
+@pytest.mark.parametrize("kind", ["readme", "png", "empty", "tiny", "zeros"])
+def test_a_file_that_is_no_log_is_refused_clearly(tmp_path, kind):
+    if kind == "readme":
+        path = ROOT / "README.md"
+    else:
+        path = tmp_path / f"{kind}.tlog"
+        if kind == "png":
+            from PIL import Image
+
+            Image.new("RGB", (8, 8), (10, 200, 30)).save(path, "PNG")
+        else:
+            path.write_bytes({"empty": b"", "tiny": b"\xfe\x09\x00", "zeros": bytes(4096)}[kind])
+    with pytest.raises(ReplayError, match="not a telemetry log") as caught:
+        index_tlog(path)
+    assert path.name in str(caught.value)
+    with pytest.raises(ReplayError):
+        Replay.open(path, Fleet())
+
+
+def test_groundstation_replay_refuses_a_file_that_is_no_log():
+    result = subprocess.run([str(BIN / "groundstation"), "replay", "README.md", "--port", "1"], cwd=ROOT,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert "README.md is not a telemetry log" in result.stderr
+    assert result.stderr.startswith("groundstation replay:")
+    assert "Traceback" not in result.stderr
+
+
+def test_groundstation_replay_refuses_a_missing_file(tmp_path, capsys):
+    from groundstation.cli import main
+
+    assert main(["replay", str(tmp_path / "no-such.tlog"), "--port", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("groundstation replay:") and "no-such.tlog" in err
+
+
+# ---- the index is exact ---------------------------------------------------------------------------------
+def synthetic_log(path: Path, count: int = 20_000) -> None:
+    """``count`` records: MAVLink 2 (trimmed payloads, TUNNEL with our payload types, ids above 255, a few
+    signed) and MAVLink 1, from three systems."""
+    rng = random.Random(42)
+    v2 = {sysid: mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1) for sysid in (1, 2)}
+    v1 = mavlink1.MAVLink(None, srcSystem=3, srcComponent=1)
+    signed = mavlink.MAVLink(None, srcSystem=4, srcComponent=1)
+    signed.signing.secret_key = bytes(range(32))
+    signed.signing.link_id = 1
+    signed.signing.sign_outgoing = True
+    signed.signing.timestamp = 1
+    chunks = []
+    stamp = PLANE_START
+    for i in range(count):
+        stamp += rng.uniform(0.0001, 0.01)
+        choice = rng.random()
+        if choice < 0.1:
+            packer, message = v1, mavlink1.MAVLink_heartbeat_message(1, 3, 0, rng.randrange(20), 4, 3)
+        elif choice < 0.2:
+            packer, message = v1, mavlink1.MAVLink_attitude_message(i, rng.random(), 0.0, 0.0, 0.0, 0.0, 0.0)
+        elif choice < 0.22:
+            packer, message = signed, mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3)
+        else:
+            packer = v2[1 if choice < 0.6 else 2]
+            pick = rng.randrange(7)
+            if pick == 0:
+                size = rng.randrange(0, 129)
+                payload = bytes(rng.randrange(256) for _ in range(size))
+                message = mavlink.MAVLink_tunnel_message(255, 190, rng.choice((MAP_SNAPSHOT, 32801, 32802, 7)),
+                                                         size, list(payload.ljust(128, b"\0")))
+            elif pick == 1:
+                message = mavlink.MAVLink_global_position_int_message(i, rng.randrange(-900000000, 900000000),
+                                                                      rng.randrange(-1800000000, 1800000000),
+                                                                      0, 0, 0, 0, 0, 0)  # trailing zeros trimmed
+            elif pick == 2:
+                message = mavlink.MAVLink_heartbeat_message(2, 3, 0, 0, 0, 0)  # almost all zeros
+            elif pick == 3:
+                message = mavlink.MAVLink_distance_sensor_message(i, 2, 4000, rng.randrange(4000), 1, 0, 0, 0,
+                                                                  0, 0, [1, 0, 0, 0], 0)
+            elif pick == 4:
+                text = "x" * rng.randrange(1, 50)
+                message = mavlink.MAVLink_statustext_message(6, text.encode(), 0, 0)
+            elif pick == 5:
+                message = mavlink.MAVLink_autopilot_version_message(0xFFFF, 1, 2, 3, 4, bytes(8), bytes(8),
+                                                                    bytes(8), 5, 6, 7, bytes(18))
+            else:
+                message = mavlink.MAVLink_command_ack_message(rng.randrange(600), 0, 0, 0, 255, 190)
+        chunks.append(TLOG_STAMP.pack(int(stamp * 1e6)) + message.pack(packer))
+    path.write_bytes(b"".join(chunks))
+
+
+def test_the_index_is_exact_on_20000_messages(tmp_path):
+    path = tmp_path / "synthetic.tlog"
+    synthetic_log(path)
+    index = index_tlog(path)
+    assert len(index) == 20_000 and index.warning == ""
+    messages = decoded(path)
+    assert len(messages) == 20_000
+    assert Counter(int(i) for i in index.msgids) == Counter(m.get_msgId() for m in messages)
+    assert [int(s) for s in index.sysids] == [m.get_srcSystem() for m in messages]
+    assert np.allclose(index.times, [m._timestamp for m in messages], atol=1e-6)
+    tunnels = [m.payload_type for m in messages if m.get_type() == "TUNNEL"]
+    assert [int(t) for t in index.tunnel_types[index.msgids == mavlink.MAVLINK_MSG_ID_TUNNEL]] == tunnels
+    assert set(index.tunnel_types[index.msgids != mavlink.MAVLINK_MSG_ID_TUNNEL]) == {-1}
+    data = path.read_bytes()
+    for i in range(0, 20_000, 997):  # each record's bytes are its packet, as pymavlink packed it
+        assert bytes(data[index.offsets[i]:index.offsets[i] + index.lengths[i]]) == bytes(messages[i].get_msgbuf())
+    assert sum(bool(m.get_msgbuf()[2] & 0x01) for m in messages if m.get_msgbuf()[0] == 0xFD) >= 100  # signed
