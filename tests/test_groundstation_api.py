@@ -655,11 +655,13 @@ def _health(port: int) -> dict | None:
     return response.json() if response.status_code == 200 else None
 
 
-@pytest.mark.parametrize(("host", "tls", "warned"), [
-    ("127.0.0.1", False, False), ("localhost", False, False), ("0.0.0.0", False, True),
-    ("192.0.2.7", False, True), ("0.0.0.0", True, False),
+@pytest.mark.parametrize(("host", "tls", "warned", "url"), [
+    ("127.0.0.1", False, False, "http://127.0.0.1:8123/"), ("localhost", False, False, "http://localhost:8123/"),
+    ("0.0.0.0", False, True, "http://127.0.0.1:8123/"), ("192.0.2.7", False, True, "http://192.0.2.7:8123/"),
+    ("0.0.0.0", True, False, "https://127.0.0.1:8123/"), ("::1", False, False, "http://[::1]:8123/"),
+    ("::", False, True, "http://127.0.0.1:8123/"), ("2001:db8::7", True, False, "https://[2001:db8::7]:8123/"),
 ])
-def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, host, tls, warned):
+def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, host, tls, warned, url):
     """serve() itself, with uvicorn's run replaced: the warning depends on the host and TLS alone."""
     import uvicorn
 
@@ -674,7 +676,7 @@ def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, host, tl
     err = capsys.readouterr().err
     assert ("without TLS" in err) is warned
     assert len(ran) == 1 and ran[0].host == host
-    assert lines and (f"{'https' if tls else 'http'}://" in lines[0]) and f"#token={TOKEN}" in lines[0]
+    assert lines and f"{url}" in lines[0] and f"#token={TOKEN}" in lines[0], lines
 
 
 def test_serve_refuses_half_a_tls_setup():

@@ -201,6 +201,34 @@ def test_a_finished_recording_downloads_byte_for_byte(flight):
         finished.unlink(missing_ok=True)
 
 
+def test_the_session_being_recorded_downloads_as_a_consistent_prefix(tmp_path):
+    """The session goes on growing while it downloads (a long one over a slow link): the download is the file
+    as it was when asked for, whole, not a broken transfer."""
+    with RunningStation(None, tmp_path) as running, running.api() as api:
+        recorder = running.station.recorder
+        packer = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        packet = mavlink.MAVLink_attitude_message(1, 0.1, 0.2, 0.3, 0, 0, 0).pack(packer)
+        stamp = time.time()
+        for _ in range(1_000_000):  # some 20 MB: more than the sockets between the two ends hold
+            recorder.write(packet, stamp)
+        recorder._writer.flush()
+        received = bytearray()
+        with api.stream("GET", f"/api/recordings/{recorder.path.name}") as response:
+            assert response.status_code == 200
+            declared = int(response.headers["content-length"])
+            for i, chunk in enumerate(response.iter_bytes(65536)):
+                received += chunk
+                if i == 2:  # the recorder writes on while the download runs
+                    for _ in range(200_000):
+                        recorder.write(packet, stamp)
+                    recorder._writer.flush()
+                if i < 5:
+                    time.sleep(0.05)
+        assert len(received) == declared
+        assert bytes(received) == recorder.path.read_bytes()[:declared]
+        assert recorder.path.stat().st_size > declared
+
+
 def test_deleting_recordings(flight):
     api = flight.api
     doomed = flight.record_dir / "old-session.tlog"
@@ -304,11 +332,14 @@ def test_replay_equals_live(flight, tmp_path):
         assert math.hypot(vehicle.x - moment.x, vehicle.y - moment.y) < 0.03, (moment.time, vehicle.x, moment.x)
         assert (vehicle.mode, vehicle.armed) == (moment.mode, moment.armed)
         stream = vehicle.map_stream
+        # decoding the log from its start up to the same record gives what the live station held then
         grid, synced, applied = sequential[stamp]
+        assert (synced, applied) == (moment.synced, moment.applied)
+        assert np.array_equal(grid, moment.grid)
         if lossless:
-            assert stream.synced and synced and moment.synced
-        if stream.synced and synced:  # sequential decoding of the same log, from its start, to the same record
-            assert applied == stream.applied
+            assert stream.synced and synced
+        if synced:  # a synced live copy: the replay has the map too (from the last complete snapshot on)
+            assert stream.synced and stream.applied == applied
             assert np.array_equal(grid, stream.grid)
             compared_sequential += 1
         if stream.synced and moment.synced and moment.applied == stream.applied:  # what the live station showed
@@ -617,15 +648,29 @@ def test_export_is_one_html_file(flight, plane_in_record_dir):
 
 
 # ---- logs from elsewhere -----------------------------------------------------------------------------------
-def test_an_experiment_log_replays(tmp_path):
-    scene = tmp_path / "walls.wrl"
+@dataclass
+class ExperimentRun:
+    log: Path
+    final_map: np.ndarray
+
+
+@pytest.fixture(scope="module")
+def experiment_run(tmp_path_factory) -> ExperimentRun:
+    """`vehicle experiment --log` of a copter scanning once round in the walls scene, and its final map."""
+    folder = tmp_path_factory.mktemp("experiment")
+    scene = folder / "walls.wrl"
     scene.write_text(SCENE_TEXT)
-    log = tmp_path / "run.tlog"
+    log = folder / "run.tlog"
     result = subprocess.run(
         [str(BIN / "vehicle"), "experiment", "--scene", str(scene), "--mission", "browse", "--set", "space_size=20",
-         "--time-limit", "60", "--map-out", str(tmp_path / "map"), "--log", str(log)],
-        capture_output=True, text=True, timeout=120, cwd=tmp_path)
+         "--time-limit", "60", "--map-out", str(folder / "map"), "--log", str(log)],
+        capture_output=True, text=True, timeout=120, cwd=folder)
     assert result.returncode == 0, result.stderr
+    return ExperimentRun(log, np.load(next((folder / "map").glob("*.npy"))))
+
+
+def test_an_experiment_log_replays(experiment_run):
+    log = experiment_run.log
     index = index_tlog(log)
     assert index.warning == "" and len(index) > 1000
     assert index.start == pytest.approx(1767225600.0, abs=1)  # simulated time from 2026-01-01
@@ -633,13 +678,45 @@ def test_an_experiment_log_replays(tmp_path):
     replay.seek(replay.duration)
     vehicle = replay.fleet.get(1)
     assert vehicle is not None and vehicle.kind == "copter"
-    final = np.load(next((tmp_path / "map").glob("*.npy")))
     assert vehicle.map_stream.synced
-    assert np.array_equal(vehicle.map_stream.grid, final)  # the replayed map is the run's final map
+    assert np.array_equal(vehicle.map_stream.grid, experiment_run.final_map)  # the run's final map
     assert math.hypot(vehicle.x, vehicle.y) < 0.5  # it went home
     replay.seek(replay.duration / 2)
     middle = replay.fleet.get(1)
     assert middle.alt > 3.0 and middle.armed  # mid-scan, in the air
+
+
+def test_seeking_in_a_log_that_lost_snapshot_chunks_still_shows_the_map(experiment_run, tmp_path):
+    """A live station that lost a chunk of each of the last two map snapshots (UDP loss hits the snapshot
+    bursts first) stays synced from an earlier snapshot plus the deltas; seeking in its recording does too,
+    from the last complete snapshot."""
+    log = experiment_run.log
+    index = index_tlog(log)
+    data = log.read_bytes()
+
+    def header(i: int) -> tuple[int, int, int]:  # snapshot id, chunk index, chunk count of a TUNNEL record
+        body = int(index.offsets[i]) + 10  # MAVLink 2; the payload starts 5 bytes into the TUNNEL fields
+        return struct.unpack_from("<HHH", data[body + 5:body + 11].ljust(6, b"\0"))
+
+    chunks = [int(i) for i in np.flatnonzero(index.tunnel_types == MAP_SNAPSHOT)]
+    starts = [i for i in chunks if header(i)[1] == 0]
+    assert len(starts) >= 3 and all(header(i)[2] >= 2 for i in starts[-2:])
+    lost = {next(i for i in chunks if i > start and header(i)[1] == 1) for start in starts[-2:]}
+    lossy = tmp_path / "lossy.tlog"
+    lossy.write_bytes(b"".join(data[int(o) - 8:int(o) + int(n)] for k, (o, n) in
+                               enumerate(zip(index.offsets, index.lengths, strict=True)) if k not in lost))
+    live = MapReceiver()  # what a live station that heard exactly this held at the end
+    for message in decoded(lossy):
+        if message.get_type() == "TUNNEL":
+            live.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
+    assert live.synced and np.array_equal(live.grid, experiment_run.final_map)
+    replay = Replay.open(lossy, Fleet(Datum()))
+    for seconds in (replay.duration, float(index.times[starts[-1]] - index.start) + 0.01):
+        replay.seek(seconds)
+        stream = replay.fleet.get(1).map_stream
+        assert stream.synced, f"no map at {seconds:.2f} s where the live station had one"
+    replay.seek(replay.duration)
+    assert np.array_equal(replay.fleet.get(1).map_stream.grid, live.grid)
 
 
 @pytest.mark.parametrize("where", ["after the header", "half way", "one byte short"])
@@ -666,15 +743,15 @@ def test_a_truncated_log_replays_up_to_the_cut(tmp_path, where):
     assert plane.lat == pytest.approx(lat, abs=1e-9) and plane.lon == pytest.approx(lon, abs=1e-9)
 
 
-@pytest.mark.parametrize("into", [9, 11])  # bytes into the record: into the packet's header
-def test_a_log_cut_in_a_packet_header_replays_with_a_warning(tmp_path, into):
+@pytest.mark.parametrize("into", [1, 4, 7, 8, 9, 11])  # bytes into the record: its timestamp, its header
+def test_a_log_cut_in_a_record_header_replays_with_a_warning(tmp_path, into):
     whole = tmp_path / "whole.tlog"
     plane_log(whole)
     full = index_tlog(whole)
     cut = tmp_path / "cut.tlog"
     cut.write_bytes(whole.read_bytes()[:int(full.offsets[500]) - 8 + into])
     index = index_tlog(cut)
-    assert index.warning and "cut.tlog" in index.warning
+    assert index.warning and "cut.tlog" in index.warning  # never silently
     assert len(index) == 500
     replay = Replay.open(cut, Fleet())
     replay.seek(replay.duration)
