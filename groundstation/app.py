@@ -110,13 +110,14 @@ def create_app(station: GroundStation) -> FastAPI:
     # ---- vehicles ----------------------------------------------------------------------------------
     @app.get("/api/vehicles", tags=["vehicles"])
     def vehicles():
-        return station.fleet.snapshot(station.now())
+        return station.vehicles()
 
     @app.get("/api/vehicles/{sysid}", tags=["vehicles"])
     def vehicle(sysid: int):
-        v = vehicle_or_404(sysid)
-        with station.fleet.lock:
-            return station.fleet.describe(v, station.now())
+        described = station.vehicles(sysid)
+        if not described:
+            raise HTTPException(404, f"no vehicle with system id {sysid}")
+        return described[0]
 
     @app.get("/api/vehicles/{sysid}/map", tags=["vehicles"],
              responses={200: {"content": {"image/png": {}, "application/json": {}}}})

@@ -147,7 +147,7 @@ class Replay:
     position: int = 0  # index of the next record to apply
     clock: float = 0.0  # seconds from the start of the log
     _data: bytes = field(default=b"", repr=False)
-    _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
+    lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
 
     @classmethod
     def open(cls, path: str | Path, fleet: Fleet) -> Replay:
@@ -191,7 +191,7 @@ class Replay:
     # ---- seeking ----------------------------------------------------------------------------------
     def seek(self, seconds: float) -> None:
         """Rebuild the fleet as it was ``seconds`` into the log."""
-        with self._lock:
+        with self.lock:
             seconds = min(max(seconds, 0.0), self.duration)
             end = int(np.searchsorted(self.index.times, self.index.start + seconds, side="right"))
             with self.fleet.lock:
@@ -260,7 +260,7 @@ class Replay:
     # ---- playing ----------------------------------------------------------------------------------
     def advance(self, seconds: float) -> None:
         """Play forward by ``seconds`` of log time, message by message."""
-        with self._lock:
+        with self.lock:
             target = min(self.clock + seconds, self.duration)
             end = int(np.searchsorted(self.index.times, self.index.start + target, side="right"))
             with self.fleet.lock:

@@ -71,6 +71,22 @@ class GroundStation:
         replay = self.replay
         return replay.now if replay is not None else time.time()
 
+    def vehicles(self, sysid: int | None = None) -> list[dict]:
+        """The vehicles described as of one moment: a replay cannot step between reading its clock and
+        its fleet, or heartbeat ages would come out of a different moment than the messages."""
+        replay = self.replay
+        if replay is None:
+            return self._describe(self.live, time.time(), sysid)
+        with replay.lock:
+            return self._describe(replay.fleet, replay.now, sysid)
+
+    @staticmethod
+    def _describe(fleet: Fleet, now: float, sysid: int | None) -> list[dict]:
+        with fleet.lock:
+            chosen = [fleet.vehicles[sysid]] if sysid in fleet.vehicles else [] if sysid is not None else \
+                [v for _, v in sorted(fleet.vehicles.items())]
+            return [fleet.describe(v, now) for v in chosen]
+
     def start(self) -> None:
         if self.link is not None:
             self.link.start()
@@ -87,8 +103,7 @@ class GroundStation:
     # ---- what the app asks for -------------------------------------------------------------------
     def status(self) -> dict:
         replay = self.replay
-        now = self.now()
-        return {"type": "vehicles", "mode": self.mode, "time": now, "vehicles": self.fleet.snapshot(now),
+        return {"type": "vehicles", "mode": self.mode, "time": self.now(), "vehicles": self.vehicles(),
                 "replay": replay.status() if replay is not None else None}
 
     # ---- recordings and replay -----------------------------------------------------------------------

@@ -1,0 +1,96 @@
+# ruff: noqa: F811 - the fixtures imported from test_browser are used by name
+"""Browser tests of click-to-go and of the 3D view's proxy when a page closes (they share
+tests/test_browser.py's fixtures: one ground station, one Chromium)."""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path("tests").resolve()))  # run from the repository's root
+
+from playwright.sync_api import expect  # noqa: E402
+from test_browser import (  # noqa: E402, F401 - fixtures are used by name
+    FLYER,
+    TOKEN,
+    browser,
+    browser_page,
+    copters,
+    flyer,
+    press,
+    scene,
+    station,
+    wait_sim,
+)
+
+
+def test_click_to_go(browser_page, station, copters, tmp_path):
+    sysid = 5
+    copters(sysid, start=(6.0, 6.0))  # north-east of the scene's centre, in the open
+    assert station.command(sysid, action="set_mode", mode="GUIDED") == "accepted"
+    assert station.command(sysid, action="arm") == "accepted"
+    assert station.command(sysid, action="takeoff", altitude=4) == "accepted"
+    wait_sim(station, sysid, lambda v: v["position"]["alt"] > 2.0, 20, "airborne")
+    assert station.command(sysid, action="abort") == "accepted"  # hold there (the operator takes over)
+    wait_sim(station, sysid, lambda v: v["mode"] == "BRAKE", 5, "holding in BRAKE")
+
+    page = browser_page.open(f"#token={TOKEN}", view=True)
+    expect(page.locator("#auth-status")).to_have_text("Signed in")
+    browser_page.wait_for_view(tmp_path, sysid)
+    coords = page.locator("#target-coords")
+    expect(coords).to_have_text("Click the ground in the 3D view to pick a target")
+    expect(page.locator("#go-here")).to_be_disabled()
+
+    # the initial camera looks at the scene's centre from the south-west: the middle of the view is
+    # open ground there (the start of the scene, clear for 6.9 m around)
+    box = page.locator("#view").bounding_box()
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    expect(coords).to_have_text(re.compile(r"^x -?[\d.]+ m, y -?[\d.]+ m$"), timeout=30_000)
+    target = tuple(float(v) for v in re.findall(r"-?[\d.]+", coords.inner_text()))
+    assert math.hypot(*target) < 6, target  # near the centre, on the ground
+    browser_page.poll(lambda: ("/target" in {name for _, name in browser_page.scene_nodes}), 10,
+                      "the target marker is drawn in this viewer")
+    page.screenshot(path=str(tmp_path / "target.png"))
+
+    page.select_option("#target-vehicle", str(sysid))
+    go = page.locator("#go-here")
+    expect(go).to_be_enabled()
+    before = station.vehicle(sysid)["position"]
+    distance = math.dist((before["x"], before["y"]), target)
+    assert distance > 4, (before, target)
+    press(go)
+    expect(page.locator("#target .ack")).to_have_text(re.compile(rf"^Go here \(vehicle {sysid}\): accepted"))
+    there = wait_sim(station, sysid, lambda v: math.dist((v["position"]["x"], v["position"]["y"]), target) < 1.0,
+                     distance / 2.5 * 2 + 10, f"vehicle {sysid} reaches the target {target}")
+    assert there["mode"] == "GUIDED"
+    assert there["position"]["alt"] > 2.0  # it flew there
+    page.screenshot(path=str(tmp_path / "arrived.png"))
+
+
+class _Errors(logging.Handler):
+    def __init__(self):
+        super().__init__(logging.ERROR)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+def test_closing_the_page_logs_no_server_error(browser_page, station, flyer, tmp_path):
+    """A viewer closing the page is normal: the 3D view's proxy must not log an ASGI exception for it."""
+    errors = _Errors()
+    logger = logging.getLogger("uvicorn.error")
+    logger.addHandler(errors)
+    try:
+        browser_page.open(view=True)
+        browser_page.wait_for_view(tmp_path, FLYER)
+        browser_page.context.close()  # the viewer leaves
+        time.sleep(2)
+    finally:
+        logger.removeHandler(errors)
+    messages = [r.getMessage() + (f" ({r.exc_info[1]!r})" if r.exc_info else "") for r in errors.records]
+    assert not messages, messages
