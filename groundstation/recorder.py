@@ -31,11 +31,21 @@ class Recorder:
         self._lock = threading.Lock()
         self._flushed = time.monotonic()
         self.packets = 0
+        self._first: float | None = None
+        self._last: float | None = None
 
     def write(self, packet: bytes, timestamp: float) -> None:
         with self._lock:
             self._writer.write(packet, timestamp)
             self.packets += 1
+            if self._first is None:
+                self._first = timestamp
+            self._last = timestamp
+
+    @property
+    def duration(self) -> float | None:
+        """Seconds recorded so far."""
+        return None if self._first is None else round(self._last - self._first, 1)
 
     def tick(self, now: float | None = None) -> None:
         """Flush if a second has passed since the last flush (called by the link's loop)."""

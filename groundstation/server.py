@@ -21,7 +21,7 @@ from groundstation.app import create_app
 from groundstation.link import Link
 from groundstation.proxy import VizProxy
 from groundstation.recorder import Recorder
-from groundstation.replay import Player, Replay
+from groundstation.replay import Player, Replay, ReplayError, index_tlog
 from groundstation.state import Fleet
 from groundstation.viz import SceneView
 from vehicle.geodesy import Datum
@@ -53,6 +53,7 @@ class GroundStation:
         self.replay: Replay | None = None  # set while a recording is replayed
         self._player: Player | None = None
         self._replay_lock = threading.Lock()
+        self._durations: dict[tuple, float | None] = {}
         self._inboxes: dict[str | None, set[asyncio.Queue]] = {}
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -113,9 +114,21 @@ class GroundStation:
         found = []
         for path in sorted(self.record_dir.glob("*.tlog"), key=lambda p: p.stat().st_mtime, reverse=True):
             stat = path.stat()
+            recording = self.recorder is not None and path == self.recorder.path
             found.append({"name": path.name, "size": stat.st_size, "modified": stat.st_mtime,
-                          "recording": self.recorder is not None and path == self.recorder.path})
+                          "recording": recording,
+                          "duration_s": self.recorder.duration if recording else self._duration(path, stat)})
         return found
+
+    def _duration(self, path: Path, stat) -> float | None:
+        """How long a recording lasts (from its index, kept while the file does not change)."""
+        key = (path, stat.st_mtime, stat.st_size)
+        if key not in self._durations:
+            try:
+                self._durations[key] = round(index_tlog(path).duration, 1)
+            except (ReplayError, OSError):
+                self._durations[key] = None
+        return self._durations[key]
 
     def recording_path(self, name: str) -> Path | None:
         """The recording called ``name`` in the record folder (no paths, only .tlog files), or None."""
