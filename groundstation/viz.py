@@ -61,6 +61,8 @@ class SceneView:
         server.gui.configure_theme(show_share_button=False, control_width="small", dark_mode=True)
         server.gui.main_panel.minimize()  # the operator's panel is the page's; viser's own stays out of the way
         server.scene.set_up_direction("+z")
+        # a dimmer environment than viser's default, so the scene's own colours show (not washed out)
+        server.scene.configure_environment_map("city", environment_intensity=0.35)
         if self.scene is not None and len(self.scene.mesh.faces):
             server.scene.add_mesh_trimesh("/scene", self.scene.mesh)
             low, high = self.scene.bounds
