@@ -97,7 +97,9 @@ class Gcs:
         return self.command(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number)
 
     def wait_mode(self, number: int, sim_timeout: float = 10.0):
-        return self.wait("HEARTBEAT", lambda m: m.custom_mode == number, sim_timeout)
+        """A HEARTBEAT in that mode. Heartbeats come once a wall second, so the wait covers at least
+        three of them however fast the simulation runs."""
+        return self.wait("HEARTBEAT", lambda m: m.custom_mode == number, max(sim_timeout, 3.0 * self.speedup))
 
 
 class RunningSim:

@@ -131,6 +131,9 @@ def test_sys_status_reports_health_and_a_battery_that_drains(fly):
 def test_distance_sensor_matches_the_geometry(fly):
     gcs, sim = fly()
     take_off(gcs)
+    # face north and stay (an operator's yaw also pauses the onboard mission, which would turn it)
+    assert gcs.command(mavlink.MAV_CMD_CONDITION_YAW, 0, 90, 1, 0) == mavlink.MAV_RESULT_ACCEPTED
+    gcs.wait("ATTITUDE", lambda m: abs(m.yaw) < 0.005 and abs(m.yawspeed) < 1e-3, sim_timeout=20)
     sensor = gcs.wait("DISTANCE_SENSOR", lambda m: m.id == 0 and m.orientation == 0)
     position = gcs.wait("LOCAL_POSITION_NED")
     assert sensor.type == mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND
@@ -231,6 +234,8 @@ def test_operator_takeover_pauses_and_resume_continues(fly):
 def test_gcs_failsafe_returns_a_copter_home_and_obeys_again(fly):
     gcs, _ = fly(failsafe_timeout=2.0)
     take_off(gcs)
+    assert gcs.set_mode(5) == mavlink.MAV_RESULT_ACCEPTED  # LOITER: the operator holds it, the agent pauses
+    gcs.wait_mode(5)
     mark = len(gcs.texts)
     gcs.wait_text("GCS failsafe", since=mark, heartbeats=False, sim_timeout=60)
     gcs.wait_mode(6)  # RTL
@@ -243,7 +248,7 @@ def test_gcs_failsafe_holds_a_rover(fly):
     assert gcs.set_mode(15) == mavlink.MAV_RESULT_ACCEPTED
     assert gcs.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
     gcs.wait_text("GCS failsafe", heartbeats=False, sim_timeout=60)
-    gcs.wait("HEARTBEAT", lambda m: m.custom_mode == 4, heartbeats=False)  # HOLD
+    gcs.wait("HEARTBEAT", lambda m: m.custom_mode == 4, heartbeats=False, sim_timeout=60)  # HOLD
 
 
 # ---- parameters and missions ---------------------------------------------------------------------
