@@ -55,17 +55,25 @@ class Collider:
 
     def _build_grid(self) -> dict[tuple[int, int], np.ndarray]:
         """Triangles by the grid cells their bounding boxes overlap; big ones (ground planes) go in ``_large``."""
-        cells: dict[tuple[int, int], list[int]] = {}
-        lo = np.floor(self._lo[:, :2] / self.cell_size).astype(int)
-        hi = np.floor(self._hi[:, :2] / self.cell_size).astype(int)
-        span = (hi - lo + 1).prod(axis=1)
-        self._large = np.flatnonzero(span > LARGE_SPAN)
-        for index in np.flatnonzero(span <= LARGE_SPAN):
-            (i0, j0), (i1, j1) = lo[index], hi[index]
-            for i in range(i0, i1 + 1):
-                for j in range(j0, j1 + 1):
-                    cells.setdefault((i, j), []).append(index)
-        return {key: np.array(value, dtype=np.int64) for key, value in cells.items()}
+        lo = np.floor(self._lo[:, :2] / self.cell_size).astype(np.int64)
+        hi = np.floor(self._hi[:, :2] / self.cell_size).astype(np.int64)
+        spans = hi - lo + 1
+        count = spans.prod(axis=1)
+        self._large = np.flatnonzero(count > LARGE_SPAN)
+        small = np.flatnonzero(count <= LARGE_SPAN)
+        # one (triangle, cell) pair per cell each small triangle overlaps, made without a Python loop
+        triangle = np.repeat(small, count[small])
+        k = np.arange(len(triangle)) - np.repeat(np.cumsum(count[small]) - count[small], count[small])
+        i = lo[triangle, 0] + k // spans[triangle, 1]
+        j = lo[triangle, 1] + k % spans[triangle, 1]
+        if not len(triangle):
+            return {}
+        order = np.lexsort((triangle, j, i))
+        i, j, triangle = i[order], j[order], triangle[order]
+        breaks = np.flatnonzero((np.diff(i) != 0) | (np.diff(j) != 0)) + 1
+        groups = np.split(triangle, breaks)
+        firsts = np.concatenate(([0], breaks))
+        return {(int(i[f]), int(j[f])): group for f, group in zip(firsts, groups, strict=True)}
 
     def _candidates(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Indices of triangles whose bounding box overlaps the box [lo, hi]."""

@@ -71,7 +71,8 @@ class MemoryMap:
 
     # ---- evidence ----------------------------------------------------------------------------
     def add_readings(self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray,
-                     max_ranges: np.ndarray, beams: np.ndarray | None = None) -> int:
+                     max_ranges: np.ndarray, beams: np.ndarray | None = None,
+                     free: np.ndarray | None = None) -> int:
         """Project a batch of readings into the map; returns how many marked an obstacle.
 
         ``distances`` holds NaN where a reading had no echo (then the ray is free up to
@@ -85,7 +86,8 @@ class MemoryMap:
         (readings of one period see the same thing, so they are one piece of
         evidence); misses are applied before hits. A beam that leaves the band around
         the sensor's height counts only up to where it leaves it, and its echo (ground
-        or ceiling) is no obstacle.
+        or ceiling) is no obstacle. ``free`` (a mask) picks the readings whose beams
+        mark free space, when several of a batch would only repeat each other.
         """
         origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
         directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
@@ -100,11 +102,12 @@ class MemoryMap:
         echo &= ~leaves
         ends = origins[:, :2] + directions[:, :2] * lengths[:, None]
         hit_of_ray = np.where(echo, self._flat_cells(ends[:, 0], ends[:, 1]), -1)
-        starts, stops, owners = origins[:, :2], ends, np.arange(len(origins))
+        owners = np.arange(len(origins)) if free is None else np.flatnonzero(free)
+        starts, stops = origins[owners, :2], ends[owners]
         if beams is not None:  # the cone's sides, as far as the centre line reaches (and SIDE_REACH at most)
-            spread = FREE_SPREAD * np.asarray(beams)
-            side_lengths = np.minimum(lengths, SIDE_REACH)[:, None]
-            sides = [_turn(directions[:, :2], sign * spread) * side_lengths + starts for sign in (-1, 1)]
+            spread = FREE_SPREAD * np.asarray(beams)[owners]
+            side_lengths = np.minimum(lengths[owners], SIDE_REACH)[:, None]
+            sides = [_turn(directions[owners, :2], sign * spread) * side_lengths + starts for sign in (-1, 1)]
             starts = np.concatenate([starts] * 3)
             stops = np.concatenate([stops, *sides])
             owners = np.concatenate([owners] * 3)

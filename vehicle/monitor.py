@@ -90,7 +90,11 @@ class Monitor:
             distances = np.array([np.nan if r.distance is None else r.distance for r in readings])
             max_ranges = np.minimum([r.max_range for r in readings], farness)
             beams = np.radians([r.beam_angle for r in readings])
-            self.map.add_readings(origins, directions, distances, max_ranges, beams)
+            # free space from each sensor's latest reading of the period: the earlier ones only repeat it
+            latest = {r.sensor: i for i, r in enumerate(readings)}
+            free = np.zeros(len(readings), dtype=bool)
+            free[list(latest.values())] = True
+            self.map.add_readings(origins, directions, distances, max_ranges, beams, free)
             if travel is not None:
                 observation.nearest_ahead = self._nearest_ahead(x, y, travel, origins, directions, distances,
                                                                 reach)
