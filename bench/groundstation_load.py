@@ -160,7 +160,13 @@ def main() -> None:
                 time.sleep(3.0)
                 cpu0, _ = process_figures(server.pid)
                 started = time.perf_counter()
-                latencies, frames = asyncio.run(viewers(f"ws://127.0.0.1:{web}/viz", vehicles, 9, args.seconds))
+                outcome: dict = {}  # the viewers get their own thread: Playwright's sync API holds this one's loop
+                worker = threading.Thread(target=lambda: outcome.update(result=asyncio.run(
+                    viewers(f"ws://127.0.0.1:{web}/viz", vehicles, 9, args.seconds))))
+                worker.start()
+                while worker.is_alive():
+                    page.wait_for_timeout(500)  # keep the browser's page alive and drawing
+                latencies, frames = outcome["result"]
                 wall = time.perf_counter() - started
                 cpu1, rss = process_figures(server.pid)
                 browser.close()

@@ -49,20 +49,33 @@ class VizProxy:
         requested = client.headers.get("sec-websocket-protocol", "")
         protocols = [p.strip() for p in requested.split(",") if p.strip()]
         viewer = client.query_params.get("viewer")
-        async with self._lock:  # one connection at a time, so the next viser client id is this viewer's
+        if viewer is None:  # not from the page (a script, say): nothing to tie it to, no need to queue
+            upstream = await self._connect(client, protocols)
+            if upstream is not None:
+                await self._relay(client, upstream)
+            return
+        async with self._lock:  # one page at a time, so the next viser client id is this viewer's
             self._pending, _ = viewer, self._connected.clear()
-            try:
-                upstream = await websockets.connect(f"ws://{self.base}", subprotocols=protocols or None,
-                                                    max_size=None, ping_interval=None, compression=None)
-            except OSError:
-                await client.close(code=1011)
+            upstream = await self._connect(client, protocols)
+            if upstream is None:
+                self._pending = None
                 return
-            await client.accept(subprotocol=upstream.subprotocol)
             # relay at once: viser reports a client only after its first message (the camera)
             relay = asyncio.create_task(self._relay(client, upstream))
             await asyncio.to_thread(self._connected.wait, CONNECT_WAIT)
             self._pending = None
         await relay
+
+    async def _connect(self, client: WebSocket, protocols: list[str]):
+        """Open the upstream websocket to viser and accept the client's; None if viser is not there."""
+        try:
+            upstream = await websockets.connect(f"ws://{self.base}", subprotocols=protocols or None,
+                                                max_size=None, ping_interval=None, compression=None)
+        except OSError:
+            await client.close(code=1011)
+            return None
+        await client.accept(subprotocol=upstream.subprotocol)
+        return upstream
 
     @staticmethod
     async def _relay(client: WebSocket, upstream) -> None:
