@@ -201,29 +201,42 @@ class Replay:
             self.clock = seconds
 
     def _needed(self, end: int) -> np.ndarray:
-        """Indices (in time order) of the records before ``end`` that rebuild the state at ``end``."""
+        """Indices of the records before ``end`` that rebuild the state at ``end``.
+
+        Each vehicle's first heartbeat comes first (it creates the vehicle), then
+        its map from the last whole snapshot on (so the readings that follow
+        draw hits, not a map of the ground station's own), then the rest in
+        time order.
+        """
         index = self.index
         msgids, sysids = index.msgids[:end], index.sysids[:end]
-        picked: list[np.ndarray] = []
+        firsts: list[np.ndarray] = []
+        maps: list[np.ndarray] = []
+        rest: list[np.ndarray] = []
         for sysid in np.unique(sysids):
             mine = sysids == sysid
+            heartbeats = np.flatnonzero(mine & (msgids == mavlink.MAVLINK_MSG_ID_HEARTBEAT))
+            firsts.append(heartbeats[:1])
             for msgid in LATEST_ONLY:
                 where = np.flatnonzero(mine & (msgids == msgid))
-                if len(where):
-                    picked.append(where[[0, -1]])  # the first heartbeat creates the vehicle
+                rest.append(where[-1:])
             poses = np.flatnonzero(mine & np.isin(msgids, POSES))
             if len(poses):
-                picked.append(poses[np.linspace(0, len(poses) - 1, min(len(poses), TRAIL_SAMPLES)).astype(int)])
-            picked.append(np.flatnonzero(mine & (msgids == STATUSTEXT))[-RECENT_TEXTS:])
-            tunnels = mine & (msgids == TUNNEL)
-            snapshot_chunks = np.flatnonzero(tunnels & (index.tunnel_types[:end] == MAP_SNAPSHOT))
+                rest.append(poses[np.linspace(0, len(poses) - 1, min(len(poses), TRAIL_SAMPLES)).astype(int)])
+            rest.append(np.flatnonzero(mine & (msgids == STATUSTEXT))[-RECENT_TEXTS:])
+            tunnels = np.flatnonzero(mine & (msgids == TUNNEL))
+            snapshot_chunks = tunnels[index.tunnel_types[tunnels] == MAP_SNAPSHOT]
+            readings = np.flatnonzero(mine & (msgids == DISTANCE_SENSOR))
             if len(snapshot_chunks):
-                picked.append(np.flatnonzero(tunnels)[np.flatnonzero(tunnels) >= self._snapshot_start(
-                    snapshot_chunks)])
-                picked.append(np.flatnonzero(mine & (msgids == DISTANCE_SENSOR))[-RECENT_READINGS:])
+                maps.append(tunnels[tunnels >= self._snapshot_start(snapshot_chunks)])
+                rest.append(readings[-RECENT_READINGS:])
             else:  # no map from the vehicle: the ground station builds one from every reading
-                picked.append(np.flatnonzero(mine & (msgids == DISTANCE_SENSOR)))
-        return np.unique(np.concatenate(picked)) if picked else np.zeros(0, dtype=np.int64)
+                rest.append(readings)
+        if not firsts:
+            return np.zeros(0, dtype=np.int64)
+        first = np.unique(np.concatenate(firsts))
+        return np.concatenate([first, np.unique(np.concatenate(maps + [np.zeros(0, dtype=np.int64)])),
+                               np.setdiff1d(np.concatenate(rest), first)])
 
     def _snapshot_start(self, chunks: np.ndarray) -> int:
         """Record index where the last complete snapshot among ``chunks`` began (its first chunk).
@@ -233,17 +246,15 @@ class Replay:
         to date just the same.
         """
         seen: dict[int, set[int]] = {}
-        first: dict[int, int] = {}
-        counts: dict[int, int] = {}
-        best = None
-        for i in chunks:
+        for i in chunks[::-1]:  # from the latest back: the first whole snapshot found is the one
             ident, number, count = self._chunk_header(int(i))
-            if number == 0 or ident not in first:
-                first[ident], seen[ident], counts[ident] = int(i), set(), count
-            seen[ident].add(number)
-            if len(seen[ident]) == counts[ident]:
-                best = first[ident]
-        return best if best is not None else int(chunks[0])
+            numbers = seen.setdefault(ident, set())
+            numbers.add(number)
+            if number == 0:
+                if len(numbers) == count:
+                    return int(i)
+                del seen[ident]  # an incomplete one: its id may come round again earlier
+        return int(chunks[0])
 
     def _chunk_header(self, i: int) -> tuple[int, int, int]:
         """Snapshot id, chunk index and chunk count inside a MAP_SNAPSHOT TUNNEL record, from the raw packet."""

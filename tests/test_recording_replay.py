@@ -374,6 +374,8 @@ def test_playing_forward_equals_seeking(flight, tmp_path):
         if a.map_stream.synced and b.map_stream.synced:
             assert a.map_stream.applied == b.map_stream.applied
             assert np.array_equal(a.map_stream.grid, b.map_stream.grid)
+        if b.map_stream.synced:  # the vehicle's map applied before the readings: no map of the station's own
+            assert b.own_map is None
 
 
 # ---- replay through the API -------------------------------------------------------------------------------
