@@ -10,6 +10,8 @@ vehicle there goes through the REST API with the operator token.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 import threading
 import time
@@ -43,7 +45,8 @@ class SceneView:
     def __init__(self, fleet: Fleet, scene: Scene | None, port: int = 0):
         self.fleet = fleet
         self.scene = scene
-        self.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)  # loopback: proxied only
+        with contextlib.redirect_stdout(io.StringIO()):  # its banner names an internal port nobody should open
+            self.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)  # loopback: proxied only
         self.server.request_share_url = _refuse_share  # never open a public tunnel, whoever asks
         self.port = self.server.get_port()
         self.caster = RayCaster(scene.mesh) if scene is not None and len(scene.mesh.faces) else None
