@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -68,6 +69,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
                 process.kill()
 
     atexit.register(stop_vehicles)
+    for number in (signal.SIGTERM, signal.SIGHUP):  # as Ctrl-C does: the vehicles go down with the station
+        signal.signal(number, _exit_quietly)
     print(f"demo: {args.vehicles} simulated {args.vehicle}(s) flying '{args.mission}' in {Path(args.scene).name}",
           flush=True)
     try:
@@ -75,6 +78,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     finally:
         stop_vehicles()
     return 0
+
+
+def _exit_quietly(number, frame) -> None:
+    raise SystemExit(0)
 
 
 def cmd_replay(args: argparse.Namespace) -> int:

@@ -131,7 +131,8 @@ class SceneView:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=2)
-        self.server.stop()
+        with contextlib.redirect_stdout(io.StringIO()):  # nor its "Server stopped"
+            self.server.stop()
 
     def _run(self) -> None:
         frame = 0

@@ -1,0 +1,90 @@
+"""The README's first command: ``groundstation demo`` serves the page and flies a simulated vehicle.
+
+Runs the real command as a user would (a subprocess on free ports) and stops it
+the way a service manager does, with SIGTERM: the vehicles must go down with it,
+or the next demo would meet an orphan flying on its port.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+WAIT = 120.0  # s: generous, the demo's vehicles start as separate processes on a busy machine
+
+
+def free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def processes_mentioning(text: str) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if text in (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace"):
+                    found.append(int(entry.name))
+            except OSError:
+                continue
+    return found
+
+
+def vehicles(port: int) -> list[dict]:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/vehicles", timeout=5) as response:
+        return json.load(response)
+
+
+@pytest.fixture
+def demo(tmp_path):
+    port, mavlink_port = free_port(socket.SOCK_STREAM), free_port(socket.SOCK_DGRAM)
+    command = [sys.executable, "-m", "groundstation.cli", "demo", "--port", str(port), "--mavlink-port",
+               str(mavlink_port), "--token", "demo-token", "--record-dir", str(tmp_path), "--speedup", "4",
+               "--quiet"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    yield process, port, mavlink_port, tmp_path
+    if process.poll() is None:
+        process.kill()
+    for pid in processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"):
+        os.kill(pid, signal.SIGKILL)
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to find the vehicle processes")
+def test_the_demo_flies_a_vehicle_and_stops_with_it_on_sigterm(demo):
+    process, port, mavlink_port, record_dir = demo
+    deadline = time.monotonic() + WAIT
+    flying = None
+    while time.monotonic() < deadline and process.poll() is None:
+        try:
+            flying = next((v for v in vehicles(port) if v["armed"] and v["position"]
+                           and v["position"]["z"] > 1.0), None)
+        except OSError:
+            flying = None
+        if flying is not None:
+            break
+        time.sleep(0.5)
+    assert process.poll() is None, process.stdout.read()
+    assert flying is not None, "no simulated vehicle took off in the demo"
+    assert flying["type"] == "copter" and flying["mode"] == "GUIDED"
+    assert processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"), "the vehicle runs as its own process"
+    assert list(record_dir.glob("session-*.tlog")), "the demo records its session"
+
+    process.send_signal(signal.SIGTERM)
+    assert process.wait(timeout=30) == 0
+    output = process.stdout.read()
+    assert "ground station: http://127.0.0.1:" in output and "#token=demo-token" in output
+    assert "viser" not in output.lower(), "no banner naming the 3D view's internal port"
+    deadline = time.monotonic() + 10
+    while processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}") and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"), "a vehicle outlived the demo"
