@@ -216,7 +216,7 @@ def _segment_crosses_triangle(p0, p1, tri):
 def segment_triangle_distance(p0: np.ndarray, p1: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Exact distance from the segment p0p1 to each triangle (n, 3, 3)."""
     best = np.minimum(point_triangle_distance(p0, tri), point_triangle_distance(p1, tri))
-    if np.any(p1 != p0):
+    if (p1 != p0).any():
         for i, j in ((0, 1), (1, 2), (2, 0)):
             best = np.minimum(best, _segment_segment_distance(p0, p1, tri[:, i], tri[:, j]))
         best = np.where(_segment_crosses_triangle(p0, p1, tri), 0.0, best)

@@ -100,18 +100,21 @@ class MemoryMap:
         leaves = vertical > self.band
         lengths = np.where(leaves, lengths * self.band / np.maximum(vertical, 1e-12), lengths)
         echo &= ~leaves
-        ends = origins[:, :2] + directions[:, :2] * lengths[:, None]
-        hit_of_ray = np.where(echo, self._flat_cells(ends[:, 0], ends[:, 1]), -1)
+        flat_directions = directions[:, :2]
+        hit_of_ray = np.where(echo, self._flat_cells(*(origins[:, :2] + flat_directions * lengths[:, None]).T), -1)
         owners = np.arange(len(origins)) if free is None else np.flatnonzero(free)
-        starts, stops = origins[owners, :2], ends[owners]
-        if beams is not None:  # the cone's sides, as far as the centre line reaches (and SIDE_REACH at most)
+        starts, lengths, ux, uy = origins[owners, :2], lengths[owners], *flat_directions[owners].T
+        if beams is None:
+            dx, dy = ux * lengths, uy * lengths
+        else:  # the centre line and the cone's sides (as far as the centre line reaches, SIDE_REACH at most)
             spread = FREE_SPREAD * np.asarray(beams)[owners]
-            side_lengths = np.minimum(lengths[owners], SIDE_REACH)[:, None]
-            sides = [_turn(directions[owners, :2], sign * spread) * side_lengths + starts for sign in (-1, 1)]
+            c, s = np.cos(spread), np.sin(spread)
+            reach = np.minimum(lengths, SIDE_REACH)
+            dx = np.concatenate([ux * lengths, (ux * c + uy * s) * reach, (ux * c - uy * s) * reach])
+            dy = np.concatenate([uy * lengths, (uy * c - ux * s) * reach, (uy * c + ux * s) * reach])
             starts = np.concatenate([starts] * 3)
-            stops = np.concatenate([stops, *sides])
             owners = np.concatenate([owners] * 3)
-        passed, line = self._cells_along(starts, stops)
+        passed, line = self._cells_along(starts, dx, dy)
         self._lower(passed[passed != hit_of_ray[owners[line]]], self.MISS)  # a beam does not pass its own echo
         hits = hit_of_ray[hit_of_ray >= 0]
         if len(hits):
@@ -120,7 +123,7 @@ class MemoryMap:
             after = np.minimum(before + self.HIT, self.LIMIT)
             flat[hits] = after  # a cell listed twice is written twice with the same value
             self.ever_hit.reshape(-1)[hits] = True
-            if np.any((before < self.OCCUPIED_AT) & (after >= self.OCCUPIED_AT)):
+            if ((before < self.OCCUPIED_AT) & (after >= self.OCCUPIED_AT)).any():
                 self.occupied_version += 1
             self._changed.append(hits)
         return len(hits)
@@ -135,29 +138,25 @@ class MemoryMap:
         """Flat index of the cell of each point, -1 outside the map."""
         cols = np.floor((x - self.origin[0]) * self.resolution).astype(np.int64)
         rows = np.floor((y - self.origin[1]) * self.resolution).astype(np.int64)
-        inside = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
+        # as unsigned, a negative index is huge: one comparison per axis finds both edges
+        inside = (cols.view(np.uint64) < self.size) & (rows.view(np.uint64) < self.size)
         return np.where(inside, rows * self.size + cols, -1)
 
-    def _cells_along(self, starts: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Flat indices of the cells the 2D segments pass through (inside the map), each once per segment,
-        and the index of the segment each belongs to.
+    def _cells_along(self, starts: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Flat indices of the cells the 2D segments (start, start + (dx, dy)) pass through (inside the
+        map), each once per segment, and the index of the segment each belongs to.
 
         Samples each segment once per cell length (a cell a line only clips near a corner
         may be missed, which costs nothing here); a straight line never comes back to a
         cell it left, so dropping repeats of the previous sample leaves each cell once.
+        All segments are sampled at once on one (segments x most samples) array.
         """
-        lengths = np.hypot(*(ends - starts).T)
-        samples = (lengths * self.resolution).astype(np.int64) + 2
-        ray = np.repeat(np.arange(len(samples)), samples)
-        first = np.repeat(np.cumsum(samples) - samples, samples)
-        t = (np.arange(len(ray)) - first) / np.repeat(samples - 1, samples)
-        x = starts[ray, 0] + (ends[ray, 0] - starts[ray, 0]) * t
-        y = starts[ray, 1] + (ends[ray, 1] - starts[ray, 1]) * t
-        flat = self._flat_cells(x, y)
-        new = np.ones(len(flat), dtype=bool)
-        new[1:] = (flat[1:] != flat[:-1]) | (ray[1:] != ray[:-1])
-        new &= flat >= 0
-        return flat[new], ray[new]
+        samples = (np.hypot(dx, dy) * self.resolution).astype(np.int64) + 2
+        t = np.arange(samples.max(initial=0)) / (samples - 1.0)[:, None]  # beyond 1 past each segment's end
+        flat = self._flat_cells(starts[:, :1] + dx[:, None] * t, starts[:, 1:] + dy[:, None] * t)
+        new = (t <= 1.0) & (flat >= 0)
+        new[:, 1:] &= flat[:, 1:] != flat[:, :-1]
+        return flat[new], np.nonzero(new)[0]
 
     def _lower(self, cells: np.ndarray, amount: int, floor: int | None = None) -> None:
         """Remove ``amount`` of obstacle evidence from each listed cell (once, however often listed)."""
@@ -169,7 +168,7 @@ class MemoryMap:
         if floor is not None:
             after = np.minimum(after, floor)
         flat[cells] = after
-        if np.any((before >= self.OCCUPIED_AT) & (after < self.OCCUPIED_AT)):
+        if ((before >= self.OCCUPIED_AT) & (after < self.OCCUPIED_AT)).any():
             self.occupied_version += 1
         self._changed.append(cells)
 
