@@ -21,12 +21,6 @@ FREE_SPREAD = 0.7  # share of a beam's half-angle at which its sides are marked 
 SIDE_REACH = 8.0  # m: further out the sides add little beyond the centre line, and cost as much
 
 
-def _turn(vectors: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """2D vectors (n, 2) rotated counter-clockwise by angles (n,) in radians."""
-    c, s = np.cos(angles), np.sin(angles)
-    return np.column_stack([vectors[:, 0] * c - vectors[:, 1] * s, vectors[:, 0] * s + vectors[:, 1] * c])
-
-
 class MemoryMap:
     HIT = 9  # evidence added to the cell a reading ends in
     MISS = 3  # evidence removed from each cell a reading passes through
