@@ -214,3 +214,11 @@ def test_occupied_version_changes_only_when_the_occupied_set_changes(grid):
     grid.mark_body(8.5, 0.5, radius=0.4)  # frees the occupied cell at 8 m
     assert grid.occupied_version > version
     assert grid.detections == 0
+
+
+def test_changes_nobody_takes_stay_bounded_and_complete(grid):
+    for step in range(2000):
+        grid.add_reading(np.array([0.5, 0.5, 0.0]), np.array([1.0, 0.0, 0.0]), 0.5 + (step % 9) * 0.1, 40.0)
+    assert len(grid._changed) <= 513
+    changed = grid.take_changes()
+    assert len(changed) == len(np.unique(changed)) > 0

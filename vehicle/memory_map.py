@@ -119,7 +119,7 @@ class MemoryMap:
             self.ever_hit.reshape(-1)[hits] = True
             if ((before < self.OCCUPIED_AT) & (after >= self.OCCUPIED_AT)).any():
                 self.occupied_version += 1
-            self._changed.append(hits)
+            self._note_changes(hits)
         return len(hits)
 
     def add_reading(self, origin: np.ndarray, direction: np.ndarray, distance: float | None,
@@ -164,7 +164,7 @@ class MemoryMap:
         flat[cells] = after
         if ((before >= self.OCCUPIED_AT) & (after < self.OCCUPIED_AT)).any():
             self.occupied_version += 1
-        self._changed.append(cells)
+        self._note_changes(cells)
 
     @functools.cache  # noqa: B019 - a handful of radii per map, kept for the map's life
     def _disc(self, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -185,6 +185,11 @@ class MemoryMap:
         cells = rows[keep] * self.size + cols[keep]
         cells = cells[self.grid.reshape(-1)[cells] > self.FREE_AT]
         self._lower(cells, 0, floor=self.FREE_AT)
+
+    def _note_changes(self, cells: np.ndarray) -> None:
+        self._changed.append(cells)
+        if len(self._changed) > 512:  # nobody is taking them (a batch run): keep them once each, bounded by the map
+            self._changed = [np.unique(np.concatenate(self._changed))]
 
     def take_changes(self) -> np.ndarray:
         """Flat indices of cells changed since the last call (for streaming deltas)."""
