@@ -225,10 +225,27 @@ def test_mount_pitch_tilts_the_beam(walls):
 
 def test_cone_rays_are_unit_vectors_within_the_beam():
     rays = cone_rays(math.radians(7.5), rings=2)
-    assert rays.shape == (13, 3)
-    assert np.linalg.norm(rays, axis=1) == pytest.approx(np.ones(13))
-    angles = np.degrees(np.arccos(rays[:, 0]))
+    assert rays.shape == (1 + 6 + 12, 3)  # ring k holds 6 k rays: as far apart around as between rings
+    assert np.linalg.norm(rays, axis=1) == pytest.approx(np.ones(len(rays)))
+    angles = np.degrees(np.arccos(np.clip(rays[:, 0], -1, 1)))
     assert angles.max() == pytest.approx(7.5) and angles[0] == 0.0
+    assert np.count_nonzero(np.isclose(angles, 3.75)) == 6
+
+
+def test_a_small_face_off_the_beam_axis_still_echoes():
+    """The end of a thin wall (0.13 x 0.3 m) 8 m away, 5 degrees off the axis (within the 7.5 degree cone):
+    a real sonar hears it, and the default cone is dense enough to find it (a cone of 7 rays missed such a
+    wall end, and a copter flew along the wall into it)."""
+    import trimesh
+
+    from vehicle.raycast import RayCaster
+    from vehicle.sensors import SonarArray
+
+    off_axis = math.radians(5.0)
+    post = trimesh.creation.box(extents=(0.13, 0.13, 0.3))
+    post.apply_translation((8.0 * math.sin(off_axis), 8.0 * math.cos(off_axis), 0.0))
+    (reading,) = SonarArray([Sonar()], RayCaster(post)).read(Pose(0.0, 0.0, 0.0), 0.0)
+    assert reading.distance == pytest.approx(8.0, abs=0.2)
 
 
 def test_sonar_axis_matches_the_reading_direction(walls):

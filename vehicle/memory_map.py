@@ -47,6 +47,7 @@ class MemoryMap:
         self.occupied_version = 0  # counts cells becoming or ceasing to be occupied, so users can skip rechecks
         self.version = 0  # counts updates of any kind, for views that redraw
         self._changed: list[np.ndarray] = []
+        self._folded: np.ndarray | None = None  # changes folded into a mask when nobody took them
 
     # ---- geometry ----------------------------------------------------------------------------
     def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
@@ -188,11 +189,17 @@ class MemoryMap:
 
     def _note_changes(self, cells: np.ndarray) -> None:
         self._changed.append(cells)
-        if len(self._changed) > 512:  # nobody is taking them (a batch run): keep them once each, bounded by the map
-            self._changed = [np.unique(np.concatenate(self._changed))]
+        if len(self._changed) > 512:  # nobody is taking them (a batch run): fold them into a mask of the map
+            if self._folded is None:
+                self._folded = np.zeros(self.grid.size, dtype=bool)
+            self._folded[np.concatenate(self._changed)] = True
+            self._changed.clear()
 
     def take_changes(self) -> np.ndarray:
         """Flat indices of cells changed since the last call (for streaming deltas)."""
+        if self._folded is not None:
+            self._changed.append(np.flatnonzero(self._folded))
+            self._folded = None
         if not self._changed:
             return np.zeros(0, dtype=np.int64)
         changed = np.unique(np.concatenate(self._changed))

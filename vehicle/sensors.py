@@ -53,7 +53,7 @@ class Sonar:
     min_range: float = 0.02
     max_range: float = 40.0
     beam_angle: float = 7.5  # half-angle of the cone (HC-SR04: a 15 degree measuring angle)
-    rings: int = 1  # rings of rays around the centre ray (6 rays per ring)
+    rings: int = 3  # rings of rays around the centre ray (6 more rays on each ring further out)
     critical_angle: float = 60.0  # no echo from surfaces hit more obliquely than this
     noise: float = 0.0  # standard deviation in metres
     servo: Servo | None = None
@@ -184,12 +184,14 @@ def sensor_suite(name: str) -> list[Sonar]:
 
 
 def cone_rays(half_angle: float, rings: int, per_ring: int = 6) -> np.ndarray:
-    """Unit rays in the sensor frame (x forward): the centre plus ``rings`` rings spread over the cone."""
+    """Unit rays in the sensor frame (x forward): the centre plus ``rings`` rings spread over the cone,
+    ring k with k * ``per_ring`` rays, so that rays are about as far apart around a ring as between rings."""
     rays = [(1.0, 0.0, 0.0)]
     for ring in range(1, rings + 1):
         tilt = half_angle * ring / rings
-        for k in range(per_ring):
-            around = 2 * math.pi * (k + 0.5 * (ring % 2)) / per_ring
+        count = per_ring * ring
+        for k in range(count):
+            around = 2 * math.pi * (k + 0.5 * (ring % 2)) / count
             rays.append((math.cos(tilt), math.sin(tilt) * math.cos(around), math.sin(tilt) * math.sin(around)))
     return np.array(rays)
 
