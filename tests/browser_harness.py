@@ -16,7 +16,6 @@ does on its own clock, with a wall-clock backstop.
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from collections.abc import Callable
@@ -24,6 +23,7 @@ from pathlib import Path
 
 import httpx
 import uvicorn
+from groundstation_harness import free_tcp_port, wait_wall
 from mavlink_gcs import RunningSim, free_udp_port
 
 from groundstation.app import create_app
@@ -41,29 +41,10 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
                  "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
 
 
-def free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
 def poll(condition: Callable[[], object], timeout: float, interval: float = 0.1, what: str = "condition",
          sleep: Callable[[], None] | None = None):
-    """The first truthy value of ``condition()`` within ``timeout`` wall seconds, else AssertionError.
-
-    ``sleep`` replaces ``time.sleep(interval)``: with Playwright's sync API, events (websocket
-    frames, requests) reach their handlers only while Playwright waits, so pass a page's wait."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what} not met within {timeout:g} s")
-        if sleep is not None:
-            sleep()
-        else:
-            time.sleep(interval)
+    """The first truthy value of ``condition()`` within ``timeout`` wall seconds, else WaitTimeout."""
+    return wait_wall(condition, timeout, what, interval, sleep)
 
 
 class Station:

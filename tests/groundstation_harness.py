@@ -140,8 +140,12 @@ class Api(httpx.Client):
                                  what=f"{seconds} s of simulated time")
 
 
-def wait_wall(condition: Callable[[], object], timeout: float, what: str = "condition", period: float = 0.05):
-    """``condition()``'s first truthy value within ``timeout`` wall seconds (for wall-clock properties)."""
+def wait_wall(condition: Callable[[], object], timeout: float, what: str = "condition", period: float = 0.05,
+              sleep: Callable[[], None] | None = None):
+    """``condition()``'s first truthy value within ``timeout`` wall seconds (for wall-clock properties).
+
+    ``sleep`` replaces ``time.sleep(period)``: with Playwright's sync API, events (websocket
+    frames, requests) reach their handlers only while Playwright waits, so pass a page's wait."""
     deadline = time.monotonic() + timeout
     while True:
         value = condition()
@@ -149,7 +153,10 @@ def wait_wall(condition: Callable[[], object], timeout: float, what: str = "cond
             return value
         if time.monotonic() > deadline:
             raise WaitTimeout(f"{what} not met within {timeout} s")
-        time.sleep(period)
+        if sleep is not None:
+            sleep()
+        else:
+            time.sleep(period)
 
 
 def make_vehicle(scene: Scene, kind: str = "copter", mission: str = "browse", autostart: bool = False,
