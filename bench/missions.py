@@ -6,11 +6,12 @@ run prints its outcome, detections (occupied cells at the end), cells ever hit, 
 and wall time and the speed-up, beside the thesis's Table 1 count for that mission and
 scene where there is one. Runs one after another in this process, so wall times are not
 shared with other runs. Target: a whole mission at least 500x faster than real time.
-Run: python bench/missions.py
+Run: python bench/missions.py [--sensors single|triple|servo]
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 from pathlib import Path
@@ -19,8 +20,10 @@ from common import CASTLE, ROOT, castle_or_default, code_state, table
 
 from vehicle.experiment import Experiment, run_experiment
 from vehicle.scene import load_scene
+from vehicle.sensors import SENSOR_SUITES
 from vehicle.settings import load_settings
 from vehicle.sweep import THESIS_TABLE
+from vehicle.world import DEFAULT_SUITE
 
 MISSIONS = ["square", "browse", "search", "pathfind"]
 TARGET = 500.0
@@ -34,6 +37,10 @@ def scenes() -> list[tuple[Path, tuple[float, float] | None]]:
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description="Every mission once per scene, timed.")
+    parser.add_argument("--sensors", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
+                        help="sensor suite (default %(default)s; the thesis's vehicle had a single sonar)")
+    suite = parser.parse_args().sensors
     load = os.getloadavg()[0]
     rows = []
     total_sim = total_wall = 0.0
@@ -43,7 +50,8 @@ def main() -> None:
         settings = load_settings(scene_hints=scene.hints)
         for mission in MISSIONS:
             started = time.perf_counter()
-            result = run_experiment(Experiment(str(path), mission, "copter", start, None, settings), scene=scene)
+            experiment = Experiment(str(path), mission, "copter", start, None, settings, sensors=suite)
+            result = run_experiment(experiment, scene=scene)
             wall = time.perf_counter() - started
             sim = result.get("sim_time_s", 0.0)
             total_sim += sim
@@ -64,7 +72,8 @@ def main() -> None:
                 [[f"{total_sim:.0f}", f"{total_wall:.1f}", f"{overall:,.0f}x",
                   f"{slowest[1]}: {slowest[0]:,.0f}x" if slowest else "-", f">= {TARGET:.0f}x per mission"]]))
     print()
-    print("Copter, default settings plus each scene's suggestions (house: altitude 1.6, padding 0.1, closeness 0.8, "
+    print(f"Copter with the {suite} sensor suite, default settings plus each scene's suggestions (house: "
+          "altitude 1.6, padding 0.1, closeness 0.8, "
           "space_size 10, its waypoints). The thesis's figures are its best over a 48-setting sweep (its Square "
           f"runs all collided); these are single runs. Load average before/after: {load:.1f}/{os.getloadavg()[0]:.1f} "
           f"(other processes on the machine slow the wall times). Vehicle code: {code_state()}.")
