@@ -128,13 +128,3 @@ def test_ground_height_is_the_roof_under_a_roof_and_the_ground_in_the_open(backe
     assert caster.ground_height(0.0, 3.0) == pytest.approx(0.0, abs=1e-4)
     assert caster.ground_height(5.0, 5.0) == pytest.approx(2.0, abs=1e-4)  # on top of the cube
     assert caster.ground_height(500.0, 0.0, default=-1.5) == -1.5  # beyond the scene
-
-
-def test_incidence_cos_is_one_head_on_half_at_sixty_degrees_and_zero_for_misses(yard):
-    caster = RayCaster(yard.mesh)
-    a = math.radians(60)
-    directions = np.array([[-1.0, 0.0, 0.0], [-math.cos(a), math.sin(a), 0.0], [0.0, 0.0, 1.0]])
-    origins = np.tile([-4.0, 0.0, 1.0], (3, 1))  # the wall's east face is 1.9 m west
-    _, face = caster.cast(origins, directions)
-    cos = caster.incidence_cos(directions, face)
-    assert cos == pytest.approx([1.0, 0.5, 0.0], abs=1e-9)

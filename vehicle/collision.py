@@ -32,29 +32,28 @@ class Contact:
         return f"collision at x={x:.2f} y={y:.2f} z={z:.2f} (face {self.face})"
 
 
-class Collider:
-    """Answers whether a sphere of ``radius`` moving from p0 to p1 touches the mesh."""
+class TriangleGrid:
+    """The scene's triangles binned by the ground-plane grid cells their bounding boxes overlap.
 
-    def __init__(self, mesh: trimesh.Trimesh, radius: float, ignore_walkable: bool = False,
-                 cell_size: float = 2.0, search: float = 4.0):
-        self.radius = float(radius)
-        self.search = max(float(search), 2 * self.radius)
+    Built once per scene and vehicle kind (a few milliseconds for ten thousand
+    triangles) and shared by every collider in it: it never changes.
+    """
+
+    def __init__(self, mesh: trimesh.Trimesh, ignore_walkable: bool = False, cell_size: float = 2.0):
         self.cell_size = float(cell_size)
         triangles = np.asarray(mesh.triangles, dtype=np.float64).reshape(-1, 3, 3)
         face_ids = np.arange(len(triangles))
         if ignore_walkable and len(triangles):
             keep = np.asarray(mesh.face_normals)[:, 2] <= WALKABLE_NORMAL_Z
             triangles, face_ids = triangles[keep], face_ids[keep]
-        self._triangles = triangles
-        self._face_ids = face_ids
+        self.triangles = triangles
+        self.face_ids = face_ids
         self._lo = triangles.min(axis=1) if len(triangles) else np.zeros((0, 3))
         self._hi = triangles.max(axis=1) if len(triangles) else np.zeros((0, 3))
         self._grid = self._build_grid()
-        self._anchor: np.ndarray | None = None
-        self._safe = 0.0
 
     def _build_grid(self) -> dict[tuple[int, int], np.ndarray]:
-        """Triangles by the grid cells their bounding boxes overlap; big ones (ground planes) go in ``_large``."""
+        """Triangles by cell; big ones (ground planes) go in ``_large``, checked everywhere."""
         lo = np.floor(self._lo[:, :2] / self.cell_size).astype(np.int64)
         hi = np.floor(self._hi[:, :2] / self.cell_size).astype(np.int64)
         spans = hi - lo + 1
@@ -75,7 +74,7 @@ class Collider:
         firsts = np.concatenate(([0], breaks))
         return {(int(i[f]), int(j[f])): group for f, group in zip(firsts, groups, strict=True)}
 
-    def _candidates(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    def candidates(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Indices of triangles whose bounding box overlaps the box [lo, hi]."""
         i0, j0 = np.floor(lo[:2] / self.cell_size).astype(int)
         i1, j1 = np.floor(hi[:2] / self.cell_size).astype(int)
@@ -86,10 +85,26 @@ class Collider:
         overlap = np.all((self._lo[ids] <= hi) & (self._hi[ids] >= lo), axis=1)
         return ids[overlap]
 
+
+class Collider:
+    """Answers whether a sphere of ``radius`` moving from p0 to p1 touches the mesh.
+
+    Takes the mesh, or its ``TriangleGrid`` when several colliders share one.
+    """
+
+    def __init__(self, mesh: trimesh.Trimesh | TriangleGrid, radius: float, ignore_walkable: bool = False,
+                 search: float = 4.0):
+        self.grid = mesh if isinstance(mesh, TriangleGrid) else TriangleGrid(mesh, ignore_walkable)
+        self.radius = float(radius)
+        self.search = max(float(search), 2 * self.radius)
+        self._triangles = self.grid.triangles
+        self._anchor: np.ndarray | None = None
+        self._safe = 0.0
+
     def clearance(self, point: np.ndarray) -> float:
         """Distance from ``point`` to the nearest triangle, or ``search`` if none is that close."""
         point = np.asarray(point, dtype=np.float64)
-        ids = self._candidates(point - self.search, point + self.search)
+        ids = self.grid.candidates(point - self.search, point + self.search)
         if len(ids) == 0:
             return self.search
         return min(self.search, float(point_triangle_distance(point, self._triangles[ids]).min()))
@@ -106,7 +121,7 @@ class Collider:
             self._anchor, self._safe = tuple(p0), clear - self.radius
             return None
         self._anchor = None
-        ids = self._candidates(np.minimum(p0, p1) - self.radius, np.maximum(p0, p1) + self.radius)
+        ids = self.grid.candidates(np.minimum(p0, p1) - self.radius, np.maximum(p0, p1) + self.radius)
         if len(ids) == 0:
             return None
         triangles = self._triangles[ids]
@@ -122,7 +137,7 @@ class Collider:
                 lo = mid
         end = p0 + hi * (p1 - p0)
         touching = int(np.argmin(segment_triangle_distance(p0, end, triangles)))
-        return Contact(point=end, fraction=hi, face=int(self._face_ids[ids[touching]]))
+        return Contact(point=end, fraction=hi, face=int(self.grid.face_ids[ids[touching]]))
 
     def touches(self, point: np.ndarray) -> bool:
         return self.sweep(point, point) is not None

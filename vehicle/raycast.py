@@ -30,7 +30,8 @@ class RayCaster:
     """Casts batches of rays and returns, per ray, the distance to the first hit and the face hit.
 
     ``cast(origins, directions)`` takes (n, 3) arrays of origins and unit directions and
-    returns ``(distance, face)``: distance is ``inf`` and face is -1 where a ray hits nothing.
+    returns ``(distance, face)``: distance is ``inf`` and face is -1 where a ray hits nothing
+    (float32 and int32 arrays from Embree, float64 and int64 from the numpy fallback).
     """
 
     def __init__(self, mesh: trimesh.Trimesh, backend: str = "auto"):
@@ -74,9 +75,9 @@ class RayCaster:
         return self._cast_embree(origins, directions)
 
     def _cast_embree(self, origins, directions):
-        result = self._scene.run(origins.astype(np.float32), directions.astype(np.float32), output=1)
-        face = result["primID"].astype(np.int64)
-        distance = result["tfar"].astype(np.float64)
+        result = self._scene.run(origins.astype(np.float32, copy=False), directions.astype(np.float32, copy=False),
+                                 output=1)
+        face, distance = result["primID"], result["tfar"]  # int32 and float32, as Embree gives them
         distance[face < 0] = MISS
         return distance, face
 
@@ -90,12 +91,6 @@ class RayCaster:
             distance[ray] = np.einsum("ij,ij->i", points - origins[ray], directions[ray])
             faces[ray] = face
         return distance, faces
-
-    def incidence_cos(self, directions: np.ndarray, faces: np.ndarray) -> np.ndarray:
-        """|cos| of the angle between each ray and the normal of the face it hit (0 where it missed)."""
-        cos = np.abs((self.face_normals[faces] * directions).sum(axis=1))  # faces of -1 read the last normal
-        cos[faces < 0] = 0.0
-        return cos
 
     def ground_height(self, x: float, y: float, default: float = 0.0) -> float:
         """Height of the highest surface a vertical ray from above meets at (x, y)."""

@@ -11,9 +11,10 @@ import functools
 import math
 import os
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import mapbox_earcut
 import numpy as np
@@ -37,6 +38,7 @@ _NON_GEOMETRIC = frozenset(
 )
 _WITHOUT_TRIANGLES = frozenset({"IndexedLineSet", "PointSet"})
 _NO_FACES = np.zeros((0, 3), dtype=np.int64)
+T = TypeVar("T")
 
 
 @dataclass
@@ -52,11 +54,19 @@ class Scene:
     start: tuple[float, float] | None = None  # Viewpoint "Start", x and y
     start_heading: float | None = None  # compass degrees of its view direction; None if vertical
     hints: dict[str, str] = field(default_factory=dict)  # "name=value" strings of a WorldInfo's info
+    _prepared: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def bounds(self) -> np.ndarray:
         """(2, 3) lowest and highest corner of the triangles; zeros for an empty scene."""
         return self.mesh.bounds if len(self.mesh.faces) else np.zeros((2, 3))
+
+    def prepared(self, key: Hashable, build: Callable[[], T]) -> T:
+        """What ``build()`` makes from the triangles (a ray caster's BVH, a collision grid), made once
+        per scene and shared by every run in it: a scene does not change after loading."""
+        if key not in self._prepared:
+            self._prepared[key] = build()
+        return self._prepared[key]
 
 
 def load_scene(path: str | Path) -> Scene:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from vehicle.physics import Pose
@@ -112,10 +113,9 @@ class SonarArray:
         self.caster = caster
         self.rng = np.random.default_rng(seed)
         self._mount_key: tuple[float, ...] | None = None
+        self._first_ray = np.cumsum([0] + [len(s._local_rays) for s in sensors])
         self._cos_critical = np.array([s._cos_critical for s in sensors])
         self._min_range = np.array([s.min_range for s in sensors])
-        self._max_range = np.array([s.max_range for s in sensors])
-        self._uniform = len({len(s._local_rays) for s in sensors}) == 1
 
     def _body_rays(self) -> tuple[np.ndarray, np.ndarray]:
         """All sensors' rays and beam axes in the body frame; recomputed only when a servo moved."""
@@ -135,18 +135,12 @@ class SonarArray:
         rays, axes = self._body_rays()
         directions = rays @ body.T
         distance, faces = self.caster.cast_from(origin, directions)
-        echo = self.caster.incidence_cos(directions, faces)
-        if self._uniform:  # one reduction for all sensors: each reports its nearest usable echo
-            count = len(self.sensors)
-            usable = ((echo.reshape(count, -1) >= self._cos_critical[:, None])
-                      & (distance.reshape(count, -1) >= self._min_range[:, None]))
-            nearest = np.where(usable, distance.reshape(count, -1), np.inf).min(axis=1)
-        else:
-            nearest = self._nearest_each(distance, echo)
+        nearest = _nearest_echoes(distance, faces, directions, self.caster.face_normals, self._first_ray,
+                                  self._cos_critical, self._min_range).tolist()
         world_axes = axes @ body.T
         readings = []
         for index, sensor in enumerate(self.sensors):
-            value = float(nearest[index]) if nearest[index] <= self._max_range[index] else None
+            value = nearest[index] if nearest[index] <= sensor.max_range else None
             if value is not None and sensor.noise > 0:
                 noisy = value + self.rng.normal(0.0, sensor.noise)
                 value = float(min(sensor.max_range, max(sensor.min_range, noisy)))
@@ -154,15 +148,26 @@ class SonarArray:
                                     sensor.yaw_offset, sensor.beam_angle))
         return readings
 
-    def _nearest_each(self, distance: np.ndarray, echo: np.ndarray) -> np.ndarray:
-        nearest = np.empty(len(self.sensors))
-        start = 0
-        for index, sensor in enumerate(self.sensors):
-            end = start + len(sensor._local_rays)
-            usable = (echo[start:end] >= sensor._cos_critical) & (distance[start:end] >= sensor.min_range)
-            nearest[index] = np.where(usable, distance[start:end], np.inf).min()
-            start = end
-        return nearest
+
+@numba.njit(cache=True)
+def _nearest_echoes(distance, faces, directions, normals, first_ray, cos_critical, min_range):
+    """Per sensor (its rays are first_ray[i] up to first_ray[i + 1]), the nearest distance at which a ray
+    hit a face it meets no more obliquely than the critical angle, at min_range or further; inf if none.
+
+    A loop over a hundred rays: in numpy the same takes a dozen calls on small arrays,
+    several times slower at the ten readings a second every simulated vehicle takes.
+    """
+    nearest = np.full(len(cos_critical), np.inf)
+    for sensor in range(len(cos_critical)):
+        for ray in range(first_ray[sensor], first_ray[sensor + 1]):
+            face, reach = faces[ray], distance[ray]
+            if face < 0 or reach < min_range[sensor] or reach >= nearest[sensor]:
+                continue
+            cos = abs(normals[face, 0] * directions[ray, 0] + normals[face, 1] * directions[ray, 1]
+                      + normals[face, 2] * directions[ray, 2])
+            if cos >= cos_critical[sensor]:
+                nearest[sensor] = reach
+    return nearest
 
 
 SENSOR_SUITES = {

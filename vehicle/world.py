@@ -15,7 +15,7 @@ from vehicle.autopilot import Autopilot
 from vehicle.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.avoidance import ObstacleDatabase
 from vehicle.battery import Battery
-from vehicle.collision import Collider, Contact
+from vehicle.collision import Collider, Contact, TriangleGrid
 from vehicle.geodesy import Datum
 from vehicle.modes import Kind
 from vehicle.physics import Body, Limits, Pose
@@ -46,14 +46,16 @@ class World:
         self.time = 0.0
         self.steps = 0
         self.datum = datum or Datum()
-        self.caster = RayCaster(scene.mesh, backend)
+        self.caster = scene.prepared(("caster", backend), lambda: RayCaster(scene.mesh, backend))
         self.limits = limits or Limits()
         x, y = start if start is not None else (scene.start or (0.0, 0.0))
         heading = heading if heading is not None else (scene.start_heading or 0.0)
         ground = self.caster.ground_height(x, y)
         self.body = Body(self.kind, self.limits, Pose(x, y, 0.0, yaw=math.radians(heading) % (2 * math.pi)))
         self.body.pose.z = self.body.rest_height(ground)
-        self.collider = Collider(scene.mesh, self.limits.radius, ignore_walkable=self.kind is Kind.ROVER)
+        walkable = self.kind is Kind.ROVER  # a rover's wheels touch the ground it drives on
+        grid = scene.prepared(("triangles", walkable), lambda: TriangleGrid(scene.mesh, ignore_walkable=walkable))
+        self.collider = Collider(grid, self.limits.radius)
         if self.collider.touches(np.array(self.body.pose.xyz())):
             raise PlacementError(f"the start x={x:g} y={y:g} is inside an obstacle")
         self.avoidance = ObstacleDatabase(margin=AVOID_MARGIN, accel=self.limits.accel, body_radius=self.limits.radius)
