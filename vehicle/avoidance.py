@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 MARGIN = 0.1  # m kept between the body and any remembered echo (planning keeps at least twice that)
@@ -48,21 +49,31 @@ class ObstacleDatabase:
         reach = self.body_radius + self.margin + speed * speed / (2 * self.accel) + 1.0  # further cannot matter
         if self._clear_from is not None and math.dist(self._clear_from, (x, y)) + reach < self._clear_radius:
             return math.inf  # nothing known anywhere near: skip the search
-        rel = self._points - (x, y)
-        live = self._times > now - self.lifetime
-        distances = np.hypot(rel[:, 0], rel[:, 1])
-        self._clear_from = (x, y)
-        self._clear_radius = float(distances[live].min()) if live.any() else math.inf
-        near = live & (distances < reach)
-        if not near.any():
-            return math.inf
         ux, uy = vx / speed, vy / speed
-        rel = rel[near]
-        ahead = rel[:, 0] * ux + rel[:, 1] * uy
-        lateral = np.abs(rel[:, 0] * uy - rel[:, 1] * ux)
-        corridor = self.body_radius + self.margin
-        in_way = (ahead > 0) & (lateral < corridor)
-        if not in_way.any():
+        nearest, gap = _nearest_and_ahead(self._points, self._times, now - self.lifetime, x, y, ux, uy,
+                                          reach, self.body_radius + self.margin)
+        self._clear_from, self._clear_radius = (x, y), nearest
+        if gap == math.inf:
             return math.inf
-        gap = float(ahead[in_way].min()) - corridor
         return math.sqrt(2 * self.accel * gap) if gap > 0 else 0.0
+
+
+@numba.njit(cache=True)
+def _nearest_and_ahead(points, times, oldest, x, y, ux, uy, reach, corridor):
+    """Over the points remembered after ``oldest``: the distance to the nearest, and how far (less the
+    corridor's half-width) the nearest one within ``reach`` lies ahead inside the corridor along (ux, uy),
+    inf if none. A loop over a few hundred points, asked at every simulated step."""
+    nearest = math.inf
+    gap = math.inf
+    for k in range(len(times)):
+        if times[k] <= oldest:
+            continue
+        dx, dy = points[k, 0] - x, points[k, 1] - y
+        distance = math.hypot(dx, dy)
+        nearest = min(nearest, distance)
+        if distance >= reach:
+            continue
+        ahead = dx * ux + dy * uy
+        if ahead > 0 and abs(dx * uy - dy * ux) < corridor:
+            gap = min(gap, ahead - corridor)
+    return nearest, gap
