@@ -115,20 +115,6 @@ class MemoryMap:
         return self.add_readings(np.asarray(origin)[None], np.asarray(direction)[None],
                                  np.array([np.nan if distance is None else distance]), np.array([max_range])) > 0
 
-    def _lower(self, cells: np.ndarray, amount: int, floor: int | None = None) -> None:
-        """Remove ``amount`` of obstacle evidence from each listed cell (once, however often listed)."""
-        if not len(cells):
-            return
-        flat = self.grid.reshape(-1)
-        before = flat[cells].astype(np.int16)
-        after = np.maximum(before - amount, self.FLOOR)
-        if floor is not None:
-            after = np.minimum(after, floor)
-        flat[cells] = after
-        if ((before >= self.OCCUPIED_AT) & (after < self.OCCUPIED_AT)).any():
-            self.occupied_version += 1
-        self._note_changes(cells)
-
     @functools.cache  # noqa: B019 - a handful of radii per map, kept for the map's life
     def _disc(self, radius: float) -> tuple[np.ndarray, np.ndarray]:
         """Row and column offsets of the cells whose centres lie within ``radius`` metres of a cell's centre."""
@@ -142,12 +128,10 @@ class MemoryMap:
         centre = self.cell_of(x, y)
         if centre is None:
             return
-        offsets = self._disc(radius)
-        rows, cols = offsets[0] + centre[0], offsets[1] + centre[1]
-        keep = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
-        cells = rows[keep] * self.size + cols[keep]
-        cells = cells[self.grid.reshape(-1)[cells] > self.FREE_AT]
-        self._lower(cells, 0, floor=self.FREE_AT)
+        cells, crossed = _free_cells(self.grid.reshape(-1), self.size, *centre, *self._disc(radius))
+        self.occupied_version += crossed
+        if len(cells):
+            self._note_changes(cells)
 
     def _note_changes(self, cells: np.ndarray) -> None:
         self._changed.append(cells)
@@ -330,3 +314,21 @@ def _project(grid, ever_hit, size, x0, y0, resolution, band, origins, directions
         grid[hits[k]] = gained[k]
         ever_hit[hits[k]] = True
     return passed, hits, crossed
+
+
+@numba.njit(cache=True)
+def _free_cells(grid, size, row, col, rows, cols):
+    """Mark free the cells at the offsets (rows, cols) from (row, col) that are inside the map and not
+    free yet; returns them, and 1 if one of them was occupied, else 0."""
+    changed = np.empty(len(rows), dtype=np.int64)
+    used = 0
+    crossed = 0
+    for k in range(len(rows)):
+        r, c = row + rows[k], col + cols[k]
+        if 0 <= r < size and 0 <= c < size and grid[r * size + c] > FREE_AT:
+            if grid[r * size + c] >= OCCUPIED_AT:
+                crossed = 1
+            grid[r * size + c] = FREE_AT
+            changed[used] = r * size + c
+            used += 1
+    return changed[:used], crossed
