@@ -63,7 +63,13 @@ class Search(Mission):
         return Status.RUNNING
 
     def choose_goal(self, readings) -> tuple[float, float] | None:
-        """The stand-off point beside the best-scoring echo of the sweep, or None."""
+        """The stand-off point beside the best-scoring echo of the sweep, or None.
+
+        An echo scores its distance, plus OPEN_WEIGHT times the mean free distance
+        of the more open arc beside it, plus UNKNOWN_WEIGHT times the share of
+        unknown cells around its goal. Echoes are tried best first by the most
+        they could score, so the map is consulted only for the few that can win.
+        """
         ctx = self.ctx
         band = ctx.map.band
         readings = [r for r in readings if r.distance is None or abs(r.hit[2] - r.origin[2]) <= band]
@@ -73,14 +79,18 @@ class Search(Mission):
         reach = min(ctx.settings.farness, max(r.max_range for r in readings))
         free = np.minimum(distances, reach)
         standoff = ctx.settings.closeness + ctx.radius + ctx.settings.padding
+        left = _means_in_arcs(headings, free, -OPEN_ARC[1], -OPEN_ARC[0])
+        right = _means_in_arcs(headings, free, OPEN_ARC[0], OPEN_ARC[1])
+        promise = distances + OPEN_WEIGHT * np.maximum(left, right)  # the score without the unknown share
         x, y = ctx.position
-        best, best_score = None, -math.inf
-        for heading, distance in zip(headings, distances, strict=True):
+        best, best_score, best_index = None, -math.inf, len(headings)
+        for i in np.argsort(-(promise + UNKNOWN_WEIGHT), kind="stable"):  # best possible first, ties in order
+            heading, distance = headings[i], distances[i]
+            if promise[i] + UNKNOWN_WEIGHT < best_score:
+                break  # no later echo can beat the best one
             if not np.isfinite(distance) or distance - standoff < MIN_LEG:
                 continue
-            left = _mean_in_arc(headings, free, heading - OPEN_ARC[1], heading - OPEN_ARC[0])
-            right = _mean_in_arc(headings, free, heading + OPEN_ARC[0], heading + OPEN_ARC[1])
-            side = 1.0 if right >= left else -1.0  # +1: clockwise of the echo
+            side = 1.0 if right[i] >= left[i] else -1.0  # +1: clockwise of the echo
             ux, uy = math.sin(heading), math.cos(heading)
             sx, sy = side * uy, -side * ux  # perpendicular towards the open side
             goal = (x + ux * (distance - standoff) + sx * standoff, y + uy * (distance - standoff) + sy * standoff)
@@ -88,9 +98,9 @@ class Search(Mission):
                 continue
             if not ctx.is_clear(goal) or not ctx.inside(goal):
                 continue
-            score = distance + OPEN_WEIGHT * max(left, right) + UNKNOWN_WEIGHT * self._unknown_around(goal)
-            if score > best_score:
-                best, best_score = goal, score
+            score = promise[i] + UNKNOWN_WEIGHT * self._unknown_around(goal)
+            if score > best_score or (score == best_score and i < best_index):
+                best, best_score, best_index = goal, score, i
         return best
 
     def _unknown_around(self, point: tuple[float, float]) -> float:
@@ -116,8 +126,10 @@ class Search(Mission):
         return Status.DONE
 
 
-def _mean_in_arc(headings: np.ndarray, values: np.ndarray, start: float, end: float) -> float:
-    """Mean of the values whose heading lies in the arc [start, end] (radians, any period)."""
-    offset = (headings - start) % (2 * math.pi)
-    inside = offset <= (end - start)
-    return float(values[inside].mean()) if inside.any() else 0.0
+def _means_in_arcs(headings: np.ndarray, values: np.ndarray, start: float, end: float) -> np.ndarray:
+    """For each heading h, the mean of the values whose heading lies in the arc [h + start, h + end]
+    (radians, any period), 0 where none does."""
+    starts, ends = headings + start, headings + end
+    inside = (headings[None, :] - starts[:, None]) % (2 * math.pi) <= (ends - starts)[:, None]
+    count = inside.sum(axis=1)
+    return np.where(count > 0, (inside @ values) / np.maximum(count, 1), 0.0)
