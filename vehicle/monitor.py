@@ -44,18 +44,26 @@ class Monitor:
         self._last_xy: tuple[float, float] | None = None
         self._pending: list[Reading] = []
 
-    def _nearest_ahead(self, x, y, travel, origins, directions, distances, reach) -> float | None:
+    def _nearest_ahead(self, x: float, y: float, travel: float, readings: list[Reading],
+                       reach: float) -> float | None:
         """Distance ahead of the nearest echo inside the corridor the body sweeps along ``travel``,
         as far as ``reach`` metres."""
-        echo = ~np.isnan(distances)
-        hits = origins[echo] + directions[echo] * distances[echo, None]
-        level = np.abs(hits[:, 2] - origins[echo, 2]) <= self.map.band  # not ground or ceiling
         ux, uy = math.sin(travel), math.cos(travel)
-        dx, dy = hits[:, 0] - x, hits[:, 1] - y
-        ahead = dx * ux + dy * uy
         corridor = self.radius + self.settings.padding
-        inside = level & (ahead > 0) & (ahead < reach + corridor) & (np.abs(dx * uy - dy * ux) < corridor)
-        return float(ahead[inside].min()) if inside.any() else None
+        nearest = None
+        for reading in readings:  # a handful per period: plain floats beat a dozen numpy calls
+            if reading.distance is None:
+                continue
+            ox, oy, oz = reading.origin.tolist()
+            rx, ry, rz = reading.direction.tolist()
+            hx, hy, hz = ox + rx * reading.distance, oy + ry * reading.distance, oz + rz * reading.distance
+            if abs(hz - oz) > self.map.band:
+                continue  # ground or ceiling
+            dx, dy = hx - x, hy - y
+            ahead = dx * ux + dy * uy
+            if 0 < ahead < reach + corridor and abs(dx * uy - dy * ux) < corridor:
+                nearest = ahead if nearest is None else min(nearest, ahead)
+        return nearest
 
     def collect(self, readings: list[Reading]) -> None:
         """Buffer readings taken between two monitor periods."""
@@ -96,8 +104,7 @@ class Monitor:
             free[list(latest.values())] = True
             self.map.add_readings(origins, directions, distances, max_ranges, beams, free)
             if travel is not None:
-                observation.nearest_ahead = self._nearest_ahead(x, y, travel, origins, directions, distances,
-                                                                reach)
+                observation.nearest_ahead = self._nearest_ahead(x, y, travel, readings, reach)
         self._pending = []
         stopping = speed * self.settings.monitor_period + speed * speed / (2 * self.brake)
         observation.too_close = (observation.nearest_ahead is not None
