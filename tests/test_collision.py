@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from vehicle.collision import Collider
+from vehicle.collision import Collider, point_triangle_distance
 from vehicle.modes import Kind
 from vehicle.sensors import Sonar
 from vehicle.world import PlacementError, World
@@ -57,6 +57,25 @@ def test_clearance_is_the_distance_to_the_nearest_surface(wall_scene):
     collider = Collider(wall_scene.mesh, RADIUS)
     assert collider.clearance(np.array([0.0, 8.0, 4.0])) == pytest.approx(1.9, abs=1e-6)
     assert collider.clearance(np.array([0.0, 0.0, 50.0])) == collider.search  # nothing near
+
+
+@pytest.mark.parametrize(("point", "expected"), [
+    ((0.5, -1.0, 0.0), 1.0),  # off the edge ab
+    ((0.25, 0.25, 2.0), 2.0),  # above it
+    ((-3.0, -4.0, 0.0), 5.0),  # off vertex a
+    ((3.0, 3.0, 0.0), 2.0 * math.sqrt(2.0)),  # off the long edge bc
+])
+def test_point_triangle_distance_in_each_region(point, expected):
+    triangle = np.array([[[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0]]])
+    assert point_triangle_distance(np.array(point), triangle)[0] == pytest.approx(expected)
+
+
+def test_a_triangle_without_area_is_as_near_as_its_edges():
+    collinear = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]])  # a 2 m segment along x
+    assert point_triangle_distance(np.array([1.5, 1.0, 0.0]), collinear)[0] == pytest.approx(1.0)
+    assert point_triangle_distance(np.array([3.0, 0.0, 0.0]), collinear)[0] == pytest.approx(1.0)
+    point_like = np.zeros((1, 3, 3))
+    assert point_triangle_distance(np.array([0.0, 3.0, 4.0]), point_like)[0] == pytest.approx(5.0)
 
 
 def test_touches_a_point_within_radius_of_the_wall(wall_scene):

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import trimesh
 
@@ -143,48 +144,90 @@ class Collider:
         return self.sweep(point, point) is not None
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("...i,...i->...", a, b)
-
-
-def closest_points_on_triangles(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Closest point on each triangle (n, 3, 3) to the point p (3,) or points (n, 3).
-
-    Ericson, Real-Time Collision Detection, 5.1.5, vectorised over triangles.
-    """
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    p = np.broadcast_to(p, a.shape)
-    ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = _dot(ab, ap), _dot(ac, ap)
-    bp, cp = p - b, p - c
-    d3, d4 = _dot(ab, bp), _dot(ac, bp)
-    d5, d6 = _dot(ab, cp), _dot(ac, cp)
-    va = d3 * d6 - d5 * d4
-    vb = d5 * d2 - d1 * d6
-    vc = d1 * d4 - d3 * d2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        denom = va + vb + vc
-        v = vb / denom
-        w = vc / denom
-        result = a + ab * v[:, None] + ac * w[:, None]  # inside the face
-        t_ab = d1 / (d1 - d3)
-        t_ac = d2 / (d2 - d6)
-        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-    on_bc = (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)
-    result = np.where(on_bc[:, None], b + (c - b) * t_bc[:, None], result)
-    on_ac = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
-    result = np.where(on_ac[:, None], a + ac * t_ac[:, None], result)
-    on_ab = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
-    result = np.where(on_ab[:, None], a + ab * t_ab[:, None], result)
-    result = np.where(((d6 >= 0) & (d5 <= d6))[:, None], c, result)
-    result = np.where(((d3 >= 0) & (d4 <= d3))[:, None], b, result)
-    result = np.where(((d1 <= 0) & (d2 <= 0))[:, None], a, result)
-    # degenerate triangles (zero area) fall back to their first vertex
-    return np.where(np.isfinite(result), result, a)
-
-
 def point_triangle_distance(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    return np.linalg.norm(closest_points_on_triangles(p, tri) - p, axis=1)
+    """Distance from the point p (3,) to each triangle (n, 3, 3)."""
+    return _point_triangle_distance(np.asarray(p, dtype=np.float64), np.asarray(tri, dtype=np.float64))
+
+
+@numba.njit(cache=True)
+def _point_triangle_distance(p, tri):
+    """A loop over the triangles: the clearance check measures hundreds of them near the body (foliage),
+    which took a few dozen numpy calls on arrays of that size."""
+    out = np.empty(len(tri))
+    point = (p[0], p[1], p[2])
+    for k in range(len(tri)):
+        a = (tri[k, 0, 0], tri[k, 0, 1], tri[k, 0, 2])
+        b = (tri[k, 1, 0], tri[k, 1, 1], tri[k, 1, 2])
+        c = (tri[k, 2, 0], tri[k, 2, 1], tri[k, 2, 2])
+        out[k] = math.sqrt(_squared_distance(point, a, b, c))
+    return out
+
+
+@numba.njit(cache=True)
+def _squared_distance(p, a, b, c):
+    """Squared distance from p to the triangle abc: Ericson, Real-Time Collision Detection, 5.1.5
+    (the closest point by the Voronoi region p lies in); a triangle without area is its edges."""
+    ab, ac, ap = _sub(b, a), _sub(c, a), _sub(p, a)
+    normal = _cross(ab, ac)
+    if _dot(normal, normal) <= 1e-12 * _dot(ab, ab) * _dot(ac, ac):
+        return min(_to_segment(p, a, b), _to_segment(p, b, c), _to_segment(p, c, a))
+    d1, d2 = _dot(ab, ap), _dot(ac, ap)
+    if d1 <= 0 and d2 <= 0:
+        return _dot(ap, ap)  # vertex a
+    bp = _sub(p, b)
+    d3, d4 = _dot(ab, bp), _dot(ac, bp)
+    if d3 >= 0 and d4 <= d3:
+        return _dot(bp, bp)  # vertex b
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0 and d1 >= 0 and d3 <= 0:
+        return _to_point(p, _along(a, ab, d1 / (d1 - d3)))  # edge ab
+    cp = _sub(p, c)
+    d5, d6 = _dot(ab, cp), _dot(ac, cp)
+    if d6 >= 0 and d5 <= d6:
+        return _dot(cp, cp)  # vertex c
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0 and d2 >= 0 and d6 <= 0:
+        return _to_point(p, _along(a, ac, d2 / (d2 - d6)))  # edge ac
+    va = d3 * d6 - d5 * d4
+    if va <= 0 and d4 - d3 >= 0 and d5 - d6 >= 0:
+        return _to_point(p, _along(b, _sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6))))  # edge bc
+    denom = va + vb + vc
+    return _to_point(p, _along(_along(a, ab, vb / denom), ac, vc / denom))  # the face itself
+
+
+@numba.njit(cache=True)
+def _to_segment(p, a, b):
+    ab = _sub(b, a)
+    length = _dot(ab, ab)
+    t = 0.0 if length == 0 else min(1.0, max(0.0, _dot(_sub(p, a), ab) / length))
+    return _to_point(p, _along(a, ab, t))
+
+
+@numba.njit(cache=True)
+def _to_point(p, q):
+    d = _sub(p, q)
+    return _dot(d, d)
+
+
+@numba.njit(cache=True)
+def _sub(u, v):
+    return (u[0] - v[0], u[1] - v[1], u[2] - v[2])
+
+
+@numba.njit(cache=True)
+def _dot(u, v):
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+@numba.njit(cache=True)
+def _cross(u, v):
+    return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+
+
+@numba.njit(cache=True)
+def _along(u, d, t):
+    """u + t d"""
+    return (u[0] + d[0] * t, u[1] + d[1] * t, u[2] + d[2] * t)
 
 
 def _segment_segment_distance(p1, q1, p2, q2):
@@ -192,11 +235,11 @@ def _segment_segment_distance(p1, q1, p2, q2):
     d1 = np.broadcast_to(q1 - p1, p2.shape)
     d2 = q2 - p2
     r = p1 - p2
-    a = _dot(d1, d1)
-    e = _dot(d2, d2)
-    f = _dot(d2, r)
-    c = _dot(d1, r)
-    b = _dot(d1, d2)
+    a = _rowdot(d1, d1)
+    e = _rowdot(d2, d2)
+    f = _rowdot(d2, r)
+    c = _rowdot(d1, r)
+    b = _rowdot(d1, d2)
     denom = a * e - b * b
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(denom > 1e-12, np.clip((b * f - c * e) / denom, 0, 1), 0.0)
@@ -217,15 +260,19 @@ def _segment_crosses_triangle(p0, p1, tri):
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
     e1, e2 = b - a, c - a
     h = np.cross(direction, e2)
-    det = _dot(e1, h)
+    det = _rowdot(e1, h)
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = 1.0 / det
         s = p0 - a
-        u = inv * _dot(s, h)
+        u = inv * _rowdot(s, h)
         q = np.cross(s, e1)
-        v = inv * _dot(direction, q)
-        t = inv * _dot(e2, q)
+        v = inv * _rowdot(direction, q)
+        t = inv * _rowdot(e2, q)
         return (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= 0) & (t <= 1)
+
+
+def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("...i,...i->...", a, b)
 
 
 def segment_triangle_distance(p0: np.ndarray, p1: np.ndarray, tri: np.ndarray) -> np.ndarray:
