@@ -80,12 +80,19 @@ def test_gap_only_when_wider_than_the_clearance(gap, passes):
         assert err.value.reason == UNREACHABLE
 
 
-def test_enclosed_goal_has_no_path():
+@pytest.mark.parametrize("doubtful", [False, True])
+def test_enclosed_goal_has_no_path(doubtful):
     g = np.zeros((40, 40), bool)
     g[25:36, 25] = g[25:36, 35] = g[25, 25:36] = g[35, 25:36] = True
     with pytest.raises(NoPath) as err:
-        plan(g, (2, 2), (30, 30), radius_cells=1)
+        plan(g, (2, 2), (30, 30), radius_cells=1, doubtful=doubtful)
     assert err.value.reason == UNREACHABLE and str(err.value) == "no path"
+
+
+def test_a_doubtful_search_that_has_a_path_finds_the_same_one():
+    g = np.zeros((40, 40), bool)
+    g[0:30, 20] = True
+    assert np.array_equal(plan(g, (5, 5), (5, 35), 2, doubtful=True), plan(g, (5, 5), (5, 35), 2))
 
 
 def test_start_inside_inflated_obstacle_escapes():

@@ -55,7 +55,6 @@ from scipy import ndimage
 START_BLOCKED = "start is inside an obstacle"
 GOAL_BLOCKED = "goal is inside an obstacle"
 UNREACHABLE = "no path"
-LABEL_FIRST = 400_000  # cells: on a grid this big, see whether the goal is reachable at all before A*
 
 
 class NoPath(Exception):
@@ -148,12 +147,16 @@ def _close_pinches(blocked: np.ndarray, keep: tuple[int, int]) -> np.ndarray:
         b[keep] = False  # its partner in the pinch is blocked, which closes it
 
 
-def astar(blocked_inflated: np.ndarray, start, goal) -> np.ndarray:
+def astar(blocked_inflated: np.ndarray, start, goal, doubtful: bool = False) -> np.ndarray:
     """8-connected A* path, (n, 2) int cells (row, col) from start to goal inclusive.
 
     Diagonal moves never pass between two blocked cells touching at a corner
     (see the module docstring). Raises NoPath if start or goal is blocked or
     the goal cannot be reached, ValueError if either is outside the grid.
+    ``doubtful`` (a smaller search already failed): first see whether the goal
+    is reachable at all, as A* that finds no path has explored every cell it
+    could reach (70 ms on 800x800 cells), while labelling the free regions
+    takes a few (but as long as a successful search on an open grid).
     """
     grid = _mask(blocked_inflated)
     start, goal = _cell(grid, start, "start"), _cell(grid, goal, "goal")
@@ -163,7 +166,7 @@ def astar(blocked_inflated: np.ndarray, start, goal) -> np.ndarray:
         raise NoPath(GOAL_BLOCKED)
     if start == goal:
         return np.array([start], dtype=np.int64)
-    if grid.size >= LABEL_FIRST and not _connected(grid, start, goal):
+    if doubtful and not _connected(grid, start, goal):
         raise NoPath(UNREACHABLE)
     search = grid
     for _attempt in range(2):
@@ -181,11 +184,7 @@ def astar(blocked_inflated: np.ndarray, start, goal) -> np.ndarray:
 
 
 def _connected(blocked: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> bool:
-    """Whether start and goal lie in one 8-connected region of free cells.
-
-    A* that finds no path has explored every cell it could reach (70 ms on a
-    window of 800x800 cells); labelling the free regions answers in a few.
-    """
+    """Whether start and goal lie in one 8-connected region of free cells."""
     labels, _ = ndimage.label(~blocked, structure=np.ones((3, 3), dtype=bool))
     return labels[start] == labels[goal]
 
@@ -299,12 +298,13 @@ def _escape(blocked: np.ndarray, inflated: np.ndarray, start: tuple[int, int]) -
     raise NoPath(UNREACHABLE, "the start is boxed in by obstacles")
 
 
-def plan(blocked: np.ndarray, start, goal, radius_cells: float) -> np.ndarray:
+def plan(blocked: np.ndarray, start, goal, radius_cells: float, doubtful: bool = False) -> np.ndarray:
     """Waypoint cells (n, 2) from start to goal, both included, keeping radius_cells of clearance.
 
     inflate + astar + smooth. A start inside the inflated zone (but not in an
     obstacle) first escapes to the nearest free cell; a goal inside the
     inflated zone raises NoPath(GOAL_BLOCKED). start == goal gives one point.
+    ``doubtful``: see :func:`astar`.
     """
     blocked = _mask(blocked)
     start, goal = _cell(blocked, start, "start"), _cell(blocked, goal, "goal")
@@ -322,4 +322,4 @@ def plan(blocked: np.ndarray, start, goal, radius_cells: float) -> np.ndarray:
         escape = _escape(blocked, inflated, start)
         head = smooth(escape, blocked)[:-1]
         start = tuple(int(v) for v in escape[-1])
-    return np.concatenate([head, smooth(astar(inflated, start, goal), inflated)])
+    return np.concatenate([head, smooth(astar(inflated, start, goal, doubtful), inflated)])

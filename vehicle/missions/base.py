@@ -98,10 +98,10 @@ class Context:
             return [goal], level  # in the open: no search needed
         attempts = [(self.settings.padding, True), (0.0, True)] + ([(0.0, False)] if relax else [])
         for index, (padding, presume) in enumerate(attempts[level:], start=level):
-            for margin in PLAN_MARGINS:
+            for wider, margin in enumerate(PLAN_MARGINS):
                 window = self._window(start_cell, goal_cell, margin)
-                try:
-                    cells = self._plan_in(start_cell, goal_cell, padding, window, presume)
+                try:  # a wider window is tried when a smaller one had no path: there may be none
+                    cells = self._plan_in(start_cell, goal_cell, padding, window, presume, doubtful=wider > 0)
                 except planning.NoPath as failure:
                     if failure.reason == planning.UNREACHABLE:
                         continue  # a wider window may find a way round
@@ -141,7 +141,7 @@ class Context:
         presumed = planning.inflate(occupied, UNSEEN_EXTENT * self.map.resolution)
         return occupied | (presumed & ~self.map.free_in(rows, cols))
 
-    def _plan_in(self, start, goal, padding: float, window, presume: bool) -> np.ndarray:
+    def _plan_in(self, start, goal, padding: float, window, presume: bool, doubtful: bool = False) -> np.ndarray:
         obstacles, offset = self.blocked_in(*window, presume), (window[0].start, window[1].start)
         local_start = (start[0] - offset[0], start[1] - offset[1])
         if presume:  # where the body is now is no presumed obstacle, whatever the sonar has not seen
@@ -151,7 +151,7 @@ class Context:
             obstacles[rows, cols] &= self.map.occupied_in(slice(rows.start + offset[0], rows.stop + offset[0]),
                                                           slice(cols.start + offset[1], cols.stop + offset[1]))
         local_goal = (goal[0] - offset[0], goal[1] - offset[1])
-        local = planning.plan(obstacles, local_start, local_goal, self.margin_cells(padding))
+        local = planning.plan(obstacles, local_start, local_goal, self.margin_cells(padding), doubtful)
         return local + np.array(offset)
 
     def path_clear(self, points: list[tuple[float, float]], horizon: float = 15.0, padding: float = 0.0) -> bool:
