@@ -9,7 +9,7 @@ times and the fastest wall time counts (the least disturbed by other work on the
 machine); they run one after another in this process. Target: a whole mission at least
 500x faster than real time. Scene loading and preparation (once per scene) and the
 process warm-up are timed apart.
-Run: python bench/missions.py [--sensors single|triple|servo] [--repeats 3]
+Run: python bench/missions.py [--sensors single|triple|servo] [--repeats 5]
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description="Every mission in every scene, timed.")
     parser.add_argument("--sensors", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
                         help="sensor suite (default %(default)s; the thesis's vehicle had a single sonar)")
-    parser.add_argument("--repeats", type=int, default=3,
+    parser.add_argument("--repeats", type=int, default=5,
                         help="runs of each mission; the fastest counts (default %(default)s)")
     args = parser.parse_args()
     suite, repeats = args.sensors, max(1, args.repeats)

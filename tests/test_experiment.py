@@ -4,6 +4,7 @@ Scenes are small VRML files written by the tests (a ground slab and a wall north
 home) and every run uses a 20 m map, so a run takes well under a second.
 """
 
+import gc
 import json
 import math
 import os
@@ -145,6 +146,15 @@ def test_a_loaded_scene_can_be_passed_in(scene_file):
     a = run_experiment(Experiment(str(scene_file), "browse", settings=SMALL), scene=scene)
     b = run(scene_file)
     assert a["detections"] == b["detections"] and a["sim_time_s"] == b["sim_time_s"]
+
+
+def test_runs_in_one_process_leave_no_map_behind(scene_file):
+    """A sweep worker runs hundreds of experiments: each map (megabytes) must go with its run."""
+    scene = load_scene(scene_file)
+    for _ in range(3):
+        run_experiment(Experiment(str(scene_file), "browse", settings=SMALL), scene=scene)
+    gc.collect()
+    assert not [o for o in gc.get_objects() if isinstance(o, MemoryMap)]
 
 
 # ---- the command line -------------------------------------------------------------------------

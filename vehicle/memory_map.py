@@ -115,20 +115,12 @@ class MemoryMap:
         return self.add_readings(np.asarray(origin)[None], np.asarray(direction)[None],
                                  np.array([np.nan if distance is None else distance]), np.array([max_range])) > 0
 
-    @functools.cache  # noqa: B019 - a handful of radii per map, kept for the map's life
-    def _disc(self, radius: float) -> tuple[np.ndarray, np.ndarray]:
-        """Row and column offsets of the cells whose centres lie within ``radius`` metres of a cell's centre."""
-        reach = int(math.ceil(radius * self.resolution))
-        rows, cols = np.mgrid[-reach:reach + 1, -reach:reach + 1]
-        inside = (rows**2 + cols**2) * (1.0 / self.resolution**2) <= radius * radius
-        return rows[inside], cols[inside]
-
     def mark_body(self, x: float, y: float, radius: float) -> None:
         """The vehicle's body is here, so these cells are free, whatever the sonar said."""
         centre = self.cell_of(x, y)
         if centre is None:
             return
-        cells, crossed = _free_cells(self.grid.reshape(-1), self.size, *centre, *self._disc(radius))
+        cells, crossed = _free_cells(self.grid.reshape(-1), self.size, *centre, *_disc(radius, self.resolution))
         self.occupied_version += crossed
         if len(cells):
             self._note_changes(cells)
@@ -208,6 +200,15 @@ class MemoryMap:
         Image.fromarray(blended).save(path)
 
 
+@functools.cache
+def _disc(radius: float, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column offsets of the cells whose centres lie within ``radius`` metres of a cell's centre."""
+    reach = int(math.ceil(radius * resolution))
+    rows, cols = np.mgrid[-reach:reach + 1, -reach:reach + 1]
+    inside = (rows**2 + cols**2) * (1.0 / resolution**2) <= radius * radius
+    return rows[inside], cols[inside]
+
+
 STATE_COLOURS = np.array([[0, 0, 0, 0], [235, 240, 245, 110], [200, 30, 40, 255]], dtype=np.uint8)
 
 
@@ -216,12 +217,12 @@ def state_image(states: np.ndarray) -> np.ndarray:
     return STATE_COLOURS[states[::-1]]
 
 
-# ---- the projection kernel -------------------------------------------------------------------
-# Tracing a dozen lines through the grid is a few microseconds of arithmetic per cell, but
-# written with numpy it takes about a hundred calls on small arrays, whose overheads made
-# it the largest share of a simulated mission's time. No maintained library traces a
-# batch of sonar cones into an occupancy grid, so the loop is written out and compiled
-# with numba (cached on disk). NUMBA_DISABLE_JIT=1 runs the same code as plain Python.
+# ---- compiled loops --------------------------------------------------------------------------
+# Tracing a dozen lines through the grid is a few microseconds of arithmetic, but written
+# with numpy it took about a hundred calls on small arrays, whose overheads made it the
+# largest share of a simulated mission's time. No maintained library traces a batch of
+# sonar cones into an occupancy grid, so the loops are written out and compiled with numba
+# (cached on disk). NUMBA_DISABLE_JIT=1 runs the same code as plain Python.
 
 
 @numba.njit(cache=True)

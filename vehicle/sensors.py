@@ -116,9 +116,12 @@ class SonarArray:
         self._first_ray = np.cumsum([0] + [len(s._local_rays) for s in sensors])
         self._cos_critical = np.array([s._cos_critical for s in sensors])
         self._min_range = np.array([s.min_range for s in sensors])
+        self._servos = any(s.servo is not None for s in sensors)
 
     def _body_rays(self) -> tuple[np.ndarray, np.ndarray]:
         """All sensors' rays and beam axes in the body frame; recomputed only when a servo moved."""
+        if self._mount_key is not None and not self._servos:
+            return self._rays, self._axes
         key = tuple(s.yaw_offset for s in self.sensors)
         if key != self._mount_key:
             mounts = [s._mount_rotation() for s in self.sensors]

@@ -136,9 +136,10 @@ class World:
                 sensor.servo.pwm = self.autopilot.servos[sensor.servo.channel]
         readings = self.sonars.read(pose, self.time)
         for reading in readings:
-            hit = reading.hit
-            if hit is not None and abs(hit[2] - pose.z) <= 1.0:
-                self.avoidance.add(hit[0], hit[1], self.time)
+            if reading.distance is not None:
+                x, y, z = reading.hit.tolist()
+                if abs(z - pose.z) <= 1.0:
+                    self.avoidance.add(x, y, self.time)
         return readings
 
     def run_for(self, seconds: float) -> list[Reading]:
