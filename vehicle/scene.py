@@ -54,7 +54,7 @@ class Scene:
     start: tuple[float, float] | None = None  # Viewpoint "Start", x and y
     start_heading: float | None = None  # compass degrees of its view direction; None if vertical
     hints: dict[str, str] = field(default_factory=dict)  # "name=value" strings of a WorldInfo's info
-    _prepared: dict = field(default_factory=dict, repr=False, compare=False)
+    _prepared: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def bounds(self) -> np.ndarray:
