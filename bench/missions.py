@@ -42,7 +42,7 @@ def scenes() -> list[tuple[Path, tuple[float, float] | None]]:
 
 
 def _warm_up() -> float:
-    """One short run, so the process's one-time costs (compiled kernels loading) fall outside the timings."""
+    """One short run, so the process's one-time costs (loading the compiled loops) fall outside the timings."""
     started = time.perf_counter()
     path = ROOT / "scenes" / "default.wrl"
     run_experiment(Experiment(str(path), "browse", "copter", None, None, load_settings(time_limit=2.0)))
@@ -103,7 +103,7 @@ def main() -> None:
           "is its fastest run's.")
     print(f"Not counted in the missions' times: loading each scene and preparing it once (the ray-casting BVH and "
           f"collision grid every run in it shares, 'prepare ms'), and the process's warm-up ({warm_up:.2f} s: "
-          "imports and loading the compiled map kernel).")
+          "imports and loading the compiled loops).")
     print(f"Copter with the {suite} sensor suite, default settings plus each scene's suggestions (house: "
           "altitude 1.6, padding 0.1, closeness 0.8, "
           "space_size 10, its waypoints). The thesis's figures are its best over a 48-setting sweep (its Square "
