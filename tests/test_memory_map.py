@@ -110,6 +110,20 @@ def test_a_reading_beyond_the_map_edge_does_not_crash(grid):
     assert grid.detections == 0
 
 
+def test_nonsense_readings_mark_nothing_and_break_nothing(grid):
+    """An infinite or NaN distance is no echo; a NaN origin or a zero direction is no reading."""
+    origins = np.array([ORIGIN, ORIGIN, [np.nan, 0.0, 4.0], ORIGIN])
+    directions = np.array([EAST, NORTH, EAST, [0.0, 0.0, 0.0]])
+    marked = grid.add_readings(origins, directions, np.array([np.inf, np.nan, 3.0, 2.0]), np.full(4, 40.0))
+    assert marked == 0 and grid.detections == 0
+    assert np.all(grid.free[10, 10:20]) and np.all(grid.free[10:20, 10])  # no echo: free up to the edge
+
+
+def test_a_direction_that_is_no_unit_vector_is_taken_as_one(grid):
+    assert grid.add_readings(ORIGIN[None], np.array([[1e9, 0.0, 0.0]]), np.array([5.0]), np.array([40.0])) == 1
+    assert grid.occupied[10, 15] and grid.detections == 1
+
+
 def test_a_batch_of_readings_counts_its_obstacles(grid):
     origins = np.tile(ORIGIN, (3, 1))
     directions = np.array([EAST, NORTH, -EAST])

@@ -236,6 +236,13 @@ def _cell(x, y, x0, y0, resolution, size):
 
 
 @numba.njit(cache=True)
+def _samples(dx, dy, resolution):
+    """Points sampled along a segment: one per cell length, both ends included; none if it is not finite."""
+    cells = math.hypot(dx, dy) * resolution
+    return int(cells) + 2 if math.isfinite(cells) else 0
+
+
+@numba.njit(cache=True)
 def _trace(out, used, x, y, dx, dy, skip, x0, y0, resolution, size):
     """Append to ``out`` (from ``used`` on) the cells the segment (x, y) + t (dx, dy), t in [0, 1], passes,
     except ``skip``; returns the new count.
@@ -244,7 +251,7 @@ def _trace(out, used, x, y, dx, dy, skip, x0, y0, resolution, size):
     which costs nothing here); a straight line never comes back to a cell it left, so
     dropping repeats of the previous sample lists each cell once.
     """
-    samples = int(math.hypot(dx, dy) * resolution) + 2
+    samples = _samples(dx, dy, resolution)
     previous = -2
     for k in range(samples):
         t = k / (samples - 1.0)
@@ -262,37 +269,43 @@ def _project(grid, ever_hit, size, x0, y0, resolution, band, origins, directions
     """``MemoryMap.add_readings`` on flat views of the grid: returns the cells passed (each listed once
     per line), the cells hit, and 1 if some cell became or ceased to be occupied, else 0."""
     count = len(origins)
-    lengths = np.empty(count)
     echo_cell = np.full(count, -1)
+    lines = np.empty((3 * count, 5))  # x, y, dx, dy and the echo cell of each line marked free
+    used_lines = 0
     for i in range(count):
-        echo = not math.isnan(distances[i])
+        echo = math.isfinite(distances[i])
         length = distances[i] if echo else clears[i]
-        vertical = abs(directions[i, 2] * length)
+        x, y, ux, uy, uz = origins[i, 0], origins[i, 1], directions[i, 0], directions[i, 1], directions[i, 2]
+        norm = math.sqrt(ux * ux + uy * uy + uz * uz)
+        if not norm > 0 or not math.isfinite(norm):
+            continue  # no direction: no reading
+        if abs(norm - 1.0) > 1e-9:  # directions should be unit vectors; a sloppy caller's still are
+            ux, uy, uz = ux / norm, uy / norm, uz / norm
+        vertical = abs(uz * length)
         if vertical > band:  # the beam leaves the band: it counts up to there, and its echo is ground or ceiling
             length = length * band / max(vertical, 1e-12)
             echo = False
-        lengths[i] = length
         if echo:
-            echo_cell[i] = _cell(origins[i, 0] + directions[i, 0] * length,
-                                 origins[i, 1] + directions[i, 1] * length, x0, y0, resolution, size)
-    room = 0
-    for i in range(count):
-        if marks[i]:
-            room += (3 if sides else 1) * (int(lengths[i] * resolution) + 3)  # samples per line, and one spare
-    passed = np.empty(room, dtype=np.int64)
-    used = 0
-    for i in range(count):
+            echo_cell[i] = _cell(x + ux * length, y + uy * length, x0, y0, resolution, size)
         if not marks[i]:
             continue
-        x, y, ux, uy, length = origins[i, 0], origins[i, 1], directions[i, 0], directions[i, 1], lengths[i]
-        used = _trace(passed, used, x, y, ux * length, uy * length, echo_cell[i], x0, y0, resolution, size)
+        lines[used_lines] = (x, y, ux * length, uy * length, float(echo_cell[i]))
+        used_lines += 1
         if sides:  # the cone's sides, as far as the centre line reaches and SIDE_REACH at most
             c, s = math.cos(spreads[i]), math.sin(spreads[i])
             reach = min(length, SIDE_REACH)
-            used = _trace(passed, used, x, y, (ux * c + uy * s) * reach, (uy * c - ux * s) * reach, echo_cell[i],
-                          x0, y0, resolution, size)
-            used = _trace(passed, used, x, y, (ux * c - uy * s) * reach, (uy * c + ux * s) * reach, echo_cell[i],
-                          x0, y0, resolution, size)
+            lines[used_lines] = (x, y, (ux * c + uy * s) * reach, (uy * c - ux * s) * reach, float(echo_cell[i]))
+            lines[used_lines + 1] = (x, y, (ux * c - uy * s) * reach, (uy * c + ux * s) * reach,
+                                     float(echo_cell[i]))
+            used_lines += 2
+    room = 0
+    for k in range(used_lines):
+        room += _samples(lines[k, 2], lines[k, 3], resolution)
+    passed = np.empty(room, dtype=np.int64)
+    used = 0
+    for k in range(used_lines):
+        used = _trace(passed, used, lines[k, 0], lines[k, 1], lines[k, 2], lines[k, 3], int(lines[k, 4]), x0, y0,
+                      resolution, size)
     passed = passed[:used]
     crossed = 0
     # each cell loses MISS once however many lines pass it: all new values come from the old ones
