@@ -23,6 +23,18 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
                         "%(default)s; '' to not record)")
     parser.add_argument("--tls-cert", help="certificate file for HTTPS")
     parser.add_argument("--tls-key", help="private key file for HTTPS")
+    parser.add_argument("--datum", type=_datum, metavar="LAT,LON[,ALT]",
+                        help="where the scene origin lies on Earth (default: the scene's datum hint, else "
+                             "ArduPilot's simulator home; without a scene, the first vehicle's home)")
+
+
+def _datum(text: str):
+    from vehicle.geodesy import Datum
+
+    try:
+        return Datum.parse(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def _station(args, urls: list[str], scene_path: str | None):
@@ -30,7 +42,7 @@ def _station(args, urls: list[str], scene_path: str | None):
     from vehicle.scene import load_scene
 
     scene = load_scene(scene_path) if scene_path else None
-    return GroundStation(urls, scene, args.token, args.record_dir or None)
+    return GroundStation(urls, scene, args.token, args.record_dir or None, datum=args.datum)
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
@@ -57,6 +69,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         command = [sys.executable, "-m", "vehicle.cli", "sim", "--scene", args.scene, "--mission", args.mission,
                    "--vehicle", args.vehicle, f"--start={x},{y}", "--sysid", str(index + 1), "--autostart",
                    "--speedup", str(args.speedup), "--mavlink", f"udpout:127.0.0.1:{port}"]
+        if args.datum is not None:
+            command.append(f"--datum={args.datum.lat},{args.datum.lon},{args.datum.alt}")
         vehicles.append(subprocess.Popen(command, stdout=subprocess.DEVNULL if args.quiet else None))
 
     def stop_vehicles() -> None:
@@ -94,7 +108,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if index.warning:
         print(f"warning: {index.warning}", file=sys.stderr)
     scene = load_scene(args.scene) if args.scene else None
-    station = GroundStation([], scene, args.token, record_dir=path.parent)
+    station = GroundStation([], scene, args.token, record_dir=path.parent, datum=args.datum)
     station.start_replay(path)
     print(f"replaying {path.name}: {len(index)} messages, {index.duration:.1f} s", flush=True)
     serve(station, args.host, args.port, args.tls_cert, args.tls_key)

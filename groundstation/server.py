@@ -40,7 +40,7 @@ class GroundStation:
         if scene is not None and len(scene.mesh.faces):
             caster = RayCaster(scene.mesh)
             ground = caster.ground_height
-            datum = datum or Datum()
+            datum = Datum.of_scene(scene.hints, datum)
         self.live = Fleet(datum, ground)
         self.record_dir = Path(record_dir) if record_dir else None
         self.recorder = Recorder(record_dir) if record_dir and urls else None

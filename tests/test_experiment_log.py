@@ -147,3 +147,38 @@ def test_cli_log_summary_mentions_the_log(tmp_path, capsys):
     assert code == 0
     assert f"log written to {log}" in out
     assert log.stat().st_size > 0
+
+
+def _first_home(log):
+    reader = mavutil.mavlink_connection(str(log))
+    home = reader.recv_match(type="HOME_POSITION")
+    reader.close()
+    return home.latitude / 1e7, home.longitude / 1e7, home.altitude / 1000
+
+
+@pytest.mark.parametrize(("hint", "option", "expected"), [
+    ("", [], (-35.363261, 149.165230, 584.0)),  # ArduPilot's simulator home
+    ('WorldInfo { info ["datum=47.3769,8.5417,408"] }\n', [], (47.3769, 8.5417, 408.0)),  # the scene's
+    ('WorldInfo { info ["datum=47.3769,8.5417,408"] }\n', ["--datum=51.5,-0.12,11"], (51.5, -0.12, 11.0)),
+])
+def test_the_datum_places_the_scene_on_earth(tmp_path, hint, option, expected):
+    scene = tmp_path / "open.wrl"
+    scene.write_text("#VRML V2.0 utf8\n" + hint
+                     + "Transform { translation 0 0 -0.05 children Shape { geometry Box { size 80 80 0.1 } } }\n")
+    log = tmp_path / "run.tlog"
+    code = main(["experiment", "--scene", str(scene), "--mission", "browse", "--time-limit", "30", "--log", str(log),
+                 *option])
+    assert code == 0
+    assert _first_home(log) == pytest.approx(expected, abs=1e-6)  # home is the scene origin, on the ground
+
+
+def test_a_bad_datum_exits_2_with_the_reason(tmp_path, capsys):
+    scene = tmp_path / "open.wrl"
+    scene.write_text(SCENE)
+    with pytest.raises(SystemExit) as exit_:
+        main(["experiment", "--scene", str(scene), "--mission", "browse", "--datum=north,east"])
+    assert exit_.value.code == 2
+    assert "LAT,LON[,ALT]" in capsys.readouterr().err
+    scene.write_text('#VRML V2.0 utf8\nWorldInfo { info ["datum=95,0"] }\n')
+    assert main(["experiment", "--scene", str(scene), "--mission", "browse"]) == 2
+    assert "the scene's datum hint" in capsys.readouterr().err

@@ -62,6 +62,20 @@ def test_datum_parse():
         Datum.parse("1,2,3,4")
 
 
+@pytest.mark.parametrize("text", ["north,east", "91,0", "0,181", "nan,0", ""])
+def test_a_bad_datum_is_refused_with_a_reason(text):
+    with pytest.raises(ValueError, match="datum is LAT,LON|latitude must be"):
+        Datum.parse(text)
+
+
+def test_a_scene_datum_comes_from_the_command_line_then_the_scene_then_the_default():
+    assert Datum.of_scene({}) == Datum()
+    assert Datum.of_scene({"datum": "47.4,8.5,410"}) == Datum(47.4, 8.5, 410.0)
+    assert Datum.of_scene({"datum": "47.4,8.5"}, Datum(1.0, 2.0, 3.0)) == Datum(1.0, 2.0, 3.0)
+    with pytest.raises(ValueError, match="the scene's datum hint"):
+        Datum.of_scene({"datum": "here"})
+
+
 @pytest.mark.parametrize(("degrees", "vector"), [(0, (0, 1)), (90, (1, 0)), (180, (0, -1)), (270, (-1, 0)),
                                                  (45, (math.sqrt(0.5), math.sqrt(0.5)))])
 def test_heading_vector_is_compass_east_north(degrees, vector):

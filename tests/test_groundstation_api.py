@@ -688,3 +688,22 @@ def test_serve_refuses_half_a_tls_setup():
             server.serve(station, "127.0.0.1", 8123, tls_cert="cert.pem", tls_key=None)
     finally:
         station.close()
+
+
+@pytest.mark.parametrize(("given", "expected"), [(None, (47.3769, 8.5417, 408.0)),
+                                                 ("51.5,-0.12", (51.5, -0.12, 584.0))])
+def test_the_station_takes_its_datum_from_the_option_else_the_scene(given, expected):
+    """Vehicles report latitude and longitude; the station must place them with the datum they use."""
+    from groundstation import server
+    from vehicle.geodesy import Datum
+    from vehicle.scene import parse_scene
+
+    scene = parse_scene('#VRML V2.0 utf8\nWorldInfo { info ["datum=47.3769,8.5417,408"] }\n'
+                        "Shape { geometry Box { size 10 10 0.1 } }\n")
+    station = server.GroundStation([], scene, TOKEN, record_dir=None,
+                                   datum=Datum.parse(given) if given else None)
+    try:
+        datum = station.live.datum
+        assert (datum.lat, datum.lon, datum.alt) == expected
+    finally:
+        station.close()

@@ -21,6 +21,15 @@ def _point(text: str) -> tuple[float, float]:
     return x, y
 
 
+def _datum(text: str):
+    from vehicle.geodesy import Datum
+
+    try:
+        return Datum.parse(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = True) -> None:
     """Options shared by ``experiment`` and ``sim``: what to fly, where, and with which settings."""
     from vehicle.missions import missions
@@ -45,6 +54,9 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--sensors", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
                         help="; ".join(f"{name}: {text}" for name, text in SENSOR_SUITES.items())
                         + " (default %(default)s)")
+    parser.add_argument("--datum", type=_datum, metavar="LAT,LON[,ALT]",
+                        help="where the scene origin lies on Earth, degrees and metres above sea level (default: "
+                             "the scene's datum hint, else ArduPilot's simulator home -35.363261,149.165230,584)")
 
 
 def settings_from(args: argparse.Namespace, scene, **extra):
@@ -89,9 +101,10 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
     scene = load_scene(args.scene)
     settings = settings_from(args, scene, time_limit=args.time_limit)
-    waypoints = load_positions(args.waypoints, Datum()) if args.waypoints else None
+    datum = Datum.of_scene(scene.hints, args.datum)
+    waypoints = load_positions(args.waypoints, datum) if args.waypoints else None
     experiment = Experiment(args.scene, args.mission, args.vehicle, args.start, args.heading, settings, args.seed,
-                            waypoints, args.sensors)
+                            waypoints, args.sensors, datum)
     log = None
     if args.log:
         from vehicle.flightlog import ExperimentLog
@@ -119,6 +132,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 def cmd_sim(args: argparse.Namespace) -> int:
     from vehicle.agent import Agent
+    from vehicle.geodesy import Datum
     from vehicle.scene import load_scene
     from vehicle.sensors import sensor_suite
     from vehicle.sim import SimOptions, SimVehicle
@@ -128,7 +142,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     settings = settings_from(args, scene)
     world = World(scene, args.vehicle, settings, args.start, args.heading, seed=args.seed,
-                  sensors=sensor_suite(args.sensors))
+                  sensors=sensor_suite(args.sensors), datum=Datum.of_scene(scene.hints, args.datum))
     waypoints = None
     if args.waypoints:
         items = load_mission(args.waypoints)

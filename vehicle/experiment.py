@@ -13,6 +13,7 @@ from pathlib import Path
 
 from vehicle import __version__
 from vehicle.agent import Agent
+from vehicle.geodesy import Datum
 from vehicle.modes import Kind
 from vehicle.scene import Scene, load_scene
 from vehicle.sensors import sensor_suite
@@ -36,6 +37,7 @@ class Experiment:
     seed: int = 0
     waypoints: list[tuple[float, float]] | None = None
     sensors: str = DEFAULT_SUITE
+    datum: Datum | None = None  # None: the scene's datum hint, else the default (it places only the --log)
 
 
 def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: str | Path | None = None,
@@ -57,7 +59,8 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
     try:
         scene = scene or load_scene(experiment.scene)
         world = World(scene, Kind(experiment.vehicle), settings, experiment.start, experiment.heading,
-                      seed=experiment.seed, sensors=sensor_suite(experiment.sensors))
+                      seed=experiment.seed, sensors=sensor_suite(experiment.sensors),
+                      datum=Datum.of_scene(scene.hints, experiment.datum))
         waypoints = experiment.waypoints
         if waypoints is None and "waypoints" in scene.hints:
             waypoints = parse_points(scene.hints["waypoints"])

@@ -8,6 +8,7 @@ round-trips through MAVLink and QGC WPL files to the same scene position.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 # metres per 1e-7 degree of latitude (ArduPilot's LOCATION_SCALING_FACTOR)
@@ -40,11 +41,29 @@ class Datum:
 
     @classmethod
     def parse(cls, text: str) -> Datum:
-        """``LAT,LON[,ALT]`` as given on a command line."""
-        parts = [float(p) for p in text.split(",")]
-        if len(parts) not in (2, 3):
-            raise ValueError(f"a datum is LAT,LON[,ALT], not {text!r}")
+        """``LAT,LON[,ALT]`` (degrees, metres above sea level) as given on a command line."""
+        try:
+            parts = [float(p) for p in text.split(",")]
+        except ValueError:
+            parts = []
+        if len(parts) not in (2, 3) or not all(map(math.isfinite, parts)):
+            raise ValueError(f"a datum is LAT,LON[,ALT] in degrees and metres, not {text!r}")
+        if not (-90 <= parts[0] <= 90 and -180 <= parts[1] <= 180):
+            raise ValueError(f"latitude must be within +-90 and longitude within +-180 degrees, not {text!r}")
         return cls(*parts)
+
+    @classmethod
+    def of_scene(cls, hints: Mapping[str, str], given: Datum | None = None) -> Datum:
+        """Where a scene's origin lies on Earth: ``given`` (a command line's), else the scene's ``datum``
+        hint (a WorldInfo ``datum=LAT,LON[,ALT]`` string), else ArduPilot's simulator home."""
+        if given is not None:
+            return given
+        if "datum" in hints:
+            try:
+                return cls.parse(hints["datum"])
+            except ValueError as error:
+                raise ValueError(f"the scene's datum hint: {error}") from None
+        return cls()
 
 
 def heading_vector(heading_rad: float) -> tuple[float, float]:
