@@ -279,7 +279,7 @@ def create_app(station: GroundStation) -> FastAPI:
         replay = station.replay
         if replay is None:
             raise HTTPException(409, "nothing is being replayed")
-        html = await asyncio.to_thread(export_html, replay.index.path, station.scene, station.live.datum,
+        html = await asyncio.to_thread(export_html, replay.index.path, station.scene, station.datum,
                                        station.live.ground_height)
         name = Path(replay.name).stem + ".html"
         return Response(html, media_type="text/html",

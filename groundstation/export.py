@@ -21,7 +21,7 @@ MIN_FRAME = 0.25  # s of log time between frames
 
 
 def export_html(path: str | Path, scene: Scene | None, datum: Datum | None, ground_height=None) -> str:
-    fleet = Fleet(datum if scene is not None else None, ground_height)
+    fleet = Fleet(datum, ground_height)
     replay = Replay.open(path, fleet)
     view = SceneView(fleet, scene)
     try:

@@ -37,10 +37,11 @@ class GroundStation:
         self.token = token or secrets.token_urlsafe(16)
         self.scene = scene
         ground = None
-        if scene is not None and len(scene.mesh.faces):
-            caster = RayCaster(scene.mesh)
-            ground = caster.ground_height
+        if scene is not None:
             datum = Datum.of_scene(scene.hints, datum)
+            if len(scene.mesh.faces):
+                ground = RayCaster(scene.mesh).ground_height
+        self.datum = datum  # None (no scene, none given): the first home heard becomes the origin
         self.live = Fleet(datum, ground)
         self.record_dir = Path(record_dir) if record_dir else None
         self.recorder = Recorder(record_dir) if record_dir and urls else None
@@ -140,8 +141,7 @@ class GroundStation:
     def start_replay(self, path: Path) -> Replay:
         """Show a recording instead of the live vehicles (the live link goes on in the background)."""
         with self._replay_lock:
-            replay = Replay.open(path, Fleet(self.live.datum if self.scene is not None else None,
-                                             self.live.ground_height))
+            replay = Replay.open(path, Fleet(self.datum, self.live.ground_height))
             self._stop_player()
             self.replay = replay
             self._player = Player(replay).start()

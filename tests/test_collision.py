@@ -78,6 +78,13 @@ def test_a_triangle_without_area_is_as_near_as_its_edges():
     assert point_triangle_distance(np.array([0.0, 3.0, 4.0]), point_like)[0] == pytest.approx(5.0)
 
 
+def test_point_triangle_distance_refuses_wrong_shapes():
+    with pytest.raises(ValueError, match="triangles"):
+        point_triangle_distance(np.zeros(3), np.zeros((2, 2, 3)))
+    with pytest.raises(ValueError, match="point"):
+        point_triangle_distance(np.zeros(2), np.zeros((1, 3, 3)))
+
+
 def test_touches_a_point_within_radius_of_the_wall(wall_scene):
     collider = Collider(wall_scene.mesh, RADIUS)
     assert collider.touches(np.array([0.0, WALL_FACE_Y - 0.2, 2.0]))

@@ -707,3 +707,15 @@ def test_the_station_takes_its_datum_from_the_option_else_the_scene(given, expec
         assert (datum.lat, datum.lon, datum.alt) == expected
     finally:
         station.close()
+
+
+def test_without_a_scene_the_given_datum_places_live_and_replayed_vehicles():
+    from groundstation import server
+    from vehicle.geodesy import Datum
+
+    for given in (Datum(51.5, -0.12, 11.0), None):  # None: the first home heard becomes the origin
+        station = server.GroundStation([], None, TOKEN, record_dir=None, datum=given)
+        try:
+            assert station.datum == given and station.live.datum == given
+        finally:
+            station.close()

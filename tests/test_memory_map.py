@@ -119,6 +119,28 @@ def test_nonsense_readings_mark_nothing_and_break_nothing(grid):
     assert np.all(grid.free[10, 10:20]) and np.all(grid.free[10:20, 10])  # no echo: free up to the edge
 
 
+def test_absurdly_long_readings_are_cut_at_the_map_edge(grid):
+    """Lines far longer than the map are traced over the map only (and their sum never overflows)."""
+    origins = np.array([ORIGIN, ORIGIN, [-1e12, 0.5, 4.0], ORIGIN])
+    directions = np.array([EAST, EAST, EAST, NORTH])
+    grid.add_readings(origins, directions, np.full(4, 2.0**62 / 10), np.full(4, 2.0**62))
+    assert grid.detections == 0  # every echo lies far beyond the map
+    assert np.all(grid.free[10, :]) and np.all(grid.free[10:, 10])  # the lines across the map are free
+
+
+def test_readings_whose_arrays_disagree_in_length_are_refused(grid):
+    origins = np.tile(ORIGIN, (3, 1))
+    directions = np.array([EAST, NORTH, -EAST])
+    with pytest.raises(ValueError, match="distances"):
+        grid.add_readings(origins, directions, np.array([5.0, 6.0]), np.full(3, 40.0))
+    with pytest.raises(ValueError, match="free"):
+        grid.add_readings(origins, directions, np.full(3, 5.0), np.full(3, 40.0), free=np.array([True, False]))
+    with pytest.raises(ValueError, match="directions"):
+        grid.add_readings(origins, directions[:2], np.full(3, 5.0), np.full(3, 40.0))
+    assert grid.version == 0 and not grid.grid.any()  # nothing was marked
+    assert grid.add_readings(origins, directions, np.full(3, 5.0), 40.0) == 3  # one max range for all
+
+
 def test_a_direction_that_is_no_unit_vector_is_taken_as_one(grid):
     assert grid.add_readings(ORIGIN[None], np.array([[1e9, 0.0, 0.0]]), np.array([5.0]), np.array([40.0])) == 1
     assert grid.occupied[10, 15] and grid.detections == 1

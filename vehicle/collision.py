@@ -146,7 +146,10 @@ class Collider:
 
 def point_triangle_distance(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Distance from the point p (3,) to each triangle (n, 3, 3)."""
-    return _point_triangle_distance(np.asarray(p, dtype=np.float64), np.asarray(tri, dtype=np.float64))
+    p, tri = np.asarray(p, dtype=np.float64), np.ascontiguousarray(tri, dtype=np.float64)
+    if p.shape != (3,) or tri.ndim != 3 or tri.shape[1:] != (3, 3):
+        raise ValueError(f"expected a point (3,) and triangles (n, 3, 3), not {p.shape} and {tri.shape}")
+    return _point_triangle_distance(p, tri)
 
 
 @numba.njit(cache=True)

@@ -91,17 +91,19 @@ class MemoryMap:
         mark free space, when several of a batch would only repeat each other.
         """
         origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
-        directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        if not len(origins):
-            return 0
-        self.version += 1
         count = len(origins)
-        spreads = np.zeros(count) if beams is None else FREE_SPREAD * np.asarray(beams, dtype=np.float64)
-        marks = np.ones(count, dtype=np.bool_) if free is None else np.asarray(free, dtype=np.bool_)
+        if not count:
+            return 0
+        directions = _per_reading(directions, (count, 3), "directions")
+        distances = _per_reading(distances, (count,), "distances")
+        clears = np.minimum(_per_reading(max_ranges, (count,), "max_ranges"), self.NO_ECHO_CLEARS)
+        spreads = np.zeros(count) if beams is None else FREE_SPREAD * _per_reading(beams, (count,), "beams")
+        marks = np.ones(count, dtype=np.bool_) if free is None else _per_reading(free, (count,), "free", np.bool_)
+        self.version += 1
         passed, hits, crossed = _project(
             self.grid.reshape(-1), self.ever_hit.reshape(-1), self.size, self.origin[0], self.origin[1],
-            self.resolution, self.band, origins, directions, np.asarray(distances, dtype=np.float64),
-            np.minimum(max_ranges, self.NO_ECHO_CLEARS), spreads, beams is not None, marks)
+            self.resolution, self.band, np.ascontiguousarray(origins), directions, distances, clears, spreads,
+            beams is not None, marks)
         self.occupied_version += crossed
         if len(passed):
             self._note_changes(passed)
@@ -200,6 +202,17 @@ class MemoryMap:
         Image.fromarray(blended).save(path)
 
 
+def _per_reading(values, shape: tuple[int, ...], what: str, dtype=np.float64) -> np.ndarray:
+    """``values`` as a C array of ``shape`` (a scalar, or one row, applies to every reading)."""
+    array = np.asarray(values, dtype=dtype)
+    if array.shape == shape:
+        return np.ascontiguousarray(array)
+    try:
+        return np.array(np.broadcast_to(array, shape))
+    except ValueError:
+        raise ValueError(f"{what}: expected one per reading, {shape}, not shape {np.shape(values)}") from None
+
+
 @functools.cache
 def _disc(radius: float, resolution: float) -> tuple[np.ndarray, np.ndarray]:
     """Row and column offsets of the cells whose centres lie within ``radius`` metres of a cell's centre."""
@@ -227,11 +240,11 @@ def state_image(states: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True)
 def _cell(x, y, x0, y0, resolution, size):
-    """Flat index of the cell of a point, -1 outside the map."""
-    col = math.floor((x - x0) * resolution)
-    row = math.floor((y - y0) * resolution)
-    if 0 <= col < size and 0 <= row < size:
-        return row * size + col
+    """Flat index of the cell of a point, -1 outside the map (or for NaN, compared before any rounding)."""
+    col = (x - x0) * resolution
+    row = (y - y0) * resolution
+    if 0.0 <= col < size and 0.0 <= row < size:
+        return int(row) * size + int(col)
     return -1
 
 
@@ -264,6 +277,29 @@ def _trace(out, used, x, y, dx, dy, skip, x0, y0, resolution, size):
 
 
 @numba.njit(cache=True)
+def _add_line(lines, used, x, y, dx, dy, skip, x0, y0, resolution, size):
+    """Append the segment (x, y) + t (dx, dy), t in [0, 1], to ``lines``; returns the new count. One longer
+    than the map is wide is cut to its part over the map first, so no line takes more samples than the map
+    has cells across, whatever it is given."""
+    if _samples(dx, dy, resolution) > 2 * size + 2:
+        side = size / resolution
+        start, end = 0.0, 1.0  # Liang-Barsky: the span of t over the map's square
+        for step, gap in ((-dx, x - x0), (dx, x0 + side - x), (-dy, y - y0), (dy, y0 + side - y)):
+            if step == 0.0:
+                if gap < 0.0:
+                    return used
+            elif step < 0.0:
+                start = max(start, gap / step)
+            else:
+                end = min(end, gap / step)
+        if not start < end:
+            return used
+        x, y, dx, dy = x + dx * start, y + dy * start, dx * (end - start), dy * (end - start)
+    lines[used] = (x, y, dx, dy, float(skip))
+    return used + 1
+
+
+@numba.njit(cache=True)
 def _project(grid, ever_hit, size, x0, y0, resolution, band, origins, directions, distances, clears, spreads,
              sides, marks):
     """``MemoryMap.add_readings`` on flat views of the grid: returns the cells passed (each listed once
@@ -289,15 +325,15 @@ def _project(grid, ever_hit, size, x0, y0, resolution, band, origins, directions
             echo_cell[i] = _cell(x + ux * length, y + uy * length, x0, y0, resolution, size)
         if not marks[i]:
             continue
-        lines[used_lines] = (x, y, ux * length, uy * length, float(echo_cell[i]))
-        used_lines += 1
+        used_lines = _add_line(lines, used_lines, x, y, ux * length, uy * length, echo_cell[i], x0, y0,
+                               resolution, size)
         if sides:  # the cone's sides, as far as the centre line reaches and SIDE_REACH at most
             c, s = math.cos(spreads[i]), math.sin(spreads[i])
             reach = min(length, SIDE_REACH)
-            lines[used_lines] = (x, y, (ux * c + uy * s) * reach, (uy * c - ux * s) * reach, float(echo_cell[i]))
-            lines[used_lines + 1] = (x, y, (ux * c - uy * s) * reach, (uy * c + ux * s) * reach,
-                                     float(echo_cell[i]))
-            used_lines += 2
+            used_lines = _add_line(lines, used_lines, x, y, (ux * c + uy * s) * reach, (uy * c - ux * s) * reach,
+                                   echo_cell[i], x0, y0, resolution, size)
+            used_lines = _add_line(lines, used_lines, x, y, (ux * c - uy * s) * reach, (uy * c + ux * s) * reach,
+                                   echo_cell[i], x0, y0, resolution, size)
     room = 0
     for k in range(used_lines):
         room += _samples(lines[k, 2], lines[k, 3], resolution)

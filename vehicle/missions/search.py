@@ -26,6 +26,7 @@ UNKNOWN_RADIUS = 3.0  # m around a goal looked at for unknown cells
 VISITED_FRACTION = 0.2  # goals closer to an earlier goal or scan spot than this share of space_size are skipped
 VISITED_MAX = 6.0  # m, whatever the space size
 MIN_LEG = 1.0  # m: goals closer than this are not worth a trip
+TIE = 1e-9  # m: arcs whose mean free distances differ by less are equally open (whatever the rounding)
 
 
 class Search(Mission):
@@ -90,7 +91,7 @@ class Search(Mission):
                 break  # no later echo can beat the best one
             if not np.isfinite(distance) or distance - standoff < MIN_LEG:
                 continue
-            side = 1.0 if right[i] >= left[i] else -1.0  # +1: clockwise of the echo
+            side = 1.0 if right[i] >= left[i] - TIE else -1.0  # +1: clockwise of the echo (also on a tie)
             ux, uy = math.sin(heading), math.cos(heading)
             sx, sy = side * uy, -side * ux  # perpendicular towards the open side
             goal = (x + ux * (distance - standoff) + sx * standoff, y + uy * (distance - standoff) + sy * standoff)
