@@ -241,3 +241,18 @@ def test_trees_trunks_stand_on_the_ground_and_crowns_clear_it():
             clearance = v[:, 2] - _ground_z(ground, v[:, :2])
             assert clearance.min() >= 2.5
     assert trunks == crowns == 32
+
+
+def test_a_scene_built_for_a_run_still_pickles_and_shares_its_preparation():
+    """A scene's BVH and collision grid are built once for every run in it, and left behind when the
+    scene goes to a worker process (an Embree scene does not pickle)."""
+    import pickle
+
+    from vehicle.world import World
+
+    s = _load("house")
+    first, second = World(s), World(s)
+    assert first.caster is second.caster and first.collider.grid is second.collider.grid
+    copy = pickle.loads(pickle.dumps(s))
+    assert len(copy.mesh.faces) == len(s.mesh.faces)
+    assert World(copy).caster is not first.caster

@@ -68,6 +68,10 @@ class Scene:
             self._prepared[key] = build()
         return self._prepared[key]
 
+    def __getstate__(self) -> dict:
+        """Pickled (to a worker process) without what was prepared: an Embree scene does not pickle."""
+        return {**self.__dict__, "_prepared": {}}
+
 
 def load_scene(path: str | Path) -> Scene:
     """Load a VRML97 file (gzipped or not); any problem raises SceneError."""
