@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from vehicle import __version__
+from vehicle.cli import datum_type
 
 DEFAULT_SCENE = Path(__file__).resolve().parent.parent / "scenes" / "default.wrl"
 DEFAULT_LINK = "udpin:127.0.0.1:14550"
@@ -23,18 +24,9 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
                         "%(default)s; '' to not record)")
     parser.add_argument("--tls-cert", help="certificate file for HTTPS")
     parser.add_argument("--tls-key", help="private key file for HTTPS")
-    parser.add_argument("--datum", type=_datum, metavar="LAT,LON[,ALT]",
+    parser.add_argument("--datum", type=datum_type, metavar="LAT,LON[,ALT]",
                         help="where the scene origin lies on Earth (default: the scene's datum hint, else "
                              "ArduPilot's simulator home; without a scene, the first vehicle's home)")
-
-
-def _datum(text: str):
-    from vehicle.geodesy import Datum
-
-    try:
-        return Datum.parse(text)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def _station(args, urls: list[str], scene_path: str | None):

@@ -21,7 +21,8 @@ def _point(text: str) -> tuple[float, float]:
     return x, y
 
 
-def _datum(text: str):
+def datum_type(text: str):
+    """argparse type of a ``--datum LAT,LON[,ALT]`` option (the ground station's too)."""
     from vehicle.geodesy import Datum
 
     try:
@@ -54,7 +55,7 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--sensors", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
                         help="; ".join(f"{name}: {text}" for name, text in SENSOR_SUITES.items())
                         + " (default %(default)s)")
-    parser.add_argument("--datum", type=_datum, metavar="LAT,LON[,ALT]",
+    parser.add_argument("--datum", type=datum_type, metavar="LAT,LON[,ALT]",
                         help="where the scene origin lies on Earth, degrees and metres above sea level (default: "
                              "the scene's datum hint, else ArduPilot's simulator home -35.363261,149.165230,584)")
 
