@@ -23,7 +23,7 @@ from pathlib import Path
 
 from common import CASTLE, ROOT, castle_or_default, code_state, table
 
-from vehicle.experiment import Experiment, run_experiment
+from vehicle.experiment import Experiment, run_experiment, warm_up
 from vehicle.scene import load_scene
 from vehicle.sensors import SENSOR_SUITES
 from vehicle.settings import load_settings
@@ -41,14 +41,6 @@ def scenes() -> list[tuple[Path, tuple[float, float] | None]]:
     return list(dict.fromkeys(out))  # the default scene once when castle is absent
 
 
-def _warm_up() -> float:
-    """One short run, so the process's one-time costs (loading the compiled loops) fall outside the timings."""
-    started = time.perf_counter()
-    path = ROOT / "scenes" / "default.wrl"
-    run_experiment(Experiment(str(path), "browse", "copter", None, None, load_settings(time_limit=2.0)))
-    return time.perf_counter() - started
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description="Every mission in every scene, timed.")
     parser.add_argument("--sensors", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
@@ -58,7 +50,7 @@ def main() -> None:
     args = parser.parse_args()
     suite, repeats = args.sensors, max(1, args.repeats)
     load = os.getloadavg()[0]
-    warm_up = _warm_up()
+    warmed = warm_up()  # loads the compiled loops (compiles them on a fresh install)
     runs = []  # (where, prepared s, experiment, scene)
     for path, start in scenes():
         scene = load_scene(path)
@@ -102,8 +94,8 @@ def main() -> None:
     print(f"Every mission ran {repeats} times, in rounds over all of them (runs are deterministic); its wall time "
           "is its fastest run's.")
     print(f"Not counted in the missions' times: loading each scene and preparing it once (the ray-casting BVH and "
-          f"collision grid every run in it shares, 'prepare ms'), and the process's warm-up ({warm_up:.2f} s: "
-          "imports and loading the compiled loops).")
+          f"collision grid every run in it shares, 'prepare ms'), and the process's warm-up ({warmed:.2f} s: "
+          "a short flight in a built-in scene that loads the compiled loops).")
     print(f"Copter with the {suite} sensor suite, default settings plus each scene's suggestions (house: "
           "altitude 1.6, padding 0.1, closeness 0.8, "
           "space_size 10, its waypoints). The thesis's figures are its best over a 48-setting sweep (its Square "

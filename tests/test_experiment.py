@@ -240,3 +240,21 @@ def test_cli_scene_hints_apply_below_set(tmp_path, capsys):
     assert code == 0
     settings = json.loads(out)["settings"]
     assert settings["altitude"] == 1.5 and settings["space_size"] == 20 and settings["yaw_step"] == 30
+
+
+def test_the_warm_up_flight_reaches_every_compiled_loop():
+    """``vehicle sim`` flies it before its link opens: a loop first compiled mid-flight would freeze the
+    vehicle for seconds on a fresh install. In a process of its own, so no other test has called them;
+    the loops these call are compiled into them."""
+    script = """
+from vehicle import avoidance, collision, memory_map, planning, sensors
+from vehicle.experiment import warm_up
+warm_up()
+loops = [memory_map._project, memory_map._free_cells, sensors._nearest_echoes, avoidance._nearest_and_ahead,
+         planning._supercover_is_clear, collision._point_triangle_distance]
+print([loop.__name__ for loop in loops if not loop.signatures])
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
+                          cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"

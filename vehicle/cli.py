@@ -133,6 +133,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 def cmd_sim(args: argparse.Namespace) -> int:
     from vehicle.agent import Agent
+    from vehicle.experiment import warm_up
     from vehicle.geodesy import Datum
     from vehicle.scene import load_scene
     from vehicle.sensors import sensor_suite
@@ -142,6 +143,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     scene = load_scene(args.scene)
     settings = settings_from(args, scene)
+    warm_up()  # before any link opens: compiling the loops on a fresh install takes a few seconds
     world = World(scene, args.vehicle, settings, args.start, args.heading, seed=args.seed,
                   sensors=sensor_suite(args.sensors), datum=Datum.of_scene(scene.hints, args.datum))
     waypoints = None

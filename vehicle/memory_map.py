@@ -282,21 +282,27 @@ def _add_line(lines, used, x, y, dx, dy, skip, x0, y0, resolution, size):
     than the map is wide is cut to its part over the map first, so no line takes more samples than the map
     has cells across, whatever it is given."""
     if _samples(dx, dy, resolution) > 2 * size + 2:
-        side = size / resolution
-        start, end = 0.0, 1.0  # Liang-Barsky: the span of t over the map's square
-        for step, gap in ((-dx, x - x0), (dx, x0 + side - x), (-dy, y - y0), (dy, y0 + side - y)):
-            if step == 0.0:
-                if gap < 0.0:
-                    return used
-            elif step < 0.0:
-                start = max(start, gap / step)
-            else:
-                end = min(end, gap / step)
+        side = size / resolution  # Liang-Barsky: the span of t over the map's square, one edge at a time
+        start, end = _clip(-dx, x - x0, 0.0, 1.0)
+        start, end = _clip(dx, x0 + side - x, start, end)
+        start, end = _clip(-dy, y - y0, start, end)
+        start, end = _clip(dy, y0 + side - y, start, end)
         if not start < end:
             return used
         x, y, dx, dy = x + dx * start, y + dy * start, dx * (end - start), dy * (end - start)
-    lines[used] = (x, y, dx, dy, float(skip))
+    lines[used, 0], lines[used, 1], lines[used, 2], lines[used, 3], lines[used, 4] = x, y, dx, dy, skip
     return used + 1
+
+
+@numba.njit(cache=True)
+def _clip(step, gap, start, end):
+    """Narrow the span [start, end] of t to where the segment is inside one edge of a square: ``gap`` is
+    how far inside the edge it starts, ``step`` how fast it moves away from it per unit of t."""
+    if step == 0.0:
+        return (start, end) if gap >= 0.0 else (1.0, 0.0)
+    if step < 0.0:
+        return max(start, gap / step), end
+    return start, min(end, gap / step)
 
 
 @numba.njit(cache=True)
@@ -307,7 +313,7 @@ def _project(grid, ever_hit, size, x0, y0, resolution, band, origins, directions
     count = len(origins)
     echo_cell = np.full(count, -1)
     lines = np.empty((3 * count, 5))  # x, y, dx, dy and the echo cell of each line marked free
-    used_lines = 0
+    used_lines = np.int64(0)  # not the literal 0: that would compile the callees once more for it
     for i in range(count):
         echo = math.isfinite(distances[i])
         length = distances[i] if echo else clears[i]
@@ -338,7 +344,7 @@ def _project(grid, ever_hit, size, x0, y0, resolution, band, origins, directions
     for k in range(used_lines):
         room += _samples(lines[k, 2], lines[k, 3], resolution)
     passed = np.empty(room, dtype=np.int64)
-    used = 0
+    used = np.int64(0)
     for k in range(used_lines):
         used = _trace(passed, used, lines[k, 0], lines[k, 1], lines[k, 2], lines[k, 3], int(lines[k, 4]), x0, y0,
                       resolution, size)
