@@ -143,7 +143,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     scene = load_scene(args.scene)
     settings = settings_from(args, scene)
-    warm_up()  # before any link opens: compiling the loops on a fresh install takes a few seconds
+    warmed = warm_up()  # before any link opens: compiling the loops on a fresh install takes a few seconds
+    if warmed > 1.0:
+        print(f"vehicle {args.sysid}: compiled the simulation's loops in {warmed:.1f} s (once after an install)",
+              flush=True)
     world = World(scene, args.vehicle, settings, args.start, args.heading, seed=args.seed,
                   sensors=sensor_suite(args.sensors), datum=Datum.of_scene(scene.hints, args.datum))
     waypoints = None
