@@ -196,12 +196,18 @@ class Replay:
             end = int(np.searchsorted(self.index.times, self.index.start + seconds, side="right"))
             with self.fleet.lock:
                 self.fleet.clear()
-                self._apply(self._needed(end))
+                needed, latest = self._needed(end)
+                self._apply(needed)
+                for sysid, i in latest.items():  # the records applied end with a pose or a text, not the last
+                    vehicle = self.fleet.get(sysid)
+                    if vehicle is not None:
+                        vehicle.last_message = float(self.index.times[i])
             self.position = end
             self.clock = seconds
 
-    def _needed(self, end: int) -> np.ndarray:
-        """Indices of the records before ``end`` that rebuild the state at ``end``.
+    def _needed(self, end: int) -> tuple[np.ndarray, dict[int, int]]:
+        """Indices of the records before ``end`` that rebuild the state at ``end``, and each vehicle's last
+        record before ``end`` (when it was last heard).
 
         Each vehicle's first heartbeat comes first (it creates the vehicle), then
         its map from the last whole snapshot on (so the readings that follow
@@ -213,8 +219,10 @@ class Replay:
         firsts: list[np.ndarray] = []
         maps: list[np.ndarray] = []
         rest: list[np.ndarray] = []
+        latest: dict[int, int] = {}
         for sysid in np.unique(sysids):
             mine = sysids == sysid
+            latest[int(sysid)] = int(np.flatnonzero(mine)[-1])
             heartbeats = np.flatnonzero(mine & (msgids == mavlink.MAVLINK_MSG_ID_HEARTBEAT))
             firsts.append(heartbeats[:1])
             for msgid in LATEST_ONLY:
@@ -233,10 +241,10 @@ class Replay:
             else:  # no map from the vehicle: the ground station builds one from every reading
                 rest.append(readings)
         if not firsts:
-            return np.zeros(0, dtype=np.int64)
+            return np.zeros(0, dtype=np.int64), latest
         first = np.unique(np.concatenate(firsts))
         return np.concatenate([first, np.unique(np.concatenate(maps + [np.zeros(0, dtype=np.int64)])),
-                               np.setdiff1d(np.concatenate(rest), first)])
+                               np.setdiff1d(np.concatenate(rest), first)]), latest
 
     def _snapshot_start(self, chunks: np.ndarray) -> int:
         """Record index where the last complete snapshot among ``chunks`` began (its first chunk).

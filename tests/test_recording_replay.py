@@ -688,6 +688,22 @@ def test_an_experiment_log_replays(experiment_run):
     assert middle.alt > 3.0 and middle.armed  # mid-scan, in the air
 
 
+def test_after_a_seek_a_vehicle_was_last_heard_at_its_last_record(tmp_path):
+    """A seek applies only the records that rebuild the state, maps before poses; the vehicle was still
+    last heard at its very last record before the seek time, often a map message."""
+    log = tmp_path / "mixed.tlog"
+    synthetic_log(log, 3000)
+    index = index_tlog(log)
+    replay = Replay.open(log, Fleet(Datum()))
+    mine = np.flatnonzero(index.sysids == 1)
+    tunnels = mine[index.msgids[mine] == mavlink.MAVLINK_MSG_ID_TUNNEL]
+    assert len(tunnels) > 20
+    for i in tunnels[len(tunnels) // 2::len(tunnels) // 20]:
+        replay.seek(float(index.times[i]) - index.start + 5e-7)  # up to and including the map record
+        vehicle = replay.fleet.get(1)
+        assert vehicle is not None and vehicle.last_message == pytest.approx(index.times[i], abs=1e-6)
+
+
 def test_seeking_in_a_log_that_lost_snapshot_chunks_still_shows_the_map(experiment_run, tmp_path):
     """A live station that lost a chunk of each of the last two map snapshots (UDP loss hits the snapshot
     bursts first) stays synced from an earlier snapshot plus the deltas; seeking in its recording does too,
