@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from vehicle.agent import Agent
 from vehicle.endpoint import Endpoint
+from vehicle.experiment import warm_up
 from vehicle.flightlog import TlogWriter
 from vehicle.telemetry import Telemetry
 from vehicle.world import World
@@ -49,6 +50,7 @@ class SimVehicle:
 
     def run(self, duration: float | None = None) -> None:
         """Run until ``stop()`` (or for ``duration`` wall seconds)."""
+        warm_up()  # before the clock starts: a loop compiled mid-flight would freeze the vehicle for seconds
         started = time.monotonic()
         sim_start = self.world.time
         last_flush = started
