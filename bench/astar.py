@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from vehicle.planning import astar, inflate, plan, smooth  # noqa: E402
+from vehicle.mapping.planning import astar, inflate, plan, smooth  # noqa: E402
 
 SIZES = (200, 1000, 2000)
 TARGET_MS = {200: 2.0, 2000: 100.0}  # plan() targets

@@ -28,8 +28,8 @@ import websockets
 import zstandard
 from common import table
 
-from vehicle.geodesy import Datum
-from vehicle.mav import mavlink, pack
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mav import mavlink, pack
 
 TICKS = os.sysconf("SC_CLK_TCK")
 STEP = 0.1  # m east per pose of vehicle 1

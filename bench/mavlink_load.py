@@ -20,7 +20,7 @@ from collections import Counter, defaultdict
 
 from common import DEFAULT_SCENE, table
 
-from vehicle.mav import mavlink, mavutil
+from vehicle.protocol.mav import mavlink, mavutil
 
 TICKS = os.sysconf("SC_CLK_TCK")
 

@@ -23,12 +23,12 @@ from pathlib import Path
 
 from common import CASTLE, ROOT, castle_or_default, code_state, table
 
-from vehicle.experiment import Experiment, run_experiment, warm_up
-from vehicle.scene import load_scene
-from vehicle.sensors import SENSOR_SUITES
-from vehicle.settings import load_settings
-from vehicle.sweep import THESIS_TABLE
-from vehicle.world import DEFAULT_SUITE, World
+from vehicle.agent.settings import load_settings
+from vehicle.lab.experiment import Experiment, run_experiment, warm_up
+from vehicle.lab.sweep import THESIS_TABLE
+from vehicle.sim.sensors import SENSOR_SUITES
+from vehicle.sim.simulation import DEFAULT_SUITE, World
+from vehicle.world.scene import load_scene
 
 MISSIONS = ["square", "browse", "search", "pathfind"]
 TARGET = 500.0

@@ -20,11 +20,11 @@ from common import table
 
 from groundstation.replay import Replay
 from groundstation.state import Fleet
-from vehicle.flightlog import TlogWriter
-from vehicle.geodesy import Datum
-from vehicle.mapstream import PAYLOAD, MapStreamer
-from vehicle.mav import mavlink, pack
-from vehicle.memory_map import MemoryMap
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mapstream import PAYLOAD, MapStreamer
+from vehicle.protocol.mav import mavlink, pack
+from vehicle.protocol.tlog import TlogWriter
 
 HOUR = 3600.0
 

@@ -34,9 +34,9 @@ from pathlib import Path
 
 from common import CASTLE, ROOT, code_state, table
 
-from vehicle.experiment import OUTCOMES, Experiment, run_experiment
-from vehicle.scene import Scene, load_scene, parse_scene
-from vehicle.settings import load_settings
+from vehicle.agent.settings import load_settings
+from vehicle.lab.experiment import OUTCOMES, Experiment, run_experiment
+from vehicle.world.scene import Scene, load_scene, parse_scene
 
 MISSIONS = ["square", "browse", "search", "pathfind"]
 PROJECT_SCENES = [ROOT / "scenes" / name for name in ("default.wrl", "trees.wrl", "house.wrl")]
@@ -168,7 +168,7 @@ def run_job(job: Job) -> dict:
 
 
 def _picture(job: Job, scene: Scene, agent, route: list[tuple[float, float]], result: dict) -> str:
-    from vehicle.topview import render_top_view
+    from vehicle.world.topview import render_top_view
 
     OUT.mkdir(parents=True, exist_ok=True)
     stem = f"{result['outcome']}-{Path(job.scene).stem}-{job.mission}-{job.vehicle}"

@@ -11,9 +11,9 @@ import time
 
 from common import CASTLE, castle_or_default, table
 
-from vehicle.scene import load_scene
-from vehicle.sensors import Sonar
-from vehicle.world import World
+from vehicle.sim.sensors import Sonar
+from vehicle.sim.simulation import World
+from vehicle.world.scene import load_scene
 
 
 def main(sim_seconds: float = 600.0) -> None:

@@ -13,10 +13,10 @@ import time
 import numpy as np
 from common import castle_or_default, table
 
-from vehicle.raycast import RayCaster, embree_available
-from vehicle.scene import load_scene
-from vehicle.sensors import sensor_suite
-from vehicle.world import DEFAULT_SUITE
+from vehicle.sim.sensors import sensor_suite
+from vehicle.sim.simulation import DEFAULT_SUITE
+from vehicle.world.raycast import RayCaster, embree_available
+from vehicle.world.scene import load_scene
 
 
 def rays_per_second(caster: RayCaster, origins: np.ndarray, directions: np.ndarray, seconds: float = 1.0) -> float:

@@ -19,8 +19,8 @@ from pathlib import Path
 
 from common import code_state, table
 
-from vehicle.experiment import OUTCOMES
-from vehicle.sweep import PRESETS, SweepSpec, run_sweep
+from vehicle.lab.experiment import OUTCOMES
+from vehicle.lab.sweep import PRESETS, SweepSpec, run_sweep
 
 TARGET_S = 6 * 60
 TARGET_RUNS = 576

@@ -15,8 +15,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run as a plain script from anywhere
 
-from vehicle import vrml  # noqa: E402
-from vehicle.scene import load_scene, parse_scene  # noqa: E402
+from vehicle.world import vrml  # noqa: E402
+from vehicle.world.scene import load_scene, parse_scene  # noqa: E402
 
 CASTLE = REPO.parent / "shared" / "scenes" / "castle.wrl"
 GRID = 10  # points per side of each synthetic shape

@@ -35,8 +35,8 @@ from groundstation.export import export_html
 from groundstation.link import LinkError
 from groundstation.replay import ReplayError
 from vehicle import __version__
-from vehicle.memory_map import MemoryMap, state_image
-from vehicle.waypoints import WaypointError, mission_text, parse_mission
+from vehicle.mapping.memory_map import MemoryMap, state_image
+from vehicle.protocol.waypoints import WaypointError, mission_text, parse_mission
 
 if TYPE_CHECKING:
     from groundstation.server import GroundStation

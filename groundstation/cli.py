@@ -31,7 +31,7 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
 
 def _station(args, urls: list[str], scene_path: str | None):
     from groundstation.server import GroundStation
-    from vehicle.scene import load_scene
+    from vehicle.world.scene import load_scene
 
     scene = load_scene(scene_path) if scene_path else None
     return GroundStation(urls, scene, args.token, args.record_dir or None, datum=args.datum)
@@ -93,7 +93,7 @@ def _exit_quietly(number, frame) -> None:
 def cmd_replay(args: argparse.Namespace) -> int:
     from groundstation.replay import index_tlog
     from groundstation.server import GroundStation, serve
-    from vehicle.scene import load_scene
+    from vehicle.world.scene import load_scene
 
     path = Path(args.file).resolve()
     index = index_tlog(path)  # a clear error now, before anything starts, if it is no log
@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
 
     args = parser.parse_args(argv)
     from groundstation.replay import ReplayError
-    from vehicle.scene import SceneError
+    from vehicle.world.scene import SceneError
 
     try:
         return args.run(args)

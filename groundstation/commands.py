@@ -14,8 +14,8 @@ from pydantic import BaseModel, Field, model_validator
 
 from groundstation.link import Link
 from groundstation.state import VehicleState
-from vehicle.geodesy import Datum
-from vehicle.mav import mavlink, mavutil
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mav import mavlink, mavutil
 
 Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed"]
 STOP_MODE = {"rover": "HOLD", "boat": "HOLD", "copter": "BRAKE", "plane": "LOITER"}

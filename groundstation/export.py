@@ -13,8 +13,8 @@ from pathlib import Path
 from groundstation.replay import Replay
 from groundstation.state import Fleet
 from groundstation.viz import SceneView
-from vehicle.geodesy import Datum
-from vehicle.scene import Scene
+from vehicle.protocol.geodesy import Datum
+from vehicle.world.scene import Scene
 
 MAX_FRAMES = 600
 MIN_FRAME = 0.25  # s of log time between frames

@@ -16,9 +16,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from groundstation.state import Fleet
-from vehicle.mav import mavlink, mavutil, pack
-from vehicle.mission_protocol import item_from, item_message
-from vehicle.modes import MissionItem
+from vehicle.protocol.mav import mavlink, mavutil, pack
+from vehicle.protocol.modes import MissionItem
+from vehicle.sim.mission_server import item_from, item_message
 
 GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER

@@ -11,7 +11,7 @@ import threading
 import time
 from pathlib import Path
 
-from vehicle.flightlog import TlogWriter
+from vehicle.protocol.tlog import TlogWriter
 
 FLUSH_EVERY = 1.0  # s
 

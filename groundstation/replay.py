@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.state import Fleet
-from vehicle.mapstream import MAP_SNAPSHOT
-from vehicle.mav import mavlink
+from vehicle.protocol.mapstream import MAP_SNAPSHOT
+from vehicle.protocol.mav import mavlink
 
 V1, V2 = 0xFE, 0xFD
 SIGNED = 0x01

@@ -24,11 +24,11 @@ from groundstation.recorder import Recorder
 from groundstation.replay import Player, Replay, ReplayError, index_tlog
 from groundstation.state import Fleet
 from groundstation.viz import SceneView
-from vehicle.geodesy import Datum
-from vehicle.modes import MissionItem
-from vehicle.raycast import RayCaster
-from vehicle.scene import Scene
-from vehicle.waypoints import positions
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.modes import MissionItem
+from vehicle.protocol.waypoints import positions
+from vehicle.world.raycast import RayCaster
+from vehicle.world.scene import Scene
 
 
 class GroundStation:

@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vehicle.geodesy import Datum
-from vehicle.mapstream import MapReceiver
-from vehicle.mav import mavlink, mavutil
-from vehicle.memory_map import MemoryMap
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mapstream import MapReceiver
+from vehicle.protocol.mav import mavlink, mavutil
 
 LINK_LOST_AFTER = 3.0  # s without a heartbeat
 TRAIL_POINTS = 2000

@@ -21,9 +21,9 @@ import numpy as np
 import viser
 
 from groundstation.state import Fleet, VehicleState
-from vehicle.memory_map import MemoryMap, state_image
-from vehicle.raycast import RayCaster
-from vehicle.scene import Scene
+from vehicle.mapping.memory_map import MemoryMap, state_image
+from vehicle.world.raycast import RayCaster
+from vehicle.world.scene import Scene
 
 RATE = 30.0  # frames per second at most (poses); trails, sonar and maps far less often
 SLOW_EVERY = 8  # trails, sonar, maps and labels every this many frames

@@ -28,10 +28,10 @@ from mavlink_gcs import RunningSim, free_udp_port
 
 from groundstation.app import create_app
 from groundstation.server import GroundStation
-from vehicle.agent import Agent
-from vehicle.scene import Scene, load_scene
-from vehicle.settings import Settings
-from vehicle.world import World
+from vehicle.agent.agent import Agent
+from vehicle.agent.settings import Settings
+from vehicle.sim.simulation import World
+from vehicle.world.scene import Scene, load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SCENE = ROOT / "scenes" / "default.wrl"

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from vehicle.scene import Scene, parse_scene
+from vehicle.world.scene import Scene, parse_scene
 
 HEADER = "#VRML V2.0 utf8\n"
 CASTLE = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "castle.wrl"

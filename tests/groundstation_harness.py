@@ -23,10 +23,10 @@ from mavlink_gcs import RunningSim, free_udp_port
 
 from groundstation.app import create_app
 from groundstation.server import GroundStation
-from vehicle.agent import Agent
-from vehicle.scene import Scene, parse_scene
-from vehicle.settings import Settings
-from vehicle.world import World
+from vehicle.agent.agent import Agent
+from vehicle.agent.settings import Settings
+from vehicle.sim.simulation import World
+from vehicle.world.scene import Scene, parse_scene
 
 TOKEN = "test-operator-token"
 SPEEDUP = 10.0

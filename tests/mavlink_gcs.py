@@ -12,8 +12,8 @@ import threading
 import time
 from collections.abc import Callable
 
-from vehicle.mav import mavlink, mavutil
-from vehicle.sim import SimOptions, SimVehicle
+from vehicle.lab.live import SimOptions, SimVehicle
+from vehicle.protocol.mav import mavlink, mavutil
 
 
 class WaitTimeout(AssertionError):

@@ -8,9 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from vehicle.autopilot import ACCEPTED, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, VELOCITY_TIMEOUT
-from vehicle.geodesy import heading_of, wrap_pi
-from vehicle.modes import (
+from vehicle.protocol.geodesy import heading_of, wrap_pi
+from vehicle.protocol.modes import (
     DO_CHANGE_SPEED,
     MODES,
     NAV_LAND,
@@ -24,9 +23,10 @@ from vehicle.modes import (
     mode_name,
     mode_number,
 )
-from vehicle.physics import Limits
-from vehicle.sensors import Sonar
-from vehicle.world import World
+from vehicle.sim.autopilot import ACCEPTED, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, VELOCITY_TIMEOUT
+from vehicle.sim.physics import Limits
+from vehicle.sim.sensors import Sonar
+from vehicle.sim.simulation import World
 
 ALTITUDE = 4.0
 REST_Z = 0.35  # body centre of a landed vehicle on ground at z = 0 (radius 0.3 + clearance 0.05)

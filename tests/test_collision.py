@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from vehicle.collision import Collider, point_triangle_distance
-from vehicle.modes import Kind
-from vehicle.sensors import Sonar
-from vehicle.world import PlacementError, World
+from vehicle.protocol.modes import Kind
+from vehicle.sim.sensors import Sonar
+from vehicle.sim.simulation import PlacementError, World
+from vehicle.world.collision import Collider, point_triangle_distance
 
 RADIUS = 0.3
 WALL_FACE_Y = 9.9  # south face of the wall in the wall_scene fixture

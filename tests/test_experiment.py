@@ -17,11 +17,11 @@ import pytest
 from PIL import Image
 
 from vehicle import __version__
+from vehicle.agent.settings import Settings
 from vehicle.cli import main
-from vehicle.experiment import OUTCOMES, Experiment, run_experiment
-from vehicle.memory_map import MemoryMap
-from vehicle.scene import load_scene
-from vehicle.settings import Settings
+from vehicle.lab.experiment import OUTCOMES, Experiment, run_experiment
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.world.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 HEADER = "#VRML V2.0 utf8\n"
@@ -247,8 +247,10 @@ def test_the_warm_up_flight_reaches_every_compiled_loop():
     vehicle for seconds on a fresh install. In a process of its own, so no other test has called them;
     the loops these call are compiled into them."""
     script = """
-from vehicle import avoidance, collision, memory_map, planning, sensors
-from vehicle.experiment import warm_up
+from vehicle.mapping import memory_map, planning
+from vehicle.sim import avoidance, sensors
+from vehicle.world import collision
+from vehicle.lab.experiment import warm_up
 warm_up()
 loops = [memory_map._project, memory_map._free_cells, sensors._nearest_echoes, avoidance._nearest_and_ahead,
          planning._supercover_is_clear, collision._point_triangle_distance]

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from vehicle.cli import main
-from vehicle.flightlog import LOG_EPOCH
-from vehicle.mapstream import MapReceiver
-from vehicle.mav import mavlink, mavutil
+from vehicle.protocol.mapstream import MapReceiver
+from vehicle.protocol.mav import mavlink, mavutil
+from vehicle.protocol.tlog import LOG_EPOCH
 
 SCENE = """#VRML V2.0 utf8
 WorldInfo { info ["space_size=20" "waypoints=-3,6; 3,6"] }

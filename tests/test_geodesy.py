@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from vehicle.geodesy import METRES_PER_DEGE7, Datum, heading_of, heading_vector, wrap_pi
+from vehicle.protocol.geodesy import METRES_PER_DEGE7, Datum, heading_of, heading_vector, wrap_pi
 
 POINTS = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (-40.0, 0.0), (123.456, -987.654), (-2500.0, 3100.0), (1e4, 1e4)]
 

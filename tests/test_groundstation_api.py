@@ -44,8 +44,8 @@ from PIL import Image
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
 from groundstation.server import is_loopback
-from vehicle.geodesy import Datum
-from vehicle.waypoints import parse_mission
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.waypoints import parse_mission
 
 ROOT = Path(__file__).resolve().parent.parent
 STOPPED_SYSID = 3
@@ -695,8 +695,8 @@ def test_serve_refuses_half_a_tls_setup():
 def test_the_station_takes_its_datum_from_the_option_else_the_scene(given, expected):
     """Vehicles report latitude and longitude; the station must place them with the datum they use."""
     from groundstation import server
-    from vehicle.geodesy import Datum
-    from vehicle.scene import parse_scene
+    from vehicle.protocol.geodesy import Datum
+    from vehicle.world.scene import parse_scene
 
     scene = parse_scene('#VRML V2.0 utf8\nWorldInfo { info ["datum=47.3769,8.5417,408"] }\n'
                         "Shape { geometry Box { size 10 10 0.1 } }\n")
@@ -711,7 +711,7 @@ def test_the_station_takes_its_datum_from_the_option_else_the_scene(given, expec
 
 def test_without_a_scene_the_given_datum_places_live_and_replayed_vehicles():
     from groundstation import server
-    from vehicle.geodesy import Datum
+    from vehicle.protocol.geodesy import Datum
 
     for given in (Datum(51.5, -0.12, 11.0), None):  # None: the first home heard becomes the origin
         station = server.GroundStation([], None, TOKEN, record_dir=None, datum=given)

@@ -11,8 +11,8 @@ import struct
 import numpy as np
 import pytest
 
-from vehicle.mapstream import MAP_DELTA, MAP_SNAPSHOT, PATH, PAYLOAD, MapReceiver, MapStreamer
-from vehicle.memory_map import MemoryMap
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.protocol.mapstream import MAP_DELTA, MAP_SNAPSHOT, PATH, PAYLOAD, MapReceiver, MapStreamer
 
 HOME = (12.0, -7.0)  # not the origin, so offsets from home show
 STEP = 0.25  # s between ticks

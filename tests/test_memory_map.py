@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from vehicle.memory_map import FREE, OCCUPIED, UNKNOWN, MemoryMap
+from vehicle.mapping.memory_map import FREE, OCCUPIED, UNKNOWN, MemoryMap
 
 ORIGIN = np.array([0.5, 0.5, 4.0])  # the centre of cell (10, 10) in the maps below, at the operating height
 EAST = np.array([1.0, 0.0, 0.0])

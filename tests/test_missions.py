@@ -10,15 +10,15 @@ import math
 import numpy as np
 import pytest
 
-from vehicle.agent import Agent, Phase
-from vehicle.experiment import Experiment, run_experiment
-from vehicle.memory_map import MemoryMap
-from vehicle.missions import mission_class, missions
-from vehicle.missions.base import UNSEEN_EXTENT, Context
-from vehicle.missions.square import square_corners
-from vehicle.monitor import Monitor
-from vehicle.settings import Settings
-from vehicle.world import World
+from vehicle.agent.agent import Agent, Phase
+from vehicle.agent.missions import mission_class, missions
+from vehicle.agent.missions.base import UNSEEN_EXTENT, Context
+from vehicle.agent.missions.square import square_corners
+from vehicle.agent.monitor import Monitor
+from vehicle.agent.settings import Settings
+from vehicle.lab.experiment import Experiment, run_experiment
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.sim.simulation import World
 
 GROUND = (0, 0, -0.05, 80, 80, 0.1)
 SMALL = {"space_size": 20, "time_limit": 200}

@@ -10,12 +10,12 @@ import math
 import numpy as np
 import pytest
 
-from vehicle.agent import Agent
-from vehicle.memory_map import MemoryMap
-from vehicle.monitor import Monitor, sweep_profile
-from vehicle.sensors import Reading
-from vehicle.settings import Settings
-from vehicle.world import World
+from vehicle.agent.agent import Agent
+from vehicle.agent.monitor import Monitor, sweep_profile
+from vehicle.agent.settings import Settings
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.sim.sensors import Reading
+from vehicle.sim.simulation import World
 
 RADIUS = 0.3
 NORTH, EAST, SOUTH = 0.0, math.pi / 2, math.pi

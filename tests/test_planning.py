@@ -3,7 +3,7 @@ import pyastar2d
 import pytest
 import scipy.ndimage as ndi
 
-from vehicle.planning import (
+from vehicle.mapping.planning import (
     GOAL_BLOCKED,
     START_BLOCKED,
     UNREACHABLE,

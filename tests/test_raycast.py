@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from vehicle.collision import point_triangle_distance
-from vehicle.raycast import RayCaster, embree_available
-from vehicle.scene import load_scene
+from vehicle.world.collision import point_triangle_distance
+from vehicle.world.raycast import RayCaster, embree_available
+from vehicle.world.scene import load_scene
 
 needs_embree = pytest.mark.skipif(not embree_available(), reason="needs embreex (x86_64 wheels only)")
 

@@ -35,9 +35,9 @@ from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
 from groundstation.replay import Replay, ReplayError, index_tlog
 from groundstation.state import Fleet
-from vehicle.geodesy import Datum
-from vehicle.mapstream import MAP_SNAPSHOT, MapReceiver
-from vehicle.mav import mavlink, mavutil
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mapstream import MAP_SNAPSHOT, MapReceiver
+from vehicle.protocol.mav import mavlink, mavutil
 
 ROOT = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent

@@ -4,10 +4,10 @@ import math
 
 import pytest
 
-from vehicle.modes import Kind
-from vehicle.scene import parse_scene
-from vehicle.sensors import Sonar
-from vehicle.world import World
+from vehicle.protocol.modes import Kind
+from vehicle.sim.sensors import Sonar
+from vehicle.sim.simulation import World
+from vehicle.world.scene import parse_scene
 
 GROUND = "#VRML V2.0 utf8\nTransform { translation 0 0 -0.05 children Shape { geometry Box { size 200 200 0.1 } } }\n"
 

@@ -5,8 +5,8 @@ import struct
 
 import numpy as np
 
-from vehicle.mapstream import MAP_DELTA, MAP_SNAPSHOT, PATH, MapReceiver, MapStreamer
-from vehicle.memory_map import MemoryMap
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.protocol.mapstream import MAP_DELTA, MAP_SNAPSHOT, PATH, MapReceiver, MapStreamer
 
 
 def test_bug4_a_path_chunk_with_an_index_past_its_count_raises_keyerror():

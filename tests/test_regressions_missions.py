@@ -5,14 +5,14 @@ import math
 
 import numpy as np
 
-from vehicle.agent import Agent
-from vehicle.experiment import Experiment, run_experiment
-from vehicle.memory_map import MemoryMap
-from vehicle.missions.base import Context
-from vehicle.monitor import Monitor
-from vehicle.scene import parse_scene
-from vehicle.settings import Settings
-from vehicle.world import World
+from vehicle.agent.agent import Agent
+from vehicle.agent.missions.base import Context
+from vehicle.agent.monitor import Monitor
+from vehicle.agent.settings import Settings
+from vehicle.lab.experiment import Experiment, run_experiment
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.sim.simulation import World
+from vehicle.world.scene import parse_scene
 
 
 def box(x, y, z, sx, sy, sz):

@@ -8,9 +8,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vehicle import vrml
-from vehicle.scene import SceneError, load_scene, parse_scene
-from vehicle.vrml import MAX_DEPTH
+from vehicle.world import vrml
+from vehicle.world.scene import SceneError, load_scene, parse_scene
+from vehicle.world.vrml import MAX_DEPTH
 
 HEADER = "#VRML V2.0 utf8\n"
 DATA = Path(__file__).parent / "data" / "vrml"

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 from scipy import ndimage
 
-from vehicle.scene import Scene, load_scene
+from vehicle.world.scene import Scene, load_scene
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 
@@ -248,7 +248,7 @@ def test_a_scene_built_for_a_run_still_pickles_and_shares_its_preparation():
     scene goes to a worker process (an Embree scene does not pickle)."""
     import pickle
 
-    from vehicle.world import World
+    from vehicle.sim.simulation import World
 
     s = _load("house")
     first, second = World(s), World(s)

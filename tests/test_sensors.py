@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from vehicle.modes import Kind
-from vehicle.physics import Pose
-from vehicle.raycast import RayCaster
-from vehicle.sensors import SENSOR_SUITES, Servo, Sonar, SonarArray, body_to_world, cone_rays, sensor_suite
-from vehicle.world import World
+from vehicle.protocol.modes import Kind
+from vehicle.sim.physics import Pose
+from vehicle.sim.sensors import SENSOR_SUITES, Servo, Sonar, SonarArray, body_to_world, cone_rays, sensor_suite
+from vehicle.sim.simulation import World
+from vehicle.world.raycast import RayCaster
 
 NORTH = 10.0  # distance from the origin to the north wall's south face
 EAST = 6.0  # distance from the origin to the east wall's west face
@@ -47,7 +47,7 @@ def test_an_oblique_wall_reads_within_the_beam_of_the_axis_distance(walls):
 
 @pytest.mark.parametrize("backend", ["embree", "numpy"])
 def test_both_backends_read_the_same(backend, walls):
-    from vehicle.raycast import embree_available
+    from vehicle.world.raycast import embree_available
 
     if backend == "embree" and not embree_available():
         pytest.skip("needs embreex")
@@ -238,8 +238,8 @@ def test_a_small_face_off_the_beam_axis_still_echoes():
     wall end, and a copter flew along the wall into it)."""
     import trimesh
 
-    from vehicle.raycast import RayCaster
-    from vehicle.sensors import SonarArray
+    from vehicle.sim.sensors import SonarArray
+    from vehicle.world.raycast import RayCaster
 
     off_axis = math.radians(5.0)
     post = trimesh.creation.box(extents=(0.13, 0.13, 0.3))

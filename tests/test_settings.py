@@ -6,8 +6,8 @@ from pathlib import Path
 import pytest
 from pydantic import ValidationError
 
-from vehicle.scene import parse_scene
-from vehicle.settings import Settings, SettingsError, load_settings, scene_defaults
+from vehicle.agent.settings import Settings, SettingsError, load_settings, scene_defaults
+from vehicle.world.scene import parse_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 

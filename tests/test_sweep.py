@@ -10,9 +10,9 @@ import csv
 import pytest
 
 from vehicle import __version__
+from vehicle.agent.settings import Settings
 from vehicle.cli import main
-from vehicle.settings import Settings
-from vehicle.sweep import Job, SweepSpec, best_runs, markdown_table, parse_grid, run_local, run_sweep
+from vehicle.lab.sweep import Job, SweepSpec, best_runs, markdown_table, parse_grid, run_local, run_sweep
 
 SCENE = """#VRML V2.0 utf8
 WorldInfo { info ["space_size=20" "time_limit=120" "waypoints=-3,-3; 3,-3"] }

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 from mavlink_gcs import Gcs, RunningSim, free_udp_port
 
-from vehicle.agent import Agent
-from vehicle.mapstream import MAP_DELTA, MapReceiver
-from vehicle.mav import mavlink, mavutil
-from vehicle.scene import parse_scene
-from vehicle.settings import Settings
-from vehicle.world import World
+from vehicle.agent.agent import Agent
+from vehicle.agent.settings import Settings
+from vehicle.protocol.mapstream import MAP_DELTA, MapReceiver
+from vehicle.protocol.mav import mavlink, mavutil
+from vehicle.sim.simulation import World
+from vehicle.world.scene import parse_scene
 
 ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 WALL_Y = 8.0  # the south face of a wall north of the start

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from vehicle.scene import load_scene, parse_scene
-from vehicle.vrml import parse
+from vehicle.world.scene import load_scene, parse_scene
+from vehicle.world.vrml import parse
 
 HEADER = "#VRML V2.0 utf8\n"
 DATA = Path(__file__).parent / "data" / "vrml"

@@ -23,7 +23,7 @@ def _point(text: str) -> tuple[float, float]:
 
 def datum_type(text: str):
     """argparse type of a ``--datum LAT,LON[,ALT]`` option (the ground station's too)."""
-    from vehicle.geodesy import Datum
+    from vehicle.protocol.geodesy import Datum
 
     try:
         return Datum.parse(text)
@@ -33,10 +33,10 @@ def datum_type(text: str):
 
 def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = True) -> None:
     """Options shared by ``experiment`` and ``sim``: what to fly, where, and with which settings."""
-    from vehicle.missions import missions
-    from vehicle.sensors import SENSOR_SUITES
-    from vehicle.settings import Settings
-    from vehicle.world import DEFAULT_SUITE
+    from vehicle.agent.missions import missions
+    from vehicle.agent.settings import Settings
+    from vehicle.sim.sensors import SENSOR_SUITES
+    from vehicle.sim.simulation import DEFAULT_SUITE
 
     names = list(missions())
     parser.add_argument("--scene", default=str(DEFAULT_SCENE), help="VRML scene (default: %(default)s)")
@@ -62,14 +62,14 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
 
 def settings_from(args: argparse.Namespace, scene, **extra):
     """Mission parameters: defaults < the scene's suggestions < --config < --set < --altitude and the like."""
-    from vehicle.settings import load_settings
+    from vehicle.agent.settings import load_settings
 
     return load_settings(args.config, args.assignments, scene.hints, altitude=args.altitude, **extra)
 
 
 def cmd_scene(args: argparse.Namespace) -> int:
-    from vehicle.scene import load_scene
-    from vehicle.topview import render_top_view
+    from vehicle.world.scene import load_scene
+    from vehicle.world.topview import render_top_view
 
     scene = load_scene(args.file)
     bounds = [[round(float(v), 3) for v in row] for row in scene.bounds] if len(scene.mesh.faces) else None
@@ -95,10 +95,10 @@ def cmd_scene(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from vehicle.experiment import Experiment, run_experiment
-    from vehicle.geodesy import Datum
-    from vehicle.scene import load_scene
-    from vehicle.waypoints import load_positions
+    from vehicle.lab.experiment import Experiment, run_experiment
+    from vehicle.protocol.geodesy import Datum
+    from vehicle.protocol.waypoints import load_positions
+    from vehicle.world.scene import load_scene
 
     scene = load_scene(args.scene)
     settings = settings_from(args, scene, time_limit=args.time_limit)
@@ -108,7 +108,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
                             waypoints, args.sensors, datum)
     log = None
     if args.log:
-        from vehicle.flightlog import ExperimentLog
+        from vehicle.protocol.tlog import ExperimentLog
 
         log = ExperimentLog(args.log)
     try:
@@ -132,14 +132,14 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
-    from vehicle.agent import Agent
-    from vehicle.experiment import warm_up
-    from vehicle.geodesy import Datum
-    from vehicle.scene import load_scene
-    from vehicle.sensors import sensor_suite
-    from vehicle.sim import SimOptions, SimVehicle
-    from vehicle.waypoints import load_mission, parse_points, positions
-    from vehicle.world import World
+    from vehicle.agent.agent import Agent
+    from vehicle.lab.experiment import warm_up
+    from vehicle.lab.live import SimOptions, SimVehicle
+    from vehicle.protocol.geodesy import Datum
+    from vehicle.protocol.waypoints import load_mission, parse_points, positions
+    from vehicle.sim.sensors import sensor_suite
+    from vehicle.sim.simulation import World
+    from vehicle.world.scene import load_scene
 
     scene = load_scene(args.scene)
     settings = settings_from(args, scene)
@@ -176,8 +176,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from vehicle.missions import missions
-    from vehicle.sweep import PRESETS, SweepSpec, parse_grid, run_sweep
+    from vehicle.agent.missions import missions
+    from vehicle.lab.sweep import PRESETS, SweepSpec, parse_grid, run_sweep
 
     preset = PRESETS[args.preset] if args.preset else {}
     mission_names = args.missions.split(",") if args.missions else preset.get("missions", list(missions()))
@@ -232,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
     sim.add_argument("--duration", type=float, help="stop after this many wall seconds")
     sim.set_defaults(run=cmd_sim)
 
-    from vehicle.sweep import PRESETS
+    from vehicle.lab.sweep import PRESETS
 
     sweep = commands.add_parser("sweep", help="run many headless missions over a grid of settings")
     sweep.add_argument("--preset", choices=list(PRESETS),
@@ -250,10 +250,10 @@ def main(argv: list[str] | None = None) -> int:
     sweep.set_defaults(run=cmd_sweep)
 
     args = parser.parse_args(argv)
-    from vehicle.scene import SceneError
-    from vehicle.settings import SettingsError
-    from vehicle.waypoints import WaypointError
-    from vehicle.world import PlacementError
+    from vehicle.agent.settings import SettingsError
+    from vehicle.protocol.waypoints import WaypointError
+    from vehicle.sim.simulation import PlacementError
+    from vehicle.world.scene import SceneError
 
     try:
         return args.run(args)

@@ -7,9 +7,9 @@ known path is skipped and reported; the mission then ends ``stopped``.
 
 from __future__ import annotations
 
-from vehicle.missions.base import Mission, Status
-from vehicle.missions.routines import Travel
-from vehicle.missions.square import square_corners
+from vehicle.agent.missions.base import Mission, Status
+from vehicle.agent.missions.routines import Travel
+from vehicle.agent.missions.square import square_corners
 
 
 class Pathfind(Mission):

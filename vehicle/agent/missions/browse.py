@@ -6,8 +6,8 @@ it shows whether the vehicle and its sensor work without going anywhere.
 
 from __future__ import annotations
 
-from vehicle.missions.base import Mission, Status
-from vehicle.missions.routines import scan
+from vehicle.agent.missions.base import Mission, Status
+from vehicle.agent.missions.routines import scan
 
 
 class Browse(Mission):

@@ -11,18 +11,18 @@ import math
 
 import numpy as np
 
-from vehicle.autopilot import Autopilot
-from vehicle.avoidance import MARGIN as AVOID_MARGIN
-from vehicle.avoidance import ObstacleDatabase
-from vehicle.battery import Battery
-from vehicle.collision import Collider, Contact, TriangleGrid
-from vehicle.geodesy import Datum
-from vehicle.modes import Kind
-from vehicle.physics import Body, Limits, Pose
-from vehicle.raycast import RayCaster
-from vehicle.scene import Scene
-from vehicle.sensors import Reading, Servo, Sonar, SonarArray, sensor_suite
-from vehicle.settings import Settings
+from vehicle.agent.settings import Settings
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.modes import Kind
+from vehicle.sim.autopilot import Autopilot
+from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
+from vehicle.sim.avoidance import ObstacleDatabase
+from vehicle.sim.battery import Battery
+from vehicle.sim.physics import Body, Limits, Pose
+from vehicle.sim.sensors import Reading, Servo, Sonar, SonarArray, sensor_suite
+from vehicle.world.collision import Collider, Contact, TriangleGrid
+from vehicle.world.raycast import RayCaster
+from vehicle.world.scene import Scene
 
 DEFAULT_STEP = 0.05  # s
 DEFAULT_SUITE = "triple"

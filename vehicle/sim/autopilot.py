@@ -12,9 +12,8 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-from vehicle.avoidance import ObstacleDatabase
-from vehicle.geodesy import Datum, heading_of, wrap_pi
-from vehicle.modes import (
+from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
+from vehicle.protocol.modes import (
     DO_CHANGE_SPEED,
     MODES,
     NAV_LAND,
@@ -26,7 +25,8 @@ from vehicle.modes import (
     MissionItem,
     mav,
 )
-from vehicle.physics import Body
+from vehicle.sim.avoidance import ObstacleDatabase
+from vehicle.sim.physics import Body
 
 ACCEPTED = mav.MAV_RESULT_ACCEPTED
 TEMPORARILY_REJECTED = mav.MAV_RESULT_TEMPORARILY_REJECTED

@@ -14,8 +14,8 @@ from pathlib import Path
 
 from pymavlink import mavwp
 
-from vehicle.geodesy import Datum
-from vehicle.modes import MissionItem
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.modes import MissionItem
 
 
 class WaypointError(ValueError):

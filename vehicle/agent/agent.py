@@ -13,16 +13,16 @@ from __future__ import annotations
 import math
 from enum import StrEnum
 
-from vehicle.autopilot import Autopilot
-from vehicle.geodesy import heading_of
-from vehicle.memory_map import MemoryMap
-from vehicle.missions import mission_class
-from vehicle.missions.base import Context, Status
-from vehicle.missions.routines import Travel
-from vehicle.modes import Kind
-from vehicle.monitor import Monitor
-from vehicle.sensors import Reading, Servo
-from vehicle.settings import Settings
+from vehicle.agent.missions import mission_class
+from vehicle.agent.missions.base import Context, Status
+from vehicle.agent.missions.routines import Travel
+from vehicle.agent.monitor import Monitor
+from vehicle.agent.settings import Settings
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.protocol.geodesy import heading_of
+from vehicle.protocol.modes import Kind
+from vehicle.sim.autopilot import Autopilot
+from vehicle.sim.sensors import Reading, Servo
 
 HOME_TOLERANCE = 0.5  # m
 SETTLED = 0.1  # m/s: slower than this counts as at rest

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from vehicle.physics import Pose
-from vehicle.raycast import RayCaster
+from vehicle.sim.physics import Pose
+from vehicle.world.raycast import RayCaster
 
 
 @dataclass

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from vehicle.memory_map import MemoryMap
-from vehicle.scene import Scene
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.world.scene import Scene
 
 
 def render_top_view(scene: Scene, path: str | Path, size: int = 900, memory_map: MemoryMap | None = None,

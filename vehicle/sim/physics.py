@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from vehicle.geodesy import heading_vector, wrap_pi
-from vehicle.modes import Kind
+from vehicle.protocol.geodesy import heading_vector, wrap_pi
+from vehicle.protocol.modes import Kind
 
 GRAVITY = 9.81
 MAX_TILT = math.radians(30)

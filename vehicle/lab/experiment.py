@@ -12,14 +12,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from vehicle import __version__
-from vehicle.agent import Agent
-from vehicle.geodesy import Datum
-from vehicle.modes import Kind
-from vehicle.scene import Scene, load_scene
-from vehicle.sensors import sensor_suite
-from vehicle.settings import Settings
-from vehicle.waypoints import parse_points
-from vehicle.world import DEFAULT_SUITE, World
+from vehicle.agent.agent import Agent
+from vehicle.agent.settings import Settings
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.modes import Kind
+from vehicle.protocol.waypoints import parse_points
+from vehicle.sim.sensors import sensor_suite
+from vehicle.sim.simulation import DEFAULT_SUITE, World
+from vehicle.world.scene import Scene, load_scene
 
 OUTCOMES = ("finished", "stopped", "collision", "timeout", "error")
 
@@ -133,7 +133,7 @@ def warm_up() -> float:
     if _warmed_up:
         return 0.0
     _warmed_up = True
-    from vehicle.scene import parse_scene
+    from vehicle.world.scene import parse_scene
 
     started = time.perf_counter()
     scene = parse_scene(WARM_UP_SCENE, "warm-up.wrl")

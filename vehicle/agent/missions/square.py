@@ -8,8 +8,8 @@ flew into objects, ours stops safely instead.
 
 from __future__ import annotations
 
-from vehicle.missions.base import Mission, Status
-from vehicle.modes import DO_CHANGE_SPEED, NAV_TAKEOFF, NAV_WAYPOINT, Kind, MissionItem
+from vehicle.agent.missions.base import Mission, Status
+from vehicle.protocol.modes import DO_CHANGE_SPEED, NAV_TAKEOFF, NAV_WAYPOINT, Kind, MissionItem
 
 MAX_HALF_SIDE = 25.0  # m
 

@@ -14,12 +14,12 @@ import threading
 import time
 from dataclasses import dataclass
 
-from vehicle.agent import Agent
-from vehicle.endpoint import Endpoint
-from vehicle.experiment import warm_up
-from vehicle.flightlog import TlogWriter
-from vehicle.telemetry import Telemetry
-from vehicle.world import World
+from vehicle.agent.agent import Agent
+from vehicle.lab.experiment import warm_up
+from vehicle.protocol.tlog import TlogWriter
+from vehicle.sim.endpoint import Endpoint
+from vehicle.sim.simulation import World
+from vehicle.sim.telemetry import Telemetry
 
 TICK = 0.01  # s of wall time between loop iterations
 MAX_LAG = 0.5  # s of wall time the simulation may fall behind before it gives up catching up

@@ -15,9 +15,9 @@ import math
 
 import numpy as np
 
-from vehicle.missions.base import Mission, Status
-from vehicle.missions.routines import Scan, ServoScan, Travel, scan
-from vehicle.monitor import sweep_profile
+from vehicle.agent.missions.base import Mission, Status
+from vehicle.agent.missions.routines import Scan, ServoScan, Travel, scan
+from vehicle.agent.monitor import sweep_profile
 
 OPEN_ARC = (math.radians(10), math.radians(40))  # where "beside" an echo is, either side
 OPEN_WEIGHT = 0.5

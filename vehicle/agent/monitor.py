@@ -13,10 +13,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from vehicle.geodesy import heading_of
-from vehicle.memory_map import MemoryMap
-from vehicle.sensors import Reading
-from vehicle.settings import Settings
+from vehicle.agent.settings import Settings
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.protocol.geodesy import heading_of
+from vehicle.sim.sensors import Reading
 
 
 @dataclass

@@ -12,9 +12,9 @@ empty list.
 
 from __future__ import annotations
 
-from vehicle.autopilot import Autopilot
-from vehicle.mav import mavlink
-from vehicle.modes import MissionItem
+from vehicle.protocol.mav import mavlink
+from vehicle.protocol.modes import MissionItem
+from vehicle.sim.autopilot import Autopilot
 
 RETRY = 1.0  # s before an item is requested again
 RETRIES = 5

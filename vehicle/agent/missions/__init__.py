@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
-from vehicle.missions.base import Mission
+from vehicle.agent.missions.base import Mission
 
 _SHARED = {"base", "routines"}
 

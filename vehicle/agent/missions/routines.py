@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 
-from vehicle.geodesy import wrap_pi
-from vehicle.missions.base import Context, Status
-from vehicle.modes import Kind
-from vehicle.sensors import Reading
+from vehicle.agent.missions.base import Context, Status
+from vehicle.protocol.geodesy import wrap_pi
+from vehicle.protocol.modes import Kind
+from vehicle.sim.sensors import Reading
 
 YAW_REACHED = math.radians(2)
 PATH_POINT_REACHED = 0.5  # m: intermediate path points count as passed this close

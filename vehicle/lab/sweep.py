@@ -20,11 +20,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from vehicle.experiment import Experiment, run_experiment
-from vehicle.scene import Scene, load_scene
-from vehicle.settings import Settings, load_settings
+from vehicle.agent.settings import Settings, load_settings
+from vehicle.lab.experiment import Experiment, run_experiment
+from vehicle.world.scene import Scene, load_scene
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CASTLE = ROOT.parent / "shared" / "scenes" / "castle.wrl"
 
 # Table 1 of the thesis: best memory-map counts (the Square runs all collided)

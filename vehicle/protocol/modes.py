@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from vehicle.mav import mavlink as mav
+from vehicle.protocol.mav import mavlink as mav
 
 
 class Kind(StrEnum):

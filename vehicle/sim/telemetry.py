@@ -14,12 +14,12 @@ from __future__ import annotations
 import math
 
 from vehicle import __version__
-from vehicle.agent import Agent
-from vehicle.mapstream import PAYLOAD, MapStreamer
-from vehicle.mav import mavlink
-from vehicle.modes import mode_number
-from vehicle.sensors import Reading
-from vehicle.world import World
+from vehicle.agent.agent import Agent
+from vehicle.protocol.mapstream import PAYLOAD, MapStreamer
+from vehicle.protocol.mav import mavlink
+from vehicle.protocol.modes import mode_number
+from vehicle.sim.sensors import Reading
+from vehicle.sim.simulation import World
 
 # SYS_STATUS sensor bits we claim present, enabled and healthy (MAVProxy warns of a fence breach
 # unless the geofence bits are set)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
-from vehicle.mav import mavlink, pack
+from vehicle.protocol.mav import mavlink, pack
 
 LOG_EPOCH = 1767225600.0  # 2026-01-01T00:00:00Z
 _STAMP = struct.Struct(">Q")
@@ -46,7 +46,7 @@ class ExperimentLog:
         self.messages = 0
 
     def __call__(self, world, agent, readings) -> None:
-        from vehicle.telemetry import Telemetry
+        from vehicle.sim.telemetry import Telemetry
 
         if self.telemetry is None:
             self.telemetry = Telemetry(world, agent, start=0.0, sysid=self.sysid)

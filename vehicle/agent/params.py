@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from pydantic import ValidationError
 
-from vehicle.mav import mavlink
-from vehicle.settings import Settings
+from vehicle.agent.settings import Settings
+from vehicle.protocol.mav import mavlink
 
 REAL32 = mavlink.MAV_PARAM_TYPE_REAL32
 

@@ -18,14 +18,14 @@ from typing import ClassVar
 import numpy as np
 from scipy import ndimage
 
-from vehicle import planning
-from vehicle.autopilot import Autopilot
-from vehicle.avoidance import MARGIN as AVOID_MARGIN
-from vehicle.memory_map import MemoryMap
-from vehicle.modes import Kind
-from vehicle.monitor import Monitor, Observation
-from vehicle.sensors import Servo
-from vehicle.settings import Settings
+from vehicle.agent.monitor import Monitor, Observation
+from vehicle.agent.settings import Settings
+from vehicle.mapping import planning
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.protocol.modes import Kind
+from vehicle.sim.autopilot import Autopilot
+from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
+from vehicle.sim.sensors import Servo
 
 PLAN_MARGINS = (15.0, 40.0)  # m around start and goal that planning searches, the small window first
 UNSEEN_EXTENT = 1.0  # m: unknown cells this close to an obstacle are presumed to be more of it

@@ -14,14 +14,14 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-from vehicle.agent import Agent
-from vehicle.flightlog import TlogWriter
-from vehicle.mav import mavlink, mavutil, pack
-from vehicle.mission_protocol import MissionServer
-from vehicle.modes import STOP_MODE, Kind, mode_name
-from vehicle.params import Parameters
-from vehicle.telemetry import Telemetry
-from vehicle.world import World
+from vehicle.agent.agent import Agent
+from vehicle.agent.params import Parameters
+from vehicle.protocol.mav import mavlink, mavutil, pack
+from vehicle.protocol.modes import STOP_MODE, Kind, mode_name
+from vehicle.protocol.tlog import TlogWriter
+from vehicle.sim.mission_server import MissionServer
+from vehicle.sim.simulation import World
+from vehicle.sim.telemetry import Telemetry
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 DENIED = mavlink.MAV_RESULT_DENIED

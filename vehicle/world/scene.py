@@ -20,7 +20,7 @@ import mapbox_earcut
 import numpy as np
 import trimesh
 
-from vehicle.vrml import MAX_DEPTH, Node, SceneError, decode, parse
+from vehicle.world.vrml import MAX_DEPTH, Node, SceneError, decode, parse
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene"]
 
