@@ -150,8 +150,9 @@ def run_job(job: Job) -> dict:
         route: list[tuple[float, float]] = []
         seen = {}
 
-        def on_step(world, agent, _readings) -> None:
-            seen["agent"] = agent
+        def on_step(stepper, _readings) -> None:
+            world = stepper.simulation
+            seen["agent"] = stepper.agent
             if world.steps % 5 == 0:
                 route.append((world.pose.x, world.pose.y))
 

@@ -12,7 +12,7 @@ import time
 from common import CASTLE, castle_or_default, table
 
 from vehicle.sim.sensors import Sonar
-from vehicle.sim.simulation import World
+from vehicle.sim.simulation import Simulation
 from vehicle.world.scene import load_scene
 
 
@@ -20,7 +20,7 @@ def main(sim_seconds: float = 600.0) -> None:
     scene_path = castle_or_default()
     scene = load_scene(scene_path)
     start = (-40.0, 0.0) if scene_path == CASTLE else None
-    world = World(scene, "copter", start=start, sensors=[Sonar()], sonar_rate=20.0)  # a reading every step
+    world = Simulation(scene, "copter", start=start, sensors=[Sonar()], sonar_rate=20.0)  # a reading every step
     autopilot = world.autopilot
     autopilot.arm()
     autopilot.takeoff(4.0)

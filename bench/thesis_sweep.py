@@ -20,7 +20,8 @@ from pathlib import Path
 from common import code_state, table
 
 from vehicle.lab.experiment import OUTCOMES
-from vehicle.lab.sweep import PRESETS, SweepSpec, run_sweep
+from vehicle.lab.presets import PRESETS
+from vehicle.lab.sweep import SweepSpec, run_sweep
 
 TARGET_S = 6 * 60
 TARGET_RUNS = 576

@@ -41,7 +41,14 @@ from vehicle.protocol.waypoints import WaypointError, mission_text, parse_missio
 if TYPE_CHECKING:
     from groundstation.server import GroundStation
 
-STATIC = Path(__file__).resolve().parent.parent / "static"
+def _static() -> Path:
+    """The operator page: package data (``groundstation/static``) in a wheel, the top-level ``static/`` of a
+    checkout."""
+    here = Path(__file__).resolve().parent
+    return here / "static" if (here / "static").is_dir() else here.parent / "static"
+
+
+STATIC = _static()
 
 
 class ReplayStart(BaseModel):

@@ -10,9 +10,10 @@ import sys
 from pathlib import Path
 
 from vehicle import __version__
-from vehicle.cli import datum_type
+from vehicle.protocol.geodesy import datum_option
+from vehicle.world.bundled import default_scene
 
-DEFAULT_SCENE = Path(__file__).resolve().parent.parent / "scenes" / "default.wrl"
+DEFAULT_SCENE = default_scene()
 DEFAULT_LINK = "udpin:127.0.0.1:14550"
 
 
@@ -24,7 +25,7 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
                         "%(default)s; '' to not record)")
     parser.add_argument("--tls-cert", help="certificate file for HTTPS")
     parser.add_argument("--tls-key", help="private key file for HTTPS")
-    parser.add_argument("--datum", type=datum_type, metavar="LAT,LON[,ALT]",
+    parser.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
                         help="where the scene origin lies on Earth (default: the scene's datum hint, else "
                              "ArduPilot's simulator home; without a scene, the first vehicle's home)")
 

@@ -16,10 +16,9 @@ from groundstation.link import Link
 from groundstation.state import VehicleState
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import mavlink, mavutil
+from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE
 
 Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed"]
-STOP_MODE = {"rover": "HOLD", "boat": "HOLD", "copter": "BRAKE", "plane": "LOITER"}
-FORCE = 21196
 
 
 class Command(BaseModel):
@@ -73,7 +72,7 @@ def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | 
     if action in ("arm", "disarm"):
         return link.command(sysid, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if action == "arm" else 0.0)
     if action == "kill":
-        return link.command(sysid, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0, FORCE)
+        return link.command(sysid, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0, FORCE_DISARM)
     if action == "takeoff":
         return link.command(sysid, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, command.altitude)
     if action == "resume":

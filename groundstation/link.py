@@ -16,9 +16,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from groundstation.state import Fleet
+from vehicle.protocol import mission
 from vehicle.protocol.mav import mavlink, mavutil, pack
-from vehicle.protocol.modes import MissionItem
-from vehicle.sim.mission_server import item_from, item_message
+from vehicle.protocol.mission import MissionItem
 
 GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER
@@ -162,35 +162,11 @@ class Link:
 
     # ---- the mission protocol, ground station side ----------------------------------------------------
     def download_mission(self, sysid: int, timeout: float = 1.0) -> list[MissionItem]:
-        count = self.request(sysid, mavlink.MAVLink_mission_request_list_message(sysid, 1, 0),
-                             lambda m: m.get_type() == "MISSION_COUNT", timeout).count
-        items = []
-        for seq in range(count):
-            reply = self.request(sysid, mavlink.MAVLink_mission_request_int_message(sysid, 1, seq, 0),
-                                 lambda m, s=seq: m.get_type() in ("MISSION_ITEM_INT", "MISSION_ITEM")
-                                 and m.seq == s, timeout)
-            items.append(item_from(reply))
-        self.send(mavlink.MAVLink_mission_ack_message(sysid, 1, mavlink.MAV_MISSION_ACCEPTED, 0), sysid)
-        return items
+        return mission.download(self, sysid, timeout=timeout)
 
     def upload_mission(self, sysid: int, items: list[MissionItem], timeout: float = 1.0) -> str:
         """Upload items (item 0 is home); returns the vehicle's MISSION_ACK result as a word."""
-        def wanted(m) -> bool:
-            return m.get_type() in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK")
-
-        reply = self.request(sysid, mavlink.MAVLink_mission_count_message(sysid, 1, len(items), 0), wanted, timeout)
-        served = set()
-        while reply.get_type() != "MISSION_ACK":
-            seq = reply.seq
-            if not 0 <= seq < len(items):
-                raise LinkError(f"vehicle {sysid} asked for mission item {seq} of {len(items)}")
-            served.add(seq)
-            reply = self.request(sysid, item_message(items[seq], seq, (sysid, 1), False),
-                                 lambda m, s=seq: wanted(m) and (m.get_type() == "MISSION_ACK" or m.seq != s),
-                                 timeout)
-        return mission_result(reply.type)
-
-
-def mission_result(code: int) -> str:
-    return "accepted" if code == mavlink.MAV_MISSION_ACCEPTED else \
-        mavlink.enums["MAV_MISSION_RESULT"][code].name.removeprefix("MAV_MISSION_").lower()
+        try:
+            return mission.upload(self, sysid, items, timeout=timeout)
+        except mission.MissionError as error:
+            raise LinkError(str(error)) from None

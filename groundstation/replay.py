@@ -2,8 +2,9 @@
 
 pymavlink decodes some 16,000 messages a second, so an hour at 20 Hz (about
 300,000 messages) would take twenty seconds to open that way. Opening reads
-only the framing instead: the timestamp, system id, message id and offset of
-every record (and, for TUNNEL, the payload type in its first two bytes).
+only the framing instead: the timestamp, system and component ids, message
+id and offset of every record (and, for TUNNEL, the payload type in its first
+two bytes).
 Seeking to a time then decodes only what rebuilds the state there: the
 latest of each status message, a thinned-out trail, the recent messages and
 sonar hits, and the map from its last complete snapshot on (found from the
@@ -24,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.state import Fleet
+from vehicle.protocol.agent_status import AGENT_STATUS
 from vehicle.protocol.mapstream import MAP_SNAPSHOT
 from vehicle.protocol.mav import mavlink
 
@@ -55,6 +57,7 @@ class TlogIndex:
     lengths: np.ndarray
     times: np.ndarray  # seconds since the Unix epoch
     sysids: np.ndarray
+    compids: np.ndarray
     msgids: np.ndarray
     tunnel_types: np.ndarray  # TUNNEL payload type, -1 for other messages
     warning: str = ""
@@ -86,7 +89,7 @@ def index_tlog(path: str | Path) -> TlogIndex:
 
 
 def _scan(path: Path, data, size: int) -> TlogIndex:
-    offsets, lengths, times, sysids, msgids, tunnels = [], [], [], [], [], []
+    offsets, lengths, times, sysids, compids, msgids, tunnels = [], [], [], [], [], [], []
     position = 0
     warning = ""
     unpack_time = struct.Struct(">Q").unpack_from
@@ -97,12 +100,12 @@ def _scan(path: Path, data, size: int) -> TlogIndex:
         if magic == V2 and start + 10 <= size:
             length = 12 + data[start + 1] + (13 if data[start + 2] & SIGNED else 0)
             msgid = data[start + 7] | data[start + 8] << 8 | data[start + 9] << 16
-            sysid = data[start + 5]
+            sysid, compid = data[start + 5], data[start + 6]
             body = start + 10
         elif magic == V1 and start + 6 <= size:
             length = 8 + data[start + 1]
             msgid = data[start + 5]
-            sysid = data[start + 3]
+            sysid, compid = data[start + 3], data[start + 4]
             body = start + 6
         else:
             warning = _damage(path, position, len(offsets))
@@ -117,6 +120,7 @@ def _scan(path: Path, data, size: int) -> TlogIndex:
         lengths.append(length)
         times.append(stamp)
         sysids.append(sysid)
+        compids.append(compid)
         msgids.append(msgid)
         tunnels.append(data[body] | data[body + 1] << 8 if msgid == TUNNEL and length >= 14 else -1)
         position = start + length
@@ -125,7 +129,8 @@ def _scan(path: Path, data, size: int) -> TlogIndex:
     if not offsets:
         raise ReplayError(f"{path.name} is not a telemetry log (no MAVLink record at its start)")
     return TlogIndex(path, np.array(offsets, dtype=np.int64), np.array(lengths, dtype=np.int32),
-                     np.array(times), np.array(sysids, dtype=np.int32), np.array(msgids, dtype=np.int32),
+                     np.array(times), np.array(sysids, dtype=np.int32), np.array(compids, dtype=np.int32),
+                     np.array(msgids, dtype=np.int32),
                      np.array(tunnels, dtype=np.int32), warning)
 
 
@@ -209,13 +214,14 @@ class Replay:
         """Indices of the records before ``end`` that rebuild the state at ``end``, and each vehicle's last
         record before ``end`` (when it was last heard).
 
-        Each vehicle's first heartbeat comes first (it creates the vehicle), then
-        its map from the last whole snapshot on (so the readings that follow
-        draw hits, not a map of the ground station's own), then the rest in
-        time order.
+        The first heartbeat of each component comes first (the autopilot's creates
+        the vehicle), then its map from the last whole snapshot on (so the
+        readings that follow draw hits, not a map of the ground station's own),
+        then the rest in time order. Status messages count per component: a
+        vehicle's autopilot and its companion computer each have a latest one.
         """
         index = self.index
-        msgids, sysids = index.msgids[:end], index.sysids[:end]
+        msgids, sysids, compids = index.msgids[:end], index.sysids[:end], index.compids[:end]
         firsts: list[np.ndarray] = []
         maps: list[np.ndarray] = []
         rest: list[np.ndarray] = []
@@ -223,16 +229,18 @@ class Replay:
         for sysid in np.unique(sysids):
             mine = sysids == sysid
             latest[int(sysid)] = int(np.flatnonzero(mine)[-1])
-            heartbeats = np.flatnonzero(mine & (msgids == mavlink.MAVLINK_MSG_ID_HEARTBEAT))
-            firsts.append(heartbeats[:1])
-            for msgid in LATEST_ONLY:
-                where = np.flatnonzero(mine & (msgids == msgid))
-                rest.append(where[-1:])
+            for compid in np.unique(compids[mine]):
+                theirs = mine & (compids == compid)
+                firsts.append(np.flatnonzero(theirs & (msgids == mavlink.MAVLINK_MSG_ID_HEARTBEAT))[:1])
+                for msgid in LATEST_ONLY:
+                    rest.append(np.flatnonzero(theirs & (msgids == msgid))[-1:])
+                statuses = np.flatnonzero(theirs & (msgids == TUNNEL))
+                rest.append(statuses[index.tunnel_types[statuses] == AGENT_STATUS][-1:])
             poses = np.flatnonzero(mine & np.isin(msgids, POSES))
             if len(poses):
                 rest.append(poses[np.linspace(0, len(poses) - 1, min(len(poses), TRAIL_SAMPLES)).astype(int)])
             rest.append(np.flatnonzero(mine & (msgids == STATUSTEXT))[-RECENT_TEXTS:])
-            tunnels = np.flatnonzero(mine & (msgids == TUNNEL))
+            tunnels = np.flatnonzero(mine & (msgids == TUNNEL) & (index.tunnel_types[:end] != AGENT_STATUS))
             snapshot_chunks = tunnels[index.tunnel_types[tunnels] == MAP_SNAPSHOT]
             readings = np.flatnonzero(mine & (msgids == DISTANCE_SENSOR))
             if len(snapshot_chunks):
@@ -272,9 +280,6 @@ class Replay:
         # our chunk header in the payload: snapshot id u16, chunk index u16, chunk count u16
         raw = self._data[body + 5:body + 11].ljust(6, b"\0")
         return struct.unpack("<HHH", raw)
-
-    def _chunk_number(self, i: int) -> int:
-        return self._chunk_header(i)[1]
 
     # ---- playing ----------------------------------------------------------------------------------
     def advance(self, seconds: float) -> None:

@@ -25,7 +25,7 @@ from groundstation.replay import Player, Replay, ReplayError, index_tlog
 from groundstation.state import Fleet
 from groundstation.viz import SceneView
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.modes import MissionItem
+from vehicle.protocol.mission import MissionItem
 from vehicle.protocol.waypoints import positions
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene

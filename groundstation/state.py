@@ -5,8 +5,11 @@ replayed logs alike. Any ArduPilot vehicle (rover, copter, plane; MAVLink 1 or
 2) is understood from its standard messages; our own vehicles add the memory
 map and the planned path in TUNNEL messages. A vehicle that streams no map
 still gets one: the ground station builds it from DISTANCE_SENSOR and the pose,
-with the same memory-map code the vehicle uses. Positions are kept in the scene
-frame (metres east and north of the datum, height above the vehicle's home).
+with the same memory-map code the vehicle uses. An onboard agent on a companion
+computer (component 191 of the vehicle's system) is part of its vehicle: its
+map, path, state and messages show on the vehicle of the same system id.
+Positions are kept in the scene frame (metres east and north of the datum,
+height above the vehicle's home).
 """
 
 from __future__ import annotations
@@ -18,12 +21,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vehicle.mapping.memory_map import MemoryMap
+from vehicle.mapping.memory_map import OCCUPIED_AT, MemoryMap
+from vehicle.protocol import agent_status
+from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mapstream import MapReceiver
 from vehicle.protocol.mav import mavlink, mavutil
+from vehicle.protocol.rangefinder import reading_from
+from vehicle.protocol.statustext import Reassembler
 
 LINK_LOST_AFTER = 3.0  # s without a heartbeat
+COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 TRAIL_POINTS = 2000
 TRAIL_SPACING = 0.3  # m between recorded trail points
 HITS_KEPT = 600
@@ -91,6 +99,8 @@ class VehicleState:
     sonar: dict[int, Sonar] = field(default_factory=dict)
     hits: deque = field(default_factory=lambda: deque(maxlen=HITS_KEPT))
     map_stream: MapReceiver = field(default_factory=MapReceiver)
+    companion_heartbeat: float | None = None  # when its onboard agent (component 191) was last heard
+    agent: agent_status.AgentStatus | None = None  # the onboard agent's own state
     own_map: MemoryMap | None = None  # built here when the vehicle streams none
     waypoints: list[tuple[float, float]] = field(default_factory=list)  # the AUTO mission, scene x, y
     version: int = 0  # bumps on every change, for views that redraw
@@ -98,6 +108,10 @@ class VehicleState:
     @property
     def kind(self) -> str:
         return TYPES.get(self.mav_type, "other")
+
+    def has_companion(self, now: float) -> bool:
+        """An onboard agent on a companion computer speaks for this vehicle (heard within the link timeout)."""
+        return self.companion_heartbeat is not None and now - self.companion_heartbeat <= LINK_LOST_AFTER
 
     def link_state(self, now: float) -> str:
         if self.last_heartbeat is None or now - self.last_heartbeat > LINK_LOST_AFTER:
@@ -136,10 +150,12 @@ class Fleet:
         self.vehicles: dict[int, VehicleState] = {}
         self.lock = threading.RLock()
         self.version = 0
+        self.texts = Reassembler()
 
     def clear(self) -> None:
         with self.lock:
             self.vehicles.clear()
+            self.texts = Reassembler()
             self.version += 1
 
     def get(self, sysid: int) -> VehicleState | None:
@@ -175,6 +191,9 @@ class Fleet:
             vehicle.time_boot_s = message.time_boot_ms / 1000.0
 
     def _heartbeat(self, vehicle, m, now) -> None:
+        if m.get_srcComponent() == COMPANION and m.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER:
+            vehicle.companion_heartbeat = now
+            return
         if m.type in NOT_VEHICLES:
             return
         vehicle.mav_type = m.type
@@ -248,9 +267,9 @@ class Fleet:
         vehicle.home = datum.to_local(lat, lon)
 
     def _statustext(self, vehicle, m, now) -> None:
-        text = m.text if isinstance(m.text, str) else m.text.decode("utf-8", "replace")
-        vehicle.status = text
-        vehicle.messages.append({"time": now, "severity": m.severity, "text": text})
+        for severity, text in self.texts.feed(m, now):  # whole texts, put together from their chunks
+            vehicle.status = text
+            vehicle.messages.append({"time": now, "severity": severity, "text": text})
 
     def _mission_current(self, vehicle, m, now) -> None:
         vehicle.mission_current = m.seq
@@ -261,32 +280,30 @@ class Fleet:
         vehicle.mission_reached = m.seq
 
     def _tunnel(self, vehicle, m, now) -> None:
-        vehicle.map_stream.feed(m.payload_type, bytes(m.payload[:m.payload_length]))
+        payload = bytes(m.payload[:m.payload_length])
+        if m.payload_type == agent_status.AGENT_STATUS:
+            vehicle.agent = agent_status.decode(payload) or vehicle.agent
+        else:
+            vehicle.map_stream.feed(m.payload_type, payload)
 
     def _distance_sensor(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)
         if vehicle.x is None:
             return
-        max_range = m.max_distance / 100.0
-        distance = None if m.current_distance > m.max_distance or m.current_distance == 0 else \
-            m.current_distance / 100.0
-        origin = (vehicle.x, vehicle.y, self.height(vehicle))
-        direction = beam_direction(vehicle, m.orientation, m.quaternion)
-        vehicle.sonar[m.id] = Sonar(distance, origin, direction, max_range, now)
-        if distance is not None:
-            vehicle.hits.append(tuple(o + d * distance for o, d in zip(origin, direction, strict=True)))
+        pose = Pose(vehicle.x, vehicle.y, self.height(vehicle), vehicle.yaw, vehicle.pitch, vehicle.roll)
+        reading = reading_from(m, pose, now)
+        if reading is None:
+            return
+        vehicle.sonar[m.id] = Sonar(reading.distance, pose.xyz(), tuple(reading.direction.tolist()),
+                                    reading.max_range, now)
+        if reading.distance is not None:
+            vehicle.hits.append(tuple(reading.hit.tolist()))
         if vehicle.map_stream.grid is None and vehicle.home is not None:
             if vehicle.own_map is None:
                 vehicle.own_map = MemoryMap(vehicle.home, OWN_MAP_SPACE, OWN_MAP_RESOLUTION)
-            vehicle.own_map.add_readings(np.array([origin]), np.array([direction]),
-                                         np.array([np.nan if distance is None else distance]),
-                                         np.array([max_range]))
+            vehicle.own_map.add_reading(reading.origin, reading.direction, reading.distance, reading.max_range)
 
     # ---- views --------------------------------------------------------------------------------
-    def snapshot(self, now: float) -> list[dict]:
-        with self.lock:
-            return [self.describe(v, now) for _, v in sorted(self.vehicles.items())]
-
     def describe(self, v: VehicleState, now: float) -> dict:
         """The vehicle as the REST API and the page's stream show it."""
         age = None if v.last_heartbeat is None else round(now - v.last_heartbeat, 2)
@@ -305,6 +322,9 @@ class Fleet:
                      "mavlink": v.mavlink_version},
             "mission": {"current": v.mission_current, "total": v.mission_total, "reached": v.mission_reached},
             "status": v.status,
+            "agent": None if v.agent is None else {
+                "state": v.agent.state, "phase": v.agent.phase, "paused": v.agent.paused, "outcome": v.agent.outcome,
+                "mission": v.agent.mission, "reason": v.agent.reason, "companion": v.has_companion(now)},
             "home": None if v.home is None else {"x": _round(v.home[0]), "y": _round(v.home[1])},
             "time_boot_s": v.time_boot_s,
             "messages": list(v.messages)[-20:],
@@ -314,29 +334,7 @@ class Fleet:
     @staticmethod
     def occupied(v: VehicleState) -> int | None:
         grid = v.map_grid()
-        return None if grid is None else int(np.count_nonzero(grid[0] >= MemoryMap.OCCUPIED_AT))
-
-
-def beam_direction(vehicle: VehicleState, orientation: int, quaternion) -> tuple[float, float, float]:
-    """Unit vector (scene frame) of a DISTANCE_SENSOR beam, from the mount and the vehicle's attitude."""
-    if orientation < 8:  # NONE, YAW_45 ... YAW_315: clockwise from the nose
-        yaw_offset, pitch = math.radians(45 * orientation), 0.0
-    elif orientation == mavlink.MAV_SENSOR_ROTATION_PITCH_270:  # down
-        yaw_offset, pitch = 0.0, -math.pi / 2
-    elif orientation == mavlink.MAV_SENSOR_ROTATION_PITCH_90:  # up
-        yaw_offset, pitch = 0.0, math.pi / 2
-    elif orientation == mavlink.MAV_SENSOR_ROTATION_CUSTOM and any(quaternion):
-        w, qx, qy, qz = quaternion  # body frame forward-right-down; rotate the x axis
-        fx = 1 - 2 * (qy * qy + qz * qz)
-        fy = 2 * (qx * qy + w * qz)
-        fz = 2 * (qx * qz - w * qy)
-        yaw_offset, pitch = math.atan2(fy, fx), math.atan2(-fz, math.hypot(fx, fy))
-    else:
-        yaw_offset, pitch = 0.0, 0.0
-    heading = vehicle.yaw + yaw_offset
-    total_pitch = pitch + vehicle.pitch
-    return (math.sin(heading) * math.cos(total_pitch), math.cos(heading) * math.cos(total_pitch),
-            math.sin(total_pitch))
+        return None if grid is None else int(np.count_nonzero(grid[0] >= OCCUPIED_AT))
 
 
 def _round(value: float | None, digits: int = 2) -> float | None:

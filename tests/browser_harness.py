@@ -28,9 +28,8 @@ from mavlink_gcs import RunningSim, free_udp_port
 
 from groundstation.app import create_app
 from groundstation.server import GroundStation
-from vehicle.agent.agent import Agent
 from vehicle.agent.settings import Settings
-from vehicle.sim.simulation import World
+from vehicle.lab.stepper import simulate
 from vehicle.world.scene import Scene, load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,11 +118,9 @@ class Copter:
                  speedup: float = 5.0, start: tuple[float, float] | None = None, settings: Settings | None = None):
         self.sysid = sysid
         self.speedup = speedup
-        settings = settings or Settings()
-        world = World(scene, "copter", settings, start)
-        agent = Agent(world.autopilot, mission, settings, world.limits.radius, autostart=autostart)
-        self.world = world
-        self.runner = RunningSim(world, agent, [f"udpout:127.0.0.1:{port}"], speedup=speedup, sysid=sysid)
+        stepper = simulate(scene, mission, "copter", settings, start, autostart=autostart)
+        self.world = stepper.simulation
+        self.runner = RunningSim(stepper, [f"udpout:127.0.0.1:{port}"], speedup=speedup, sysid=sysid)
         self.running = False
 
     def start(self) -> Copter:

@@ -23,9 +23,8 @@ from mavlink_gcs import RunningSim, free_udp_port
 
 from groundstation.app import create_app
 from groundstation.server import GroundStation
-from vehicle.agent.agent import Agent
 from vehicle.agent.settings import Settings
-from vehicle.sim.simulation import World
+from vehicle.lab.stepper import Stepper, simulate
 from vehicle.world.scene import Scene, parse_scene
 
 TOKEN = "test-operator-token"
@@ -160,11 +159,8 @@ def wait_wall(condition: Callable[[], object], timeout: float, what: str = "cond
 
 
 def make_vehicle(scene: Scene, kind: str = "copter", mission: str = "browse", autostart: bool = False,
-                 settings: Settings | None = None, start: tuple[float, float] | None = None):
-    settings = settings or Settings(space_size=20)
-    world = World(scene, kind, settings, start=start)
-    agent = Agent(world.autopilot, mission, settings, world.limits.radius, autostart=autostart)
-    return world, agent
+                 settings: Settings | None = None, start: tuple[float, float] | None = None) -> Stepper:
+    return simulate(scene, mission, kind, settings or Settings(space_size=20), start, autostart=autostart)
 
 
 def start_sim(station: RunningStation, scene: Scene, sysid: int = 1, kind: str = "copter", mission: str = "browse",
@@ -172,8 +168,8 @@ def start_sim(station: RunningStation, scene: Scene, sysid: int = 1, kind: str =
               **options) -> RunningSim:
     """A simulated vehicle sending to the station (not started: use it as a context manager or call
     ``__enter__``)."""
-    world, agent = make_vehicle(scene, kind, mission, autostart, settings, start)
-    return RunningSim(world, agent, [station.vehicle_url()], speedup=SPEEDUP, sysid=sysid, **options)
+    stepper = make_vehicle(scene, kind, mission, autostart, settings, start)
+    return RunningSim(stepper, [station.vehicle_url()], speedup=SPEEDUP, sysid=sysid, **options)
 
 
 def command_ok(api: Api, sysid: int, **body) -> None:

@@ -15,6 +15,9 @@ from collections.abc import Callable
 from vehicle.lab.live import SimOptions, SimVehicle
 from vehicle.protocol.mav import mavlink, mavutil
 
+AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
+COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+
 
 class WaitTimeout(AssertionError):
     """A condition did not come true within its simulated-time budget."""
@@ -41,21 +44,28 @@ class Gcs:
     def heartbeat(self) -> None:
         self.conn.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
 
-    def recv(self, timeout: float = 0.2):
-        message = self.conn.recv_match(blocking=True, timeout=timeout)
-        if message is None or message.get_type() == "BAD_DATA":
-            return None
-        if message.get_srcSystem() == self.target:
-            if hasattr(message, "time_boot_ms"):
-                self.sim_time = max(self.sim_time, message.time_boot_ms / 1000)
-            self.seen[message.get_type()] = message
+    def recv(self, timeout: float = 0.2, component: int | None = AUTOPILOT):
+        """The next message from the vehicle's ``component`` (None: any), or None if none came in ``timeout``.
+        Every STATUSTEXT of the vehicle, whichever component sent it, goes to ``texts``."""
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            message = self.conn.recv_match(blocking=True, timeout=left)
+            if message is None or message.get_type() == "BAD_DATA" or message.get_srcSystem() != self.target:
+                continue
             if message.get_type() == "STATUSTEXT":
                 self.texts.append(message.text)
-        return message
+            if hasattr(message, "time_boot_ms"):  # the vehicle's clock, whoever is waited for
+                self.sim_time = max(self.sim_time, message.time_boot_ms / 1000)
+            if component is not None and message.get_srcComponent() != component:
+                continue
+            self.seen[message.get_type()] = message
+            return message
+        return None
 
     def wait(self, kind: str | None, condition: Callable = lambda m: True, sim_timeout: float = 30.0,
-             heartbeats: bool = True):
-        """The first message of ``kind`` for which ``condition`` holds, within ``sim_timeout`` simulated s."""
+             heartbeats: bool = True, component: int | None = AUTOPILOT):
+        """The first message of ``kind`` from ``component`` (the autopilot unless told; None: any) for which
+        ``condition`` holds, within ``sim_timeout`` simulated s."""
         start_sim = None
         wall_deadline = time.monotonic() + sim_timeout / self.speedup * 4 + 15
         last_beat = 0.0
@@ -63,7 +73,7 @@ class Gcs:
             if heartbeats and time.monotonic() - last_beat > 0.3:
                 self.heartbeat()
                 last_beat = time.monotonic()
-            message = self.recv()
+            message = self.recv(component=component)
             if start_sim is None and self.sim_time > 0:
                 start_sim = self.sim_time
             if start_sim is not None and self.sim_time - start_sim > sim_timeout:
@@ -78,7 +88,7 @@ class Gcs:
             return next((t for t in self.texts[since:] if fragment in t), None)
         if (text := found()) is not None:
             return text
-        self.wait(None, lambda m: found() is not None, sim_timeout, heartbeats)
+        self.wait(None, lambda m: found() is not None, sim_timeout, heartbeats, component=None)
         return found()
 
     def command(self, command: int, *params: float, retries: int = 5) -> int:
@@ -105,8 +115,8 @@ class Gcs:
 class RunningSim:
     """A SimVehicle on its own thread, talking over real UDP sockets."""
 
-    def __init__(self, world, agent, urls: list[str], speedup: float = 10.0, **options):
-        self.sim = SimVehicle(world, agent, SimOptions(urls, speedup=speedup, **options))
+    def __init__(self, stepper, urls: list[str], speedup: float = 10.0, **options):
+        self.sim = SimVehicle(stepper, SimOptions(urls, speedup=speedup, **options))
         self.thread = threading.Thread(target=self.sim.run, daemon=True)
 
     def __enter__(self) -> SimVehicle:

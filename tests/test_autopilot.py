@@ -1,6 +1,6 @@
-"""The simulated flight controller in its World (vehicle.autopilot, vehicle.physics, vehicle.world).
+"""The simulated flight controller in its Simulation (vehicle.autopilot, vehicle.physics, vehicle.world).
 
-Everything runs on simulated time: the tests step the World and look at the pose.
+Everything runs on simulated time: the tests step the Simulation and look at the pose.
 """
 
 import math
@@ -9,50 +9,46 @@ import numpy as np
 import pytest
 
 from vehicle.protocol.geodesy import heading_of, wrap_pi
-from vehicle.protocol.modes import (
+from vehicle.protocol.mission import (
     DO_CHANGE_SPEED,
-    MODES,
     NAV_LAND,
     NAV_LOITER_UNLIM,
     NAV_RETURN_TO_LAUNCH,
     NAV_TAKEOFF,
     NAV_WAYPOINT,
-    STOP_MODE,
-    Kind,
     MissionItem,
-    mode_name,
-    mode_number,
 )
+from vehicle.protocol.modes import MODES, STOP_MODE, Kind, mode_name, mode_number
 from vehicle.sim.autopilot import ACCEPTED, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, VELOCITY_TIMEOUT
 from vehicle.sim.physics import Limits
 from vehicle.sim.sensors import Sonar
-from vehicle.sim.simulation import World
+from vehicle.sim.simulation import Simulation
 
 ALTITUDE = 4.0
 REST_Z = 0.35  # body centre of a landed vehicle on ground at z = 0 (radius 0.3 + clearance 0.05)
 
 
-def armed_copter(scene, start=(0.0, 0.0), altitude=ALTITUDE, **kwargs) -> World:
+def armed_copter(scene, start=(0.0, 0.0), altitude=ALTITUDE, **kwargs) -> Simulation:
     """A copter that took off in GUIDED and hovers at ``altitude`` above its start."""
-    world = World(scene, Kind.COPTER, start=start, **kwargs)
+    world = Simulation(scene, Kind.COPTER, start=start, **kwargs)
     assert world.autopilot.arm() == ACCEPTED
     assert world.autopilot.takeoff(altitude) == ACCEPTED
     world.run_for(altitude / world.limits.climb_rate + 3.0)
     return world
 
 
-def armed_rover(scene, start=(0.0, 0.0), **kwargs) -> World:
-    world = World(scene, Kind.ROVER, start=start, **kwargs)
+def armed_rover(scene, start=(0.0, 0.0), **kwargs) -> Simulation:
+    world = Simulation(scene, Kind.ROVER, start=start, **kwargs)
     assert world.autopilot.arm() == ACCEPTED
     assert world.autopilot.set_mode("GUIDED") == ACCEPTED
     return world
 
 
-def vehicle(kind: Kind, scene, **kwargs) -> World:
+def vehicle(kind: Kind, scene, **kwargs) -> Simulation:
     return armed_copter(scene, **kwargs) if kind is Kind.COPTER else armed_rover(scene, **kwargs)
 
 
-def step_until(world: World, condition, limit: float) -> float:
+def step_until(world: Simulation, condition, limit: float) -> float:
     """Step until ``condition()`` holds; returns the simulated time it took (fails past ``limit`` seconds)."""
     start = world.time
     while not condition():
@@ -61,23 +57,23 @@ def step_until(world: World, condition, limit: float) -> float:
     return world.time - start
 
 
-def position_item(world: World, command: int, x: float, y: float, alt: float = ALTITUDE, **params) -> MissionItem:
+def position_item(world: Simulation, command: int, x: float, y: float, alt: float = ALTITUDE, **params) -> MissionItem:
     lat, lon = world.datum.to_global(x, y)
     return MissionItem(command, lat, lon, alt, **params)
 
 
-def reached(world: World) -> list[int]:
+def reached(world: Simulation) -> list[int]:
     return [event.seq for event in world.autopilot.events if event.kind == "reached"]
 
 
-def texts(world: World) -> list[str]:
+def texts(world: Simulation) -> list[str]:
     return [event.text for event in world.autopilot.events if event.kind == "text"]
 
 
 # ---- arming and take-off ----------------------------------------------------------------------
 
 def test_copter_boots_disarmed_on_the_ground_in_guided(flat_scene):
-    world = World(flat_scene, Kind.COPTER, start=(2.0, 3.0), heading=90.0)
+    world = Simulation(flat_scene, Kind.COPTER, start=(2.0, 3.0), heading=90.0)
     assert not world.autopilot.armed and world.autopilot.mode == "GUIDED"
     assert world.pose.xyz() == pytest.approx((2.0, 3.0, REST_Z))
     assert world.pose.yaw == pytest.approx(math.pi / 2)
@@ -87,12 +83,12 @@ def test_copter_boots_disarmed_on_the_ground_in_guided(flat_scene):
 
 
 def test_rover_boots_disarmed_in_hold(flat_scene):
-    world = World(flat_scene, Kind.ROVER)
+    world = Simulation(flat_scene, Kind.ROVER)
     assert not world.autopilot.armed and world.autopilot.mode == "HOLD"
 
 
 def test_copter_takes_off_to_altitude_in_guided(flat_scene):
-    world = World(flat_scene, Kind.COPTER, start=(0.0, 0.0))
+    world = Simulation(flat_scene, Kind.COPTER, start=(0.0, 0.0))
     world.autopilot.arm()
     assert world.autopilot.takeoff(ALTITUDE) == ACCEPTED
     took = step_until(world, lambda: abs(world.pose.z - ALTITUDE) < 0.2 and abs(world.body.vz) < 0.05, limit=8.0)
@@ -111,14 +107,14 @@ def test_takeoff_altitude_is_above_the_start_ground(make_scene, box):
 
 
 def test_takeoff_refused_when_disarmed(flat_scene):
-    world = World(flat_scene, Kind.COPTER)
+    world = Simulation(flat_scene, Kind.COPTER)
     assert world.autopilot.takeoff(ALTITUDE) == TEMPORARILY_REJECTED
     world.run_for(2.0)
     assert world.pose.z == pytest.approx(REST_Z)
 
 
 def test_takeoff_refused_outside_guided(flat_scene):
-    world = World(flat_scene, Kind.COPTER)
+    world = Simulation(flat_scene, Kind.COPTER)
     world.autopilot.arm()
     assert world.autopilot.set_mode("LOITER") == ACCEPTED
     assert world.autopilot.takeoff(ALTITUDE) == TEMPORARILY_REJECTED
@@ -127,7 +123,7 @@ def test_takeoff_refused_outside_guided(flat_scene):
 
 
 def test_takeoff_to_zero_altitude_denied_and_again_in_the_air_failed(flat_scene):
-    world = World(flat_scene, Kind.COPTER)
+    world = Simulation(flat_scene, Kind.COPTER)
     world.autopilot.arm()
     assert world.autopilot.takeoff(0.0) == DENIED
     world = armed_copter(flat_scene)
@@ -140,14 +136,14 @@ def test_rover_takeoff_unsupported(flat_scene):
 
 
 def test_guided_commands_refused_when_disarmed(flat_scene):
-    autopilot = World(flat_scene, Kind.COPTER).autopilot
+    autopilot = Simulation(flat_scene, Kind.COPTER).autopilot
     assert autopilot.goto(5.0, 5.0) == TEMPORARILY_REJECTED
     assert autopilot.set_velocity(1.0, 0.0) == TEMPORARILY_REJECTED
     assert autopilot.set_yaw(1.0) == TEMPORARILY_REJECTED
 
 
 def test_arming_refused_in_land_unless_forced(flat_scene):
-    world = World(flat_scene, Kind.COPTER)
+    world = Simulation(flat_scene, Kind.COPTER)
     world.autopilot.set_mode("LAND")
     assert world.autopilot.arm() == FAILED
     assert not world.autopilot.armed
@@ -158,19 +154,19 @@ def test_arming_refused_in_land_unless_forced(flat_scene):
 
 @pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
 def test_unknown_mode_name_is_unsupported(kind, flat_scene):
-    autopilot = World(flat_scene, kind).autopilot
+    autopilot = Simulation(flat_scene, kind).autopilot
     before = autopilot.mode
     assert autopilot.set_mode("FLIP") == UNSUPPORTED
     assert autopilot.mode == before
 
 
 def test_copter_has_no_hold_and_rover_has_no_brake(flat_scene):
-    assert World(flat_scene, Kind.COPTER).autopilot.set_mode("HOLD") == UNSUPPORTED
-    assert World(flat_scene, Kind.ROVER).autopilot.set_mode("BRAKE") == UNSUPPORTED
+    assert Simulation(flat_scene, Kind.COPTER).autopilot.set_mode("HOLD") == UNSUPPORTED
+    assert Simulation(flat_scene, Kind.ROVER).autopilot.set_mode("BRAKE") == UNSUPPORTED
 
 
 def test_mode_names_are_case_insensitive(flat_scene):
-    autopilot = World(flat_scene, Kind.COPTER).autopilot
+    autopilot = Simulation(flat_scene, Kind.COPTER).autopilot
     assert autopilot.set_mode("brake") == ACCEPTED
     assert autopilot.mode == "BRAKE"
 
@@ -184,7 +180,7 @@ def test_mode_numbers_are_ardupilots():
     assert mode_name(Kind.COPTER, 99) is None
     with pytest.raises(ValueError, match="no mode"):
         mode_number(Kind.COPTER, "HOLD")
-    assert STOP_MODE == {Kind.ROVER: "HOLD", Kind.COPTER: "BRAKE"}
+    assert STOP_MODE == {"rover": "HOLD", "boat": "HOLD", "copter": "BRAKE", "plane": "LOITER"}
 
 
 # ---- GUIDED: goto, velocity, yaw, speed ---------------------------------------------------------
@@ -318,7 +314,7 @@ def test_set_speed_changes_cruise_and_refuses_out_of_range(flat_scene):
 # ---- AUTO missions ----------------------------------------------------------------------------
 
 def test_auto_mission_visits_waypoints_in_order_with_speed_changes(flat_scene):
-    world = World(flat_scene, Kind.COPTER)
+    world = Simulation(flat_scene, Kind.COPTER)
     autopilot = world.autopilot
     autopilot.set_mission([
         MissionItem(NAV_WAYPOINT),  # home, replaced
@@ -348,13 +344,13 @@ def test_auto_mission_visits_waypoints_in_order_with_speed_changes(flat_scene):
     assert leg_speeds[2] == pytest.approx(2.5, abs=0.01)  # the cruise speed until DO_CHANGE_SPEED
     assert leg_speeds[4] == pytest.approx(4.0, abs=0.01)
     assert autopilot.speed == 4.0
-    assert nearest[2] <= world.settings.closeness and nearest[4] <= world.settings.closeness
+    assert nearest[2] <= world.autopilot.wp_radius and nearest[4] <= world.autopilot.wp_radius
     assert nearest[5] <= 0.5
     assert world.pose.z == pytest.approx(ALTITUDE, abs=0.2)
 
 
 def test_auto_nav_land_lands_at_its_position_and_disarms(flat_scene):
-    world = World(flat_scene, Kind.COPTER)
+    world = Simulation(flat_scene, Kind.COPTER)
     autopilot = world.autopilot
     autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=3.0),
                            position_item(world, NAV_LAND, 8.0, 6.0, alt=0.0)])
@@ -370,7 +366,7 @@ def test_auto_nav_land_lands_at_its_position_and_disarms(flat_scene):
 
 
 def test_auto_return_to_launch_brings_a_copter_home_and_lands(flat_scene):
-    world = World(flat_scene, Kind.COPTER, start=(3.0, 4.0))
+    world = Simulation(flat_scene, Kind.COPTER, start=(3.0, 4.0))
     autopilot = world.autopilot
     autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=ALTITUDE),
                            position_item(world, NAV_WAYPOINT, 15.0, 4.0), MissionItem(NAV_RETURN_TO_LAUNCH)])
@@ -385,7 +381,7 @@ def test_auto_return_to_launch_brings_a_copter_home_and_lands(flat_scene):
 
 
 def test_auto_rover_starts_on_entering_auto_and_returns_home_to_hold(flat_scene):
-    world = World(flat_scene, Kind.ROVER, start=(3.0, 4.0))
+    world = Simulation(flat_scene, Kind.ROVER, start=(3.0, 4.0))
     autopilot = world.autopilot
     autopilot.set_mission([MissionItem(NAV_WAYPOINT), position_item(world, NAV_WAYPOINT, 12.0, 4.0),
                            position_item(world, NAV_WAYPOINT, 12.0, 12.0), MissionItem(NAV_RETURN_TO_LAUNCH)])
@@ -402,7 +398,7 @@ def test_auto_rover_starts_on_entering_auto_and_returns_home_to_hold(flat_scene)
 
 
 def test_auto_loiter_unlimited_holds_forever(flat_scene):
-    world = World(flat_scene, Kind.COPTER)
+    world = Simulation(flat_scene, Kind.COPTER)
     autopilot = world.autopilot
     autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=ALTITUDE),
                            position_item(world, NAV_LOITER_UNLIM, -6.0, 5.0),
@@ -417,7 +413,7 @@ def test_auto_loiter_unlimited_holds_forever(flat_scene):
 
 
 def test_start_mission_refused_outside_auto_and_without_items(flat_scene):
-    world = World(flat_scene, Kind.COPTER)
+    world = Simulation(flat_scene, Kind.COPTER)
     autopilot = world.autopilot
     autopilot.arm()
     assert autopilot.start_mission() == DENIED  # GUIDED
@@ -426,7 +422,7 @@ def test_start_mission_refused_outside_auto_and_without_items(flat_scene):
 
 
 def test_unsupported_mission_items_are_skipped_with_a_warning(flat_scene):
-    world = World(flat_scene, Kind.ROVER)
+    world = Simulation(flat_scene, Kind.ROVER)
     autopilot = world.autopilot
     autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(183),  # DO_SET_SERVO
                            position_item(world, NAV_WAYPOINT, 0.0, 8.0)])
@@ -574,7 +570,7 @@ def test_copter_holds_height_above_the_start_ground_over_a_hill(hill_scene):
 
 def trajectory(scene) -> list[tuple]:
     sensors = [Sonar("front", noise=0.05), Sonar("right", mount_yaw=60.0, noise=0.05)]
-    world = World(scene, Kind.COPTER, seed=7, sensors=sensors)
+    world = Simulation(scene, Kind.COPTER, seed=7, sensors=sensors)
     world.autopilot.arm()
     world.autopilot.takeoff(3.0)
     out = []

@@ -56,7 +56,7 @@ def test_scene_json_describes_the_default_scene(runs):
     (x0, y0, z0), (x1, y1, z1) = report["bounds"]
     assert (x0, y0, x1, y1) == (-60.0, -60.0, 60.0, 60.0) and z0 == 0.0 and z1 == 12.0
     assert report["warnings"] == []
-    assert report["start"] == [0.0, 0.0]
+    assert report["start"] == [0.0, 0.0, 1.7]  # x, y and the eye height of the Start viewpoint
 
 
 def test_scene_json_of_the_castle(runs, castle_path):

@@ -1,4 +1,4 @@
-"""Swept-sphere collision (vehicle.collision) and what a collision does to a World run (vehicle.world)."""
+"""Swept-sphere collision (vehicle.collision) and what a collision does to a Simulation run (vehicle.world)."""
 
 import math
 
@@ -7,7 +7,7 @@ import pytest
 
 from vehicle.protocol.modes import Kind
 from vehicle.sim.sensors import Sonar
-from vehicle.sim.simulation import PlacementError, World
+from vehicle.sim.simulation import PlacementError, Simulation
 from vehicle.world.collision import Collider, point_triangle_distance
 
 RADIUS = 0.3
@@ -111,7 +111,7 @@ def ramp_scene(make_scene, box):
 
 
 def test_a_rover_driving_up_a_tilted_box_is_not_colliding(ramp_scene):
-    world = World(ramp_scene, Kind.ROVER, start=(-5.0, 0.0), heading=90.0)
+    world = Simulation(ramp_scene, Kind.ROVER, start=(-5.0, 0.0), heading=90.0)
     world.autopilot.arm()
     world.autopilot.set_mode("GUIDED")
     world.autopilot.goto(9.0, 0.0)
@@ -123,7 +123,7 @@ def test_a_rover_driving_up_a_tilted_box_is_not_colliding(ramp_scene):
 
 
 def test_a_rover_on_a_slope_collides_with_a_wall(ramp_scene):
-    world = World(ramp_scene, Kind.ROVER, start=(-5.0, 0.0), heading=90.0, sensors=REAR_ONLY)
+    world = Simulation(ramp_scene, Kind.ROVER, start=(-5.0, 0.0), heading=90.0, sensors=REAR_ONLY)
     world.autopilot.arm()
     world.autopilot.set_mode("GUIDED")
     world.autopilot.goto(20.0, 0.0)
@@ -134,21 +134,21 @@ def test_a_rover_on_a_slope_collides_with_a_wall(ramp_scene):
 
 def test_world_refuses_a_start_overlapping_a_wall(wall_scene):
     with pytest.raises(PlacementError, match="inside an obstacle"):
-        World(wall_scene, Kind.COPTER, start=(0.0, WALL_FACE_Y - 0.1))
+        Simulation(wall_scene, Kind.COPTER, start=(0.0, WALL_FACE_Y - 0.1))
 
 
 def test_world_refuses_a_rover_start_overlapping_a_box(make_scene, box):
     scene = make_scene(box(0, 0, -0.05, 100, 100, 0.1), box(0.2, 0, 1, 0.2, 4, 2))
     with pytest.raises(PlacementError):
-        World(scene, Kind.ROVER, start=(0.0, 0.0))
+        Simulation(scene, Kind.ROVER, start=(0.0, 0.0))
 
 
 def test_world_accepts_a_start_just_clear_of_a_wall(wall_scene):
-    World(wall_scene, Kind.COPTER, start=(0.0, WALL_FACE_Y - RADIUS - 0.05))
+    Simulation(wall_scene, Kind.COPTER, start=(0.0, WALL_FACE_Y - RADIUS - 0.05))
 
 
-def fly_into_the_wall(wall_scene) -> World:
-    world = World(wall_scene, Kind.COPTER, start=(0.0, 0.0), sensors=REAR_ONLY)
+def fly_into_the_wall(wall_scene) -> Simulation:
+    world = Simulation(wall_scene, Kind.COPTER, start=(0.0, 0.0), sensors=REAR_ONLY)
     world.autopilot.arm()
     world.autopilot.takeoff(4.0)
     world.run_for(8.0)

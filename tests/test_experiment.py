@@ -93,8 +93,8 @@ def test_a_collision_ends_the_run(tmp_path):
     path = tmp_path / "leg.wrl"
     path.write_text(HEADER + GROUND + LEG_WALL)
 
-    def blind(world, agent, readings):  # no sonar: neither avoidance nor the monitor can see the wall
-        world.sonars.sensors = []
+    def blind(stepper, readings):  # no sonar: neither avoidance nor the monitor can see the wall
+        stepper.simulation.sonars.sensors = []
 
     result = run_experiment(Experiment(str(path), "square", settings=SMALL), on_step=blind)
     assert result["outcome"] == "collision"

@@ -1,7 +1,8 @@
-"""``vehicle experiment --log FILE.tlog`` (vehicle.flightlog): a standard telemetry log on simulated time.
+"""``vehicle experiment --log FILE.tlog`` (vehicle.lab.log): a standard telemetry log on simulated time.
 
 One pathfind run in a small scene is logged twice (and its final map saved with
 ``--map-out``); the log is read back with pymavlink's own ``mavlink_connection``.
+The autopilot's messages come from component 1, the agent's from component 191.
 """
 
 from collections import defaultdict
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 
 from vehicle.cli import main
+from vehicle.protocol import agent_status
 from vehicle.protocol.mapstream import MapReceiver
 from vehicle.protocol.mav import mavlink, mavutil
 from vehicle.protocol.tlog import LOG_EPOCH
@@ -37,14 +39,17 @@ def logged(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def messages(logged):
-    """Message type -> list of (timestamp, message), in log order."""
+    """Message type (the agent's: "TYPE@191") -> list of (timestamp, message), in log order."""
     reader = mavutil.mavlink_connection(str(logged / "a.tlog"))
     by_type = defaultdict(list)
     order = []
     while (message := reader.recv_match()) is not None:
         if message.get_type() == "BAD_DATA":
             pytest.fail(f"undecodable data in the log: {message}")
-        by_type[message.get_type()].append((message._timestamp, message))
+        component = message.get_srcComponent()
+        assert component in (1, 191)
+        key = message.get_type() if component == 1 else f"{message.get_type()}@{component}"
+        by_type[key].append((message._timestamp, message))
         order.append(message._timestamp)
     reader.close()
     by_type["_order"] = order
@@ -97,8 +102,22 @@ def test_distance_sensor_readings_are_logged(messages):
     assert all(m.current_distance <= m.max_distance + 1 for _, m in readings)
 
 
+def test_the_agent_is_component_191_with_its_own_heartbeat_and_state(messages):
+    beats = messages["HEARTBEAT@191"]
+    assert len(beats) >= 20
+    assert {m.type for _, m in beats} == {mavlink.MAV_TYPE_ONBOARD_CONTROLLER}
+    assert np.median(intervals(beats[:-1])) == pytest.approx(1.0, abs=0.01)
+    states = [agent_status.decode(bytes(m.payload[:m.payload_length])) for _, m in messages["TUNNEL@191"]
+              if m.payload_type == agent_status.AGENT_STATUS]
+    assert states[0].phase in ("preflight", "takeoff") and states[0].mission == "pathfind"
+    assert states[-1] == agent_status.AgentStatus("done", False, "finished", "pathfind", "mission complete")
+    assert not messages["TUNNEL"]  # the map is the agent's, not the autopilot's
+    texts = [m.text for _, m in messages["STATUSTEXT@191"]]
+    assert "Mission pathfind: start" in texts
+
+
 def test_tunnel_payloads_rebuild_exactly_the_final_map(logged, messages):
-    tunnels = messages["TUNNEL"]
+    tunnels = messages["TUNNEL@191"]
     assert tunnels
     receiver = MapReceiver()
     for _, message in tunnels:
@@ -114,7 +133,7 @@ def test_tunnel_payloads_rebuild_exactly_the_final_map(logged, messages):
 def test_the_planned_path_is_in_the_log(messages):
     receiver = MapReceiver()
     paths = []
-    for _, message in messages["TUNNEL"]:
+    for _, message in messages["TUNNEL@191"]:
         before = receiver.path
         receiver.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
         if receiver.path is not before and receiver.path:

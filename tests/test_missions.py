@@ -6,19 +6,24 @@ The planning helpers of ``missions.base.Context`` are tested on hand-made maps.
 """
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from vehicle.agent.agent import Agent, Phase
-from vehicle.agent.missions import mission_class, missions
-from vehicle.agent.missions.base import UNSEEN_EXTENT, Context
+import vehicle.agent.missions as missions_package
+from vehicle.agent.agent import Phase
+from vehicle.agent.missions import MISSIONS, mission_class
+from vehicle.agent.missions.base import Context, Mission
 from vehicle.agent.missions.square import square_corners
 from vehicle.agent.monitor import Monitor
 from vehicle.agent.settings import Settings
 from vehicle.lab.experiment import Experiment, run_experiment
+from vehicle.lab.stepper import simulate
 from vehicle.mapping.memory_map import MemoryMap
-from vehicle.sim.simulation import World
+from vehicle.mapping.planner import UNSEEN_EXTENT
+from vehicle.sim.onboard import SimController
+from vehicle.sim.simulation import Simulation
 
 GROUND = (0, 0, -0.05, 80, 80, 0.1)
 SMALL = {"space_size": 20, "time_limit": 200}
@@ -54,8 +59,9 @@ class Track:
         self.world = self.agent = None
         self._last = None
 
-    def __call__(self, world, agent, readings):
-        self.world, self.agent = world, agent
+    def __call__(self, stepper, readings):
+        world = self.world = stepper.simulation
+        self.agent = stepper.agent
         pose = world.pose
         if self._last is not None:
             self.horizontal += math.hypot(pose.x - self._last[0], pose.y - self._last[1])
@@ -79,12 +85,15 @@ def home_distance(result):
 
 
 # ---- the registry -----------------------------------------------------------------------------
-def test_registry_lists_the_four_missions():
-    names = list(missions())
-    assert {"square", "browse", "search", "pathfind"} <= set(names)
-    assert names == sorted(names)
-    assert all(name == name.lower() for name in names)
-    assert mission_class("Browse") is missions()["browse"]
+def test_registry_lists_every_mission_module_and_only_those():
+    package = Path(missions_package.__file__).parent
+    modules = {p.stem for p in package.glob("*.py")} - {"__init__", "base", "routines"}
+    assert set(MISSIONS) == modules == {"square", "browse", "search", "pathfind"}
+    assert list(MISSIONS) == sorted(MISSIONS)
+    for name in MISSIONS:
+        cls = mission_class(name.title())
+        assert issubclass(cls, Mission) and cls.name == name
+        assert cls.__module__ == f"vehicle.agent.missions.{name}"
 
 
 def test_an_unknown_mission_names_the_known_ones():
@@ -207,25 +216,17 @@ def test_search_with_a_short_time_limit_heads_home_in_time(scene_of):
 
 # ---- operator takeover --------------------------------------------------------------------------
 class Flight:
-    """A World and its Agent stepped as ``run_experiment`` does, for tests that intervene mid-flight."""
+    """A simulated vehicle and its agent on the one stepper, for tests that intervene mid-flight."""
 
     def __init__(self, scene, mission, vehicle="copter", waypoints=None, **settings):
-        self.settings = Settings(**{**SMALL, **settings})
-        self.world = World(scene, vehicle, self.settings)
-        self.agent = Agent(self.world.autopilot, mission, self.settings, self.world.limits.radius, waypoints)
-        self.period = max(1, round(self.settings.monitor_period / self.world.dt))
+        self.stepper = simulate(scene, mission, vehicle, Settings(**{**SMALL, **settings}), waypoints=waypoints)
+        self.world, self.agent = self.stepper.simulation, self.stepper.agent
 
-    def run(self, seconds, until=lambda: False) -> bool:
+    def run(self, seconds, until=None) -> bool:
         """Step up to ``seconds`` of simulated time; True as soon as ``until()`` holds after an agent step."""
-        end = self.world.time + seconds
-        while self.world.time < end - 1e-9:
-            self.agent.collect(self.world.step())
-            assert self.world.collision is None, self.world.collision.describe()
-            if self.world.steps % self.period == 0:
-                self.agent.step(self.world.time)
-                if until():
-                    return True
-        return False
+        reached = self.stepper.run(seconds, until)
+        assert self.world.collision is None, self.world.collision.describe()
+        return reached
 
     @property
     def xy(self):
@@ -283,11 +284,10 @@ class Planner:
 
     def __init__(self, scene, position=(0.0, 0.0)):
         self.settings = Settings(space_size=20)
-        self.world = World(scene, "copter", self.settings)
+        self.world = Simulation(scene, "copter")
         self.map = MemoryMap((0.0, 0.0), 20, 10)
         monitor = Monitor(self.settings, self.map, (0.0, 0.0), self.world.limits.radius)
-        self.ctx = Context(self.world.autopilot, self.map, monitor, self.settings, (0.0, 0.0),
-                           self.world.limits.radius, say=lambda text: None)
+        self.ctx = Context(SimController(self.world), self.map, monitor, self.settings, say=lambda text: None)
         self.move(*position)
 
     def move(self, x, y):

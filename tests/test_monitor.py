@@ -10,12 +10,11 @@ import math
 import numpy as np
 import pytest
 
-from vehicle.agent.agent import Agent
 from vehicle.agent.monitor import Monitor, sweep_profile
 from vehicle.agent.settings import Settings
+from vehicle.lab.stepper import simulate
 from vehicle.mapping.memory_map import MemoryMap
-from vehicle.sim.sensors import Reading
-from vehicle.sim.simulation import World
+from vehicle.protocol.rangefinder import Reading
 
 RADIUS = 0.3
 NORTH, EAST, SOUTH = 0.0, math.pi / 2, math.pi
@@ -167,20 +166,18 @@ def test_the_agent_stops_the_vehicle_short_of_a_wall_when_the_monitor_says_too_c
     # meets a wall whose north face is at y = 0.1. Only the monitor can stop it.
     scene = make_scene(box(0, 0, -0.05, 80, 80, 0.1), box(5, 0, 2, 4, 0.2, 6))
     settings = Settings(space_size=20, time_limit=200)
-    world = World(scene, vehicle, settings)
+    stepper = simulate(scene, "square", vehicle, settings)
+    world, agent = stepper.simulation, stepper.agent
     world.autopilot.avoidance = None
-    agent = Agent(world.autopilot, "square", settings, world.limits.radius)
-    period = round(settings.monitor_period / world.dt)
     alarm = rest = None
     closest = math.inf
     while world.time < 60 and (alarm is None or world.time < alarm + 3.0):
-        agent.collect(world.step())
+        stepper.step()
         assert world.collision is None, world.collision.describe()
         closest = min(closest, abs(world.pose.y - 0.1) if 3 < world.pose.x < 7 else math.inf)
         if alarm is not None and rest is None and world.body.speed < 0.05:
             rest = world.time
-        if world.steps % period == 0:
-            agent.step(world.time)
+        if stepper.monitor_due:
             if alarm is None and agent.ctx.observation.too_close:
                 alarm = world.time
                 assert world.pose.x == pytest.approx(5.0, abs=0.6) and 0.1 < world.pose.y < 5.0

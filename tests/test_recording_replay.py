@@ -98,7 +98,7 @@ def flight(tmp_path_factory):
     record_dir = tmp_path_factory.mktemp("recordings")
     with RunningStation(scene, record_dir) as running, running.api() as api:
         vehicle = start_sim(running, scene, sysid=1, mission="search", autostart=True)
-        vehicle.sim.telemetry.streamer.snapshot_period = 1.0
+        vehicle.sim.companion.streamer.snapshot_period = 1.0
         with vehicle:
             api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok" and v["map"]["source"] == "vehicle",
                              sim_timeout=20, what="heartbeat and map")

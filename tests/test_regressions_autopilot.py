@@ -6,7 +6,7 @@ import pytest
 
 from vehicle.protocol.modes import Kind
 from vehicle.sim.sensors import Sonar
-from vehicle.sim.simulation import World
+from vehicle.sim.simulation import Simulation
 from vehicle.world.scene import parse_scene
 
 GROUND = "#VRML V2.0 utf8\nTransform { translation 0 0 -0.05 children Shape { geometry Box { size 200 200 0.1 } } }\n"
@@ -17,8 +17,8 @@ def flat_scene():
     return parse_scene(GROUND)
 
 
-def taking_off(scene) -> World:
-    world = World(scene, Kind.COPTER)
+def taking_off(scene) -> Simulation:
+    world = Simulation(scene, Kind.COPTER)
     world.autopilot.arm()
     world.autopilot.takeoff(10.0)
     world.run_for(1.0)  # climbing, at about 1.85 m
@@ -52,17 +52,17 @@ def test_rearming_after_a_forced_disarm_during_takeoff_stays_on_the_ground(flat_
     assert world.pose.z == pytest.approx(0.35, abs=0.01)  # it used to take off by itself
 
 
-# ---- bug: a World without sensors cannot step ----------------------------------------------------
+# ---- bug: a Simulation without sensors cannot step ----------------------------------------------------
 
 def test_a_world_without_sensors_steps(flat_scene):
-    world = World(flat_scene, Kind.COPTER, sensors=[])
+    world = Simulation(flat_scene, Kind.COPTER, sensors=[])
     assert world.step() == []  # ValueError: need at least one array to concatenate (vehicle/sensors.py:124)
 
 
 # ---- questionable: stopping modes and the velocity timeout drive back to where they were engaged ------
 
 def test_rover_hold_stops_without_turning_around(flat_scene):
-    world = World(flat_scene, Kind.ROVER)
+    world = Simulation(flat_scene, Kind.ROVER)
     world.autopilot.arm()
     world.autopilot.set_mode("GUIDED")
     world.autopilot.goto(0.0, 60.0)
@@ -73,7 +73,7 @@ def test_rover_hold_stops_without_turning_around(flat_scene):
 
 
 def test_copter_stops_where_a_velocity_command_expires_without_flying_back(flat_scene):
-    world = World(flat_scene, Kind.COPTER)
+    world = Simulation(flat_scene, Kind.COPTER)
     world.autopilot.arm()
     world.autopilot.takeoff(4.0)
     world.run_for(6.0)
@@ -86,7 +86,7 @@ def test_copter_stops_where_a_velocity_command_expires_without_flying_back(flat_
 
 
 def test_copter_brake_holds_where_it_came_to_rest(flat_scene):
-    world = World(flat_scene, Kind.COPTER, sensors=[Sonar(mount_yaw=180)])
+    world = Simulation(flat_scene, Kind.COPTER, sensors=[Sonar(mount_yaw=180)])
     world.autopilot.arm()
     world.autopilot.takeoff(4.0)
     world.run_for(6.0)

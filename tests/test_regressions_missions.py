@@ -5,13 +5,14 @@ import math
 
 import numpy as np
 
-from vehicle.agent.agent import Agent
 from vehicle.agent.missions.base import Context
 from vehicle.agent.monitor import Monitor
 from vehicle.agent.settings import Settings
 from vehicle.lab.experiment import Experiment, run_experiment
+from vehicle.lab.stepper import simulate
 from vehicle.mapping.memory_map import MemoryMap
-from vehicle.sim.simulation import World
+from vehicle.sim.onboard import SimController
+from vehicle.sim.simulation import Simulation
 from vehicle.world.scene import parse_scene
 
 
@@ -25,13 +26,12 @@ def scene(*walls):
 
 def context_near_wall(position):
     settings = Settings(space_size=20)
-    world = World(scene(), "copter", settings)
+    world = Simulation(scene(), "copter")
     grid = MemoryMap((0.0, 0.0), 20, 10)
     (r0, c0), (r1, c1) = grid.cell_of(-5, 4.9), grid.cell_of(5, 5.1)
     grid.grid[:r0, :] = MemoryMap.FREE_AT  # the sonar saw the space south of the wall free
     grid.grid[r0:r1 + 1, c0:c1 + 1] = MemoryMap.LIMIT  # a known wall, y 4.9..5.1, x -5..5
-    ctx = Context(world.autopilot, grid, Monitor(settings, grid, (0, 0), 0.3), settings, (0, 0), 0.3,
-                  say=lambda t: None)
+    ctx = Context(SimController(world), grid, Monitor(settings, grid, (0, 0), 0.3), settings, say=lambda t: None)
     world.body.pose.x, world.body.pose.y = position
     return ctx
 
@@ -72,8 +72,8 @@ def test_bug1_square_without_avoidance_collides_on_the_way_home():
     # the monitor stops the square in front of a wall across its east leg; homing then plans a
     # straight line home that grazes the wall end (path_clear skips the margin) and, with the
     # autopilot's avoidance off, creeps into it scan after scan
-    def no_avoidance(world, agent, readings):
-        world.autopilot.avoidance = None
+    def no_avoidance(stepper, readings):
+        stepper.simulation.autopilot.avoidance = None
 
     result = run_experiment(Experiment("x", "square", settings=Settings(space_size=20, time_limit=200)),
                             scene=scene((5, 0, 2, 4, 0.2, 6)), on_step=no_avoidance)
@@ -82,20 +82,12 @@ def test_bug1_square_without_avoidance_collides_on_the_way_home():
 
 class Flight:
     def __init__(self, mission, kind="copter", waypoints=None):
-        self.settings = Settings(space_size=20, time_limit=200)
-        self.world = World(scene((0, 6, 2, 8, 0.2, 6)), kind, self.settings)
-        self.agent = Agent(self.world.autopilot, mission, self.settings, self.world.limits.radius, waypoints)
-        self.period = round(self.settings.monitor_period / self.world.dt)
+        self.stepper = simulate(scene((0, 6, 2, 8, 0.2, 6)), mission, kind, Settings(space_size=20, time_limit=200),
+                                waypoints=waypoints)
+        self.world, self.agent = self.stepper.simulation, self.stepper.agent
 
-    def run(self, seconds, until=lambda: False):
-        end = self.world.time + seconds
-        while self.world.time < end:
-            self.agent.collect(self.world.step())
-            if self.world.steps % self.period == 0:
-                self.agent.step(self.world.time)
-                if until():
-                    return True
-        return False
+    def run(self, seconds, until=None):
+        return self.stepper.run(seconds, until)
 
 
 def _pause_and_resume(flight, stop_mode="BRAKE"):
@@ -127,23 +119,18 @@ def test_bug3_the_monitor_lets_the_vehicle_get_well_inside_the_safety_distance()
     # once inside `closeness`, ignoring the braking distance (v^2 / 2a = 1.25 m at 2.5 m/s) and the
     # monitor period (0.25 s = 0.6 m).
     settings = Settings(space_size=20, time_limit=200)
-    world = World(scene((5, 0, 2, 4, 0.2, 6)), "copter", settings)
+    stepper = simulate(scene((5, 0, 2, 4, 0.2, 6)), "square", "copter", settings)
+    world, agent = stepper.simulation, stepper.agent
     world.autopilot.avoidance = None
-    agent = Agent(world.autopilot, "square", settings, world.limits.radius)
-    period = round(settings.monitor_period / world.dt)
     closest = math.inf
     while world.time < 60 and agent.phase.value in ("preflight", "takeoff", "mission"):
-        agent.collect(world.step())
+        stepper.step()
         if 3 < world.pose.x < 7:
             closest = min(closest, abs(world.pose.y - 0.1))
-        if world.steps % period == 0:
-            agent.step(world.time)
     for _ in range(100):  # and while it brakes after the stop (not the trip home past the wall's end)
         if world.body.speed < 0.7:
             break
-        agent.collect(world.step())
-        if world.steps % period == 0:
-            agent.step(world.time)
+        stepper.step()
         if 3 < world.pose.x < 7:
             closest = min(closest, abs(world.pose.y - 0.1))
     assert agent.outcome == "stopped"

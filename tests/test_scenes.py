@@ -113,14 +113,14 @@ def test_bounds(scene):
 
 def test_start_and_heading(scene):
     name, s = scene
-    assert s.start == pytest.approx(EXPECTED[name]["start"])
+    assert s.start[:2] == pytest.approx(EXPECTED[name]["start"])
     assert s.start_heading == pytest.approx(0.0, abs=0.01)  # looking north
 
 
 def test_start_ground_is_flat(scene):
     """The ground under the start and 2 m around it is level: nothing overhead, no slope."""
     name, s = scene
-    x, y = s.start
+    x, y, _ = s.start
     angles = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     ring = np.column_stack((x + 2 * np.cos(angles), y + 2 * np.sin(angles)))
     z = _ground_z(s.mesh, np.vstack(([x, y], ring)))
@@ -133,7 +133,7 @@ def test_start_ground_is_flat(scene):
 def test_start_in_clear_space(scene):
     """No triangle between 0.2 m and 6 m above the start's ground within the clear radius."""
     name, s = scene
-    x, y = s.start
+    x, y, _ = s.start
     g = _ground_z(s.mesh, [x, y])[0]
     tris = s.mesh.triangles
     zmin, zmax = tris[:, :, 2].min(axis=1), tris[:, :, 2].max(axis=1)
@@ -148,7 +148,7 @@ def test_start_in_clear_space(scene):
 def test_default_objects_around_the_start():
     """Something stands 5-25 m from the start in most directions, and the ground covers 120 x 120 m."""
     s = _load("default")
-    x, y = s.start
+    x, y, _ = s.start
     seen = 0
     for bearing in range(0, 360, 30):
         b = np.radians(bearing)
@@ -186,7 +186,7 @@ def test_house_every_room_reachable_at_flight_height():
     def label_at(x, y):
         return labels[int((x - lo[0]) / res), int((y - lo[1]) / res)]
 
-    start = label_at(*s.start)
+    start = label_at(*s.start[:2])
     assert start != 0
     assert label_at(-8.4, -6.4) != start, "the house is closed"
     rooms = {"kitchen": (5, -2), "bedroom 1": (-5.5, 3), "bedroom 2": (0, 3), "bathroom": (6, 3)}
@@ -248,11 +248,11 @@ def test_a_scene_built_for_a_run_still_pickles_and_shares_its_preparation():
     scene goes to a worker process (an Embree scene does not pickle)."""
     import pickle
 
-    from vehicle.sim.simulation import World
+    from vehicle.sim.simulation import Simulation
 
     s = _load("house")
-    first, second = World(s), World(s)
+    first, second = Simulation(s), Simulation(s)
     assert first.caster is second.caster and first.collider.grid is second.collider.grid
     copy = pickle.loads(pickle.dumps(s))
     assert len(copy.mesh.faces) == len(s.mesh.faces)
-    assert World(copy).caster is not first.caster
+    assert Simulation(copy).caster is not first.caster

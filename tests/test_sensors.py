@@ -5,10 +5,12 @@ import math
 import numpy as np
 import pytest
 
+from vehicle.protocol.frames import Pose, body_to_world
 from vehicle.protocol.modes import Kind
-from vehicle.sim.physics import Pose
-from vehicle.sim.sensors import SENSOR_SUITES, Servo, Sonar, SonarArray, body_to_world, cone_rays, sensor_suite
-from vehicle.sim.simulation import World
+from vehicle.protocol.rangefinder import Servo
+from vehicle.sim.sensors import Sonar, SonarArray, cone_rays
+from vehicle.sim.simulation import Simulation
+from vehicle.sim.suites import SENSOR_SUITES, sensor_suite
 from vehicle.world.raycast import RayCaster
 
 NORTH = 10.0  # distance from the origin to the north wall's south face
@@ -179,7 +181,7 @@ def test_the_triple_suite_has_three_sensors_forward_and_45_degrees_each_side():
 
 
 def test_the_world_reads_the_triple_suite_by_default(walls):
-    world = World(walls, Kind.COPTER, start=(0.0, 0.0))
+    world = Simulation(walls, Kind.COPTER, start=(0.0, 0.0))
     readings = []
     while not readings:
         readings = world.step()
@@ -257,7 +259,7 @@ def test_sonar_axis_matches_the_reading_direction(walls):
 
 
 def test_the_servo_suite_turns_its_sonar_with_the_autopilot_output(walls):
-    world = World(walls, Kind.COPTER, start=(0.0, 0.0), sensors=sensor_suite("servo"))
+    world = Simulation(walls, Kind.COPTER, start=(0.0, 0.0), sensors=sensor_suite("servo"))
     servo = world.servo
     assert servo is not None and servo.angle() == 0.0
     world.autopilot.set_servo(servo.channel, servo.pwm_for(90.0))

@@ -14,13 +14,12 @@ import time
 
 import numpy as np
 import pytest
-from mavlink_gcs import Gcs, RunningSim, free_udp_port
+from mavlink_gcs import COMPANION, Gcs, RunningSim, free_udp_port
 
-from vehicle.agent.agent import Agent
 from vehicle.agent.settings import Settings
+from vehicle.lab.stepper import simulate
 from vehicle.protocol.mapstream import MAP_DELTA, MapReceiver
 from vehicle.protocol.mav import mavlink, mavutil
-from vehicle.sim.simulation import World
 from vehicle.world.scene import parse_scene
 
 ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
@@ -38,10 +37,7 @@ def scene():
 
 
 def make_vehicle(scene, kind="copter", mission="browse", autostart=False, settings=None):
-    settings = settings or Settings(space_size=20)
-    world = World(scene, kind, settings)
-    agent = Agent(world.autopilot, mission, settings, world.limits.radius, autostart=autostart)
-    return world, agent
+    return simulate(scene, mission, kind, settings or Settings(space_size=20), autostart=autostart)
 
 
 @pytest.fixture
@@ -52,8 +48,8 @@ def fly(scene):
     def start(kind="copter", mission="browse", autostart=False, speedup=10.0, settings=None, **options):
         port = free_udp_port()
         gcs = Gcs(f"udpin:127.0.0.1:{port}", speedup=speedup)
-        world, agent = make_vehicle(scene, kind, mission, autostart, settings)
-        runner = RunningSim(world, agent, [f"udpout:127.0.0.1:{port}"], speedup=speedup, **options)
+        runner = RunningSim(make_vehicle(scene, kind, mission, autostart, settings), [f"udpout:127.0.0.1:{port}"],
+                            speedup=speedup, **options)
         sim = runner.__enter__()
         running.append((runner, gcs))
         gcs.wait("HEARTBEAT")
@@ -329,18 +325,18 @@ def collect_map(gcs, receiver, until, drop=None, rng=None, sim_timeout=120):
             if not lost:
                 receiver.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
         return until()
-    gcs.wait(None, feed, sim_timeout=sim_timeout)
+    gcs.wait(None, feed, sim_timeout=sim_timeout, component=COMPANION)  # the map is the onboard agent's
 
 
 def test_map_copy_equals_the_onboard_map(fly):
     gcs, sim = fly(mission="browse", autostart=True)
-    streamer = sim.telemetry.streamer
+    streamer = sim.companion.streamer
     streamer.snapshot_period, streamer.snapshot_budget = 1.0, 1e9
     receiver = MapReceiver()
     collect_map(gcs, receiver, lambda: sim.agent.done and receiver.synced and receiver.snapshots >= 2)
     sim.stop()
     while True:  # drain what was sent before it stopped
-        message = gcs.recv(timeout=0.5)
+        message = gcs.recv(timeout=0.5, component=COMPANION)
         if message is None:
             break
         if message.get_type() == "TUNNEL":
@@ -352,7 +348,7 @@ def test_map_copy_equals_the_onboard_map(fly):
 
 def test_a_late_and_lossy_ground_station_resynchronises(fly):
     gcs, sim = fly(mission="search", autostart=True)
-    streamer = sim.telemetry.streamer
+    streamer = sim.companion.streamer
     streamer.snapshot_period, streamer.snapshot_budget = 1.0, 1e9
     gcs.wait("ATTITUDE", lambda m: gcs.sim_time > 10, sim_timeout=30)  # join late
     receiver = MapReceiver()
@@ -361,7 +357,7 @@ def test_a_late_and_lossy_ground_station_resynchronises(fly):
     collect_map(gcs, receiver, lambda: receiver.gaps > 0 and receiver.synced and receiver.snapshots >= 2,
                 drop={MAP_DELTA: 0.2}, rng=random.Random(3), sim_timeout=300)
     sim.stop()
-    while (message := gcs.recv(timeout=0.5)) is not None:
+    while (message := gcs.recv(timeout=0.5, component=COMPANION)) is not None:
         if message.get_type() == "TUNNEL":
             receiver.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
     assert receiver.synced and receiver.applied == streamer.delta_seq
@@ -396,8 +392,7 @@ def test_several_ground_stations_at_once(scene):
     ports = [free_udp_port(), free_udp_port()]
     first, second = (Gcs(f"udpin:127.0.0.1:{p}", sysid=s, speedup=10) for p, s in zip(ports, (255, 245),
                                                                                         strict=True))
-    world, agent = make_vehicle(scene)
-    with RunningSim(world, agent, [f"udpout:127.0.0.1:{p}" for p in ports], speedup=10):
+    with RunningSim(make_vehicle(scene), [f"udpout:127.0.0.1:{p}" for p in ports], speedup=10):
         first.wait("HEARTBEAT")
         second.wait("HEARTBEAT")
         assert second.set_mode(5) == mavlink.MAV_RESULT_ACCEPTED

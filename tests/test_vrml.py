@@ -393,13 +393,13 @@ def test_start_comes_from_the_viewpoint_named_start():
         f"Transform {{ translation 100 0 0 rotation 0 0 1 {-math.pi / 2} children [\n"
         f"  DEF Start Viewpoint {{ position 0 10 2 orientation 1 0 0 {math.pi / 2} }} ] }}"
     )
-    assert s.start == pytest.approx((110, 0))
+    assert s.start == pytest.approx((110, 0, 2))  # the eye height comes too
     assert s.start_heading == pytest.approx(90)  # looks north, turned clockwise a quarter: east
 
 
 def test_start_heading_is_none_when_looking_straight_down():
     s = scene("DEF Start Viewpoint { position 3 4 50 }")  # default orientation looks along -z
-    assert s.start == pytest.approx((3, 4)) and s.start_heading is None
+    assert s.start == pytest.approx((3, 4, 50)) and s.start_heading is None
 
 
 def test_no_start_without_a_viewpoint_named_start():
@@ -410,7 +410,7 @@ def test_no_start_without_a_viewpoint_named_start():
 def test_yard_fixture():
     s = load_scene(DATA / "yard.wrl")
     assert len(s.mesh.faces) == 184 and s.objects == 5
-    assert s.start == pytest.approx((5, -10)) and s.start_heading == pytest.approx(0, abs=1e-6)
+    assert s.start == pytest.approx((5, -10, 1.7)) and s.start_heading == pytest.approx(0, abs=1e-6)
     assert s.face_colors[s.face_object == 2][0].tolist() == [255, 255, 255, 128]
 
 

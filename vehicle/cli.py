@@ -4,46 +4,41 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
 from vehicle import __version__
+from vehicle.agent.missions import MISSIONS
+from vehicle.protocol.geodesy import datum_option
+from vehicle.sim.suites import DEFAULT_SUITE, SENSOR_SUITES
+from vehicle.world.bundled import default_scene
 
-SCENES = Path(__file__).resolve().parent.parent / "scenes"
-DEFAULT_SCENE = SCENES / "default.wrl"
+DEFAULT_SCENE = default_scene()
 
 
-def _point(text: str) -> tuple[float, float]:
+def _point(text: str) -> tuple[float, ...]:
+    """``X,Y`` or ``X,Y,Z`` in scene metres."""
     try:
-        x, y = (float(v) for v in text.split(","))
+        point = tuple(float(v) for v in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected X,Y (write --start=X,Y for a negative X), not {text!r}") from None
-    return x, y
-
-
-def datum_type(text: str):
-    """argparse type of a ``--datum LAT,LON[,ALT]`` option (the ground station's too)."""
-    from vehicle.protocol.geodesy import Datum
-
-    try:
-        return Datum.parse(text)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
+        point = ()
+    if len(point) not in (2, 3) or not all(map(math.isfinite, point)):
+        raise argparse.ArgumentTypeError(f"expected X,Y or X,Y,Z (write --start=X,Y for a negative X), not {text!r}")
+    return point
 
 
 def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = True) -> None:
     """Options shared by ``experiment`` and ``sim``: what to fly, where, and with which settings."""
-    from vehicle.agent.missions import missions
     from vehicle.agent.settings import Settings
-    from vehicle.sim.sensors import SENSOR_SUITES
-    from vehicle.sim.simulation import DEFAULT_SUITE
 
-    names = list(missions())
     parser.add_argument("--scene", default=str(DEFAULT_SCENE), help="VRML scene (default: %(default)s)")
-    parser.add_argument("--mission", required=mission_required, type=str.lower, choices=names,
-                        help="; ".join(f"{name}: {cls.help}" for name, cls in missions().items()))
+    parser.add_argument("--mission", required=mission_required, type=str.lower, choices=list(MISSIONS),
+                        help="; ".join(f"{name}: {text}" for name, text in MISSIONS.items()))
     parser.add_argument("--vehicle", default="copter", choices=["rover", "copter"])
-    parser.add_argument("--start", type=_point, help="start X,Y in scene metres (default: the scene's Start)")
+    parser.add_argument("--start", type=_point, metavar="X,Y[,Z]",
+                        help="start in scene metres (default: the scene's Start); with Z, on the highest surface "
+                             "below Z (a floor under a roof)")
     parser.add_argument("--heading", type=float, help="start heading, compass degrees (0 = north)")
     parser.add_argument("--altitude", type=float, help="operating altitude above the start's ground, m")
     parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="NAME=VALUE",
@@ -55,7 +50,7 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--sensors", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
                         help="; ".join(f"{name}: {text}" for name, text in SENSOR_SUITES.items())
                         + " (default %(default)s)")
-    parser.add_argument("--datum", type=datum_type, metavar="LAT,LON[,ALT]",
+    parser.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
                         help="where the scene origin lies on Earth, degrees and metres above sea level (default: "
                              "the scene's datum hint, else ArduPilot's simulator home -35.363261,149.165230,584)")
 
@@ -108,7 +103,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
                             waypoints, args.sensors, datum)
     log = None
     if args.log:
-        from vehicle.protocol.tlog import ExperimentLog
+        from vehicle.lab.log import ExperimentLog
 
         log = ExperimentLog(args.log)
     try:
@@ -132,13 +127,12 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
-    from vehicle.agent.agent import Agent
     from vehicle.lab.experiment import warm_up
     from vehicle.lab.live import SimOptions, SimVehicle
+    from vehicle.lab.stepper import simulate
     from vehicle.protocol.geodesy import Datum
     from vehicle.protocol.waypoints import load_mission, parse_points, positions
-    from vehicle.sim.sensors import sensor_suite
-    from vehicle.sim.simulation import World
+    from vehicle.sim.suites import sensor_suite
     from vehicle.world.scene import load_scene
 
     scene = load_scene(args.scene)
@@ -147,20 +141,18 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if warmed > 1.0:
         print(f"vehicle {args.sysid}: compiled the simulation's loops in {warmed:.1f} s (once after an install)",
               flush=True)
-    world = World(scene, args.vehicle, settings, args.start, args.heading, seed=args.seed,
-                  sensors=sensor_suite(args.sensors), datum=Datum.of_scene(scene.hints, args.datum))
-    waypoints = None
-    if args.waypoints:
-        items = load_mission(args.waypoints)
+    datum = Datum.of_scene(scene.hints, args.datum)
+    items = load_mission(args.waypoints) if args.waypoints else None
+    waypoints = positions(items, datum) if items else (
+        parse_points(scene.hints["waypoints"]) if "waypoints" in scene.hints else None)
+    stepper = simulate(scene, args.mission, args.vehicle, settings, args.start, args.heading, waypoints,
+                       autostart=args.autostart, seed=args.seed, sensors=sensor_suite(args.sensors), datum=datum)
+    world = stepper.simulation
+    if items:
         world.autopilot.set_mission(items)
-        waypoints = positions(items, world.datum)
-    elif "waypoints" in scene.hints:
-        waypoints = parse_points(scene.hints["waypoints"])
-    agent = Agent(world.autopilot, args.mission, settings, world.limits.radius, waypoints, autostart=args.autostart,
-                  servo=world.servo)
     options = SimOptions(args.mavlink or ["udpout:127.0.0.1:14550"], args.sysid, args.speedup,
                          args.failsafe_timeout, args.log)
-    sim = SimVehicle(world, agent, options)
+    sim = SimVehicle(stepper, options)
     start = "starting the mission now" if args.autostart else "waiting for arm + AUTO/MISSION_START or GUIDED takeoff"
     print(f"vehicle {args.sysid}: {args.vehicle} in {Path(args.scene).name} at {world.home[0]:.1f}, "
           f"{world.home[1]:.1f}, mission {args.mission}, x{args.speedup:g}, on {', '.join(options.urls)}; {start}",
@@ -176,14 +168,14 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from vehicle.agent.missions import missions
-    from vehicle.lab.sweep import PRESETS, SweepSpec, parse_grid, run_sweep
+    from vehicle.lab.presets import PRESETS
+    from vehicle.lab.sweep import SweepSpec, parse_grid, run_sweep
 
     preset = PRESETS[args.preset] if args.preset else {}
-    mission_names = args.missions.split(",") if args.missions else preset.get("missions", list(missions()))
+    mission_names = args.missions.split(",") if args.missions else preset.get("missions", list(MISSIONS))
     for name in mission_names:
-        if name not in missions():
-            raise ValueError(f"unknown mission {name!r}; missions: {', '.join(missions())}")
+        if name not in MISSIONS:
+            raise ValueError(f"unknown mission {name!r}; missions: {', '.join(MISSIONS)}")
     scenes = args.scene or (preset["scenes"]() if preset else [str(DEFAULT_SCENE)])
     grid = {**preset.get("grid", {}), **parse_grid(args.grid)}
     spec = SweepSpec(mission_names, scenes, grid, args.seeds, args.vehicle)
@@ -232,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     sim.add_argument("--duration", type=float, help="stop after this many wall seconds")
     sim.set_defaults(run=cmd_sim)
 
-    from vehicle.lab.sweep import PRESETS
+    from vehicle.lab.presets import PRESETS
 
     sweep = commands.add_parser("sweep", help="run many headless missions over a grid of settings")
     sweep.add_argument("--preset", choices=list(PRESETS),

@@ -1,33 +1,35 @@
 """The onboard agent: gets the vehicle ready, runs the monitor and the mission, and brings it home.
 
-Stepped once per ``monitor_period`` of simulated time, it reads the monitor's
-observation and commands the autopilot. Its phases run one way: preflight ->
-take-off -> mission -> homing -> landing -> done. A mission that completes or
-gives up, a vehicle that leaves the allowed space, or a time budget that
-runs low all lead home. An operator's mode change pauses the agent; AUTO with
-MISSION_START hands control back to it (see ``resume``).
+Stepped once per ``monitor_period`` of the flight controller's time, it reads
+the monitor's observation and commands the vehicle through its flight
+controller (``vehicle.agent.controller``), never anything else. Its phases run
+one way: preflight -> take-off -> mission -> homing -> landing -> done. A
+mission that completes or gives up, a vehicle that leaves the allowed space,
+or a time budget that runs low all lead home. Someone else taking over (a
+mode change the agent did not make, another ground station's target) pauses
+the agent; ``resume`` hands control back to it.
 """
 
 from __future__ import annotations
 
-import math
+from collections import deque
 from enum import StrEnum
 
+from vehicle.agent.controller import FlightController
 from vehicle.agent.missions import mission_class
 from vehicle.agent.missions.base import Context, Status
 from vehicle.agent.missions.routines import Travel
 from vehicle.agent.monitor import Monitor
 from vehicle.agent.settings import Settings
 from vehicle.mapping.memory_map import MemoryMap
-from vehicle.protocol.geodesy import heading_of
+from vehicle.protocol.mav import mavlink
 from vehicle.protocol.modes import Kind
-from vehicle.sim.autopilot import Autopilot
-from vehicle.sim.sensors import Reading, Servo
 
 HOME_TOLERANCE = 0.5  # m
 SETTLED = 0.1  # m/s: slower than this counts as at rest
 BLOCKED_FOR = 1.0  # s held back by avoidance before the monitor treats it as an obstacle too close
 RESERVE = 60.0  # s kept for scans, detours and landing on the way home (at most a sixth of the time limit)
+MESSAGES_KEPT = 200
 
 
 class Phase(StrEnum):
@@ -41,45 +43,36 @@ class Phase(StrEnum):
 
 
 class Agent:
-    def __init__(self, vehicle: Autopilot, mission: str, settings: Settings, radius: float,
-                 waypoints: list[tuple[float, float]] | None = None, autostart: bool = True,
-                 servo: Servo | None = None):
-        self.vehicle = vehicle
+    def __init__(self, fc: FlightController, mission: str, settings: Settings,
+                 waypoints: list[tuple[float, float]] | None = None, autostart: bool = True):
+        self.fc = fc
         self.settings = settings
-        home = (vehicle.home[0], vehicle.home[1])
+        home = (fc.home[0], fc.home[1])
         self.map = MemoryMap(home, settings.space_size, settings.resolution)
-        self.monitor = Monitor(settings, self.map, home, radius, brake=vehicle.body.limits.accel)
-        self.messages: list[str] = []
-        self.ctx = Context(vehicle, self.map, self.monitor, settings, home, radius, waypoints, say=self.say,
-                           servo=servo)
+        self.monitor = Monitor(settings, self.map, home, fc.radius, brake=fc.brake)
+        self.messages: deque[str] = deque(maxlen=MESSAGES_KEPT)
+        self.outbox: deque[tuple[int, str]] = deque(maxlen=MESSAGES_KEPT)  # (severity, text) for the wire
+        self.ctx = Context(fc, self.map, self.monitor, settings, waypoints, say=self.say)
         self.mission_name = mission
         self.mission = mission_class(mission)(self.ctx)
         self.phase = Phase.PREFLIGHT if autostart else Phase.WAITING
         self.outcome: str | None = None  # "finished" | "stopped" once the mission ends
         self.reason = ""
         self.paused = False
+        self.pause_reason = ""
         self._travel: Travel | None = None
         self._settling = False
         self._blocked_since: float | None = None
-        self._mode_changes = vehicle.mode_changes
 
     @property
     def done(self) -> bool:
         return self.phase is Phase.DONE
 
-    def say(self, text: str) -> None:
+    def say(self, text: str, severity: int = mavlink.MAV_SEVERITY_INFO) -> None:
         self.messages.append(text)
-        self.vehicle._say(text)
+        self.outbox.append((severity, text))
 
-    def collect(self, readings: list[Reading]) -> None:
-        self.monitor.collect(readings)
-
-    # ---- operator takeover --------------------------------------------------------------------
-    def _operator_took_over(self) -> bool:
-        changed = self.vehicle.mode_changes != self._mode_changes and self.vehicle.mode_source != "agent"
-        self._mode_changes = self.vehicle.mode_changes
-        return changed
-
+    # ---- starting, pausing, resuming ----------------------------------------------------------
     def start(self) -> bool:
         """Start the mission (the operator's start, or again after one ended). False if one is running."""
         if self.phase not in (Phase.WAITING, Phase.DONE):
@@ -88,23 +81,19 @@ class Agent:
             self.mission = mission_class(self.mission_name)(self.ctx)
             self.outcome, self.reason, self._travel = None, "", None
         self.paused = False
-        self.ctx.started = self.ctx.time
+        self.pause_reason = ""
+        self.ctx.started = self.ctx.time = self.fc.time
         self.phase = Phase.PREFLIGHT
-        self._mode_changes = self.vehicle.mode_changes
+        self.fc.took_over()  # what the operator did to get here (GUIDED, arm) is no takeover
         return True
 
-    def take_over(self, what: str) -> None:
-        """An operator steered the vehicle directly (a GUIDED target, a yaw): pause the mission."""
-        if self.phase not in (Phase.WAITING, Phase.DONE) and not self.paused:
-            self.paused = True
-            self.say(f"Agent: paused, operator {what}")
-
     def resume(self) -> bool:
-        """Hand control back to the agent (the operator's AUTO + MISSION_START). False if not paused."""
+        """Hand control back to the agent (the operator's resume). False if not paused."""
         if not self.paused:
             return False
         self.paused = False
-        self._mode_changes = self.vehicle.mode_changes  # the operator's AUTO is the hand-back, not a takeover
+        self.pause_reason = ""
+        self.fc.took_over()  # the operator's own switch back is the hand-back, not a takeover
         self.say("Agent: resuming mission")
         if self.phase is Phase.HOMING or (self.phase is Phase.MISSION and self.mission.mode == "GUIDED"):
             self._set_mode("GUIDED")
@@ -114,27 +103,33 @@ class Agent:
             self._travel.resume()
         return True
 
+    def _pause(self, what: str) -> None:
+        self.paused = True
+        self.pause_reason = f"operator {what}"
+        self.say(f"Agent: paused, operator {what}")
+
     def _set_mode(self, mode: str) -> None:
-        self.vehicle.set_mode(mode, source="agent")
-        self._mode_changes = self.vehicle.mode_changes
+        self.fc.set_mode(mode)
 
     # ---- the step -----------------------------------------------------------------------------
-    def step(self, now: float) -> None:
-        ctx = self.ctx
-        ctx.time = now
-        x, y = ctx.position
-        wanted = self.vehicle.wanted
-        travel = heading_of(*wanted) if math.hypot(*wanted) > 0.05 else None
-        destination = self.vehicle.destination
-        reach = math.inf if destination is None else math.dist((x, y), destination)
-        observation = self.monitor.observe(now, x, y, travel, self.vehicle.body.speed, reach)
+    def step(self) -> None:
+        fc, ctx = self.fc, self.ctx
+        now = ctx.time = fc.time
+        self.monitor.collect(fc.readings())
+        pose = fc.pose
+        navigation = fc.navigation
+        observation = self.monitor.observe(now, pose.x, pose.y, navigation.heading, fc.speed, navigation.reach)
         ctx.observation = observation
-        if self._operator_took_over() and self.phase not in (Phase.DONE, Phase.WAITING):
-            self.paused = True
-            self.say(f"Agent: paused, operator switched to {self.vehicle.mode}")
-        if self.paused or self.phase in (Phase.DONE, Phase.WAITING):
+        taken = fc.took_over()
+        if self.phase in (Phase.WAITING, Phase.DONE):
+            if fc.taking_off and fc.mode == "GUIDED":
+                self.start()  # the operator's GUIDED take-off starts the mission
             return
-        if self.vehicle.blocked:
+        if taken is not None:
+            self._pause(taken)
+        if self.paused:
+            return
+        if fc.blocked:
             self._blocked_since = now if self._blocked_since is None else self._blocked_since
         else:
             self._blocked_since = None
@@ -144,28 +139,25 @@ class Agent:
         getattr(self, f"_{self.phase.value}")(now)
 
     def _preflight(self, now: float) -> None:
-        vehicle = self.vehicle
+        fc = self.fc
         if self.mission.mode == "AUTO":
             self.mission.begin()
             self._set_mode("AUTO")
-            vehicle.arm()
-            if vehicle.mission_running:
-                self.phase = Phase.MISSION
-                return
-            if vehicle.start_mission() == 0:
+            fc.arm()
+            if fc.mission.running or fc.start_mission() == 0:
                 self.phase = Phase.MISSION
             return
         self._set_mode("GUIDED")
-        vehicle.arm()
-        if self.vehicle.kind is Kind.ROVER or (vehicle.flying and not vehicle.taking_off):
+        fc.arm()
+        if fc.kind is Kind.ROVER or (fc.flying and not fc.taking_off):
             self._start_mission()
             return
-        if not vehicle.taking_off:
-            vehicle.takeoff(self.settings.altitude)
+        if not fc.taking_off:
+            fc.takeoff(self.settings.altitude)
         self.phase = Phase.TAKEOFF
 
     def _takeoff(self, now: float) -> None:
-        if self.vehicle.flying and not self.vehicle.taking_off:
+        if self.fc.flying and not self.fc.taking_off:
             self._start_mission()
 
     def _start_mission(self) -> None:
@@ -195,7 +187,7 @@ class Agent:
         self.outcome = "finished" if status is Status.DONE else "stopped"
         self.reason = reason or ("mission complete" if status is Status.DONE else "stopped")
         self.say(f"Mission {self.mission.name}: {self.outcome} ({self.reason}); going home")
-        if self.vehicle.mode != "GUIDED":
+        if self.fc.mode != "GUIDED":
             self._set_mode("GUIDED")
         self.mission.stop()
         self._travel = Travel(self.ctx, self.ctx.home, HOME_TOLERANCE, relax=True)
@@ -204,7 +196,7 @@ class Agent:
 
     def _homing(self, now: float) -> None:
         if self._settling:  # come to rest where the mission ended before setting off home
-            if self.vehicle.body.speed > SETTLED:
+            if self.fc.speed > SETTLED:
                 return
             self._settling = False
         travel = self._travel
@@ -218,7 +210,7 @@ class Agent:
             self.mission.stop()
             self.phase = Phase.DONE
             return
-        if self.vehicle.kind is Kind.COPTER:
+        if self.fc.kind is Kind.COPTER:
             self._set_mode("LAND")
             self.phase = Phase.LANDING
         else:
@@ -226,5 +218,5 @@ class Agent:
             self.phase = Phase.DONE
 
     def _landing(self, now: float) -> None:
-        if not self.vehicle.armed:
+        if not self.fc.armed:
             self.phase = Phase.DONE

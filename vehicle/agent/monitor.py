@@ -16,7 +16,7 @@ import numpy as np
 from vehicle.agent.settings import Settings
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol.geodesy import heading_of
-from vehicle.sim.sensors import Reading
+from vehicle.protocol.rangefinder import Reading
 
 
 @dataclass

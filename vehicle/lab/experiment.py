@@ -12,13 +12,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from vehicle import __version__
-from vehicle.agent.agent import Agent
 from vehicle.agent.settings import Settings
+from vehicle.lab.stepper import Stepper, simulate
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.modes import Kind
+from vehicle.protocol.rangefinder import Reading
 from vehicle.protocol.waypoints import parse_points
-from vehicle.sim.sensors import sensor_suite
-from vehicle.sim.simulation import DEFAULT_SUITE, World
+from vehicle.sim.suites import DEFAULT_SUITE, sensor_suite
 from vehicle.world.scene import Scene, load_scene
 
 OUTCOMES = ("finished", "stopped", "collision", "timeout", "error")
@@ -31,7 +30,7 @@ class Experiment:
     scene: str
     mission: str
     vehicle: str = "copter"
-    start: tuple[float, float] | None = None
+    start: tuple[float, ...] | None = None
     heading: float | None = None
     settings: Settings = field(default_factory=Settings)
     seed: int = 0
@@ -41,8 +40,8 @@ class Experiment:
 
 
 def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: str | Path | None = None,
-                   on_step: Callable[[World, Agent], None] | None = None) -> dict:
-    """Run the mission to its outcome; ``on_step(world, agent, readings)`` is called after every step."""
+                   on_step: Callable[[Stepper, list[Reading]], None] | None = None) -> dict:
+    """Run the mission to its outcome; ``on_step(stepper, readings)`` is called after every step."""
     started = time.perf_counter()
     settings = experiment.settings
     result = {
@@ -55,29 +54,30 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
         "settings": settings.model_dump(),
         "resolution": settings.resolution,
     }
-    world = agent = None
+    stepper = None
     try:
         scene = scene or load_scene(experiment.scene)
-        world = World(scene, Kind(experiment.vehicle), settings, experiment.start, experiment.heading,
-                      seed=experiment.seed, sensors=sensor_suite(experiment.sensors),
-                      datum=Datum.of_scene(scene.hints, experiment.datum))
         waypoints = experiment.waypoints
         if waypoints is None and "waypoints" in scene.hints:
             waypoints = parse_points(scene.hints["waypoints"])
-        agent = Agent(world.autopilot, experiment.mission, settings, world.limits.radius, waypoints,
-                      servo=world.servo)
-        outcome, reason = _fly(world, agent, on_step)
+        stepper = simulate(scene, experiment.mission, experiment.vehicle, settings, experiment.start,
+                           experiment.heading, waypoints, seed=experiment.seed,
+                           sensors=sensor_suite(experiment.sensors),
+                           datum=Datum.of_scene(scene.hints, experiment.datum))
+        outcome, reason = _fly(stepper, on_step)
     except Exception as error:  # noqa: BLE001 - any failure is an outcome of the run, reported, not raised
         outcome, reason = "error", f"{type(error).__name__}: {error}"
     result.update(outcome=outcome, reason=reason)
-    if world is not None:
+    agent = stepper.agent if stepper is not None else None
+    if stepper is not None:
+        world = stepper.simulation
         pose = world.pose
         result.update(start=[round(world.home[0], 3), round(world.home[1], 3)],
                       sim_time_s=round(world.time, 3), distance_m=round(world.distance_travelled, 2),
                       final_position=[round(float(v), 2) for v in pose.xyz()])
     if agent is not None:
         result.update(detections=agent.map.detections, cells_ever_hit=agent.map.cells_ever_hit,
-                      messages=agent.messages[-20:])
+                      messages=list(agent.messages)[-20:])
         if map_out:
             out = Path(map_out)
             out.mkdir(parents=True, exist_ok=True)
@@ -90,22 +90,18 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
     return result
 
 
-def _fly(world: World, agent: Agent, on_step) -> tuple[str, str]:
-    period = max(1, round(world.settings.monitor_period / world.dt))
-    limit = world.settings.time_limit
+def _fly(stepper: Stepper, on_step) -> tuple[str, str]:
+    simulation, agent = stepper.simulation, stepper.agent
+    limit = stepper.settings.time_limit
     while True:
-        readings = world.step()
-        agent.collect(readings)
-        if world.collision is not None:
-            return "collision", world.collision.describe()
-        monitor_due = world.steps % period == 0
-        if monitor_due:
-            agent.step(world.time)
+        readings = stepper.step()
+        if simulation.collision is not None:
+            return "collision", simulation.collision.describe()
         if on_step is not None:
-            on_step(world, agent, readings)
-        if monitor_due and agent.done:
+            on_step(stepper, readings)
+        if stepper.monitor_due and agent.done:
             return agent.outcome, agent.reason
-        if world.time >= limit:
+        if simulation.time >= limit:
             return "timeout", f"time limit of {limit:g} s reached in phase {agent.phase.value}"
 
 

@@ -1,4 +1,8 @@
-"""``vehicle sim``: a simulated vehicle with its onboard agent, live on MAVLink links.
+"""``vehicle sim``: a simulated vehicle, live on MAVLink links, with its onboard agent or as a plain autopilot.
+
+The all-in-one vehicle puts the autopilot (component 1) and its onboard agent
+(component 191, ``vehicle.agent.companion``) on the same links, as a flight
+controller and its companion computer are seen from a ground station.
 
 Two clocks run side by side (see Clocks in the design): the world advances on
 simulated time, ``speedup`` times faster than the wall clock, while everything
@@ -14,11 +18,12 @@ import threading
 import time
 from dataclasses import dataclass
 
-from vehicle.agent.agent import Agent
+from vehicle.agent.companion import COMPONENT, Companion
 from vehicle.lab.experiment import warm_up
+from vehicle.lab.stepper import Stepper
+from vehicle.protocol.mav import mavlink
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.sim.endpoint import Endpoint
-from vehicle.sim.simulation import World
 from vehicle.sim.telemetry import Telemetry
 
 TICK = 0.01  # s of wall time between loop iterations
@@ -35,15 +40,17 @@ class SimOptions:
 
 
 class SimVehicle:
-    def __init__(self, world: World, agent: Agent, options: SimOptions):
-        self.world = world
-        self.agent = agent
+    def __init__(self, stepper: Stepper, options: SimOptions):
+        self.stepper = stepper
+        self.world = stepper.simulation
+        self.agent = stepper.agent
         self.options = options
-        self.telemetry = Telemetry(world, agent, start=time.time(), sysid=options.sysid)
+        now = time.time()
+        self.telemetry = Telemetry(self.world, start=now, sysid=options.sysid)
+        self.companion = Companion(self.agent, options.sysid, start=now) if self.agent is not None else None
         self.log = TlogWriter(options.log) if options.log else None
-        self.endpoint = Endpoint(options.urls, world, agent, self.telemetry, options.sysid,
-                                 options.failsafe_timeout, self.log)
-        self.period = max(1, round(agent.settings.monitor_period / world.dt))
+        self.endpoint = Endpoint(options.urls, self.world, self.telemetry, options.sysid, options.failsafe_timeout,
+                                 self.log, onboard=self.companion)
         self.stop_event = threading.Event()
         self.lagging = 0.0  # simulated seconds dropped because the machine could not keep up
         self._crash_reported = False
@@ -67,6 +74,8 @@ class SimVehicle:
                     self.lagging += target - self.world.time  # too slow: let simulated time slip
                 outgoing += self.telemetry.tick(now)
                 self.endpoint.send(outgoing, now)
+                if self.companion is not None:
+                    self.endpoint.send(self.companion.tick(now), now, COMPONENT)
                 if self.log is not None and wall - last_flush >= 1.0:
                     self.log.flush()
                     last_flush = wall
@@ -78,17 +87,14 @@ class SimVehicle:
 
     def _advance(self, target: float, now: float, deadline: float) -> list:
         """Step the world up to simulated time ``target``; returns the DISTANCE_SENSOR messages of its readings."""
-        world, agent = self.world, self.agent
+        world, stepper = self.world, self.stepper
         messages = []
         while world.time + world.dt / 2 <= target and time.monotonic() < deadline:
-            readings = world.step()
-            agent.collect(readings)
+            readings = stepper.step()
             messages += [self.telemetry.distance_sensor(r, world.time) for r in readings]
-            if world.steps % self.period == 0:
-                agent.step(world.time)
             if world.collision is not None and not self._crash_reported:
                 self._crash_reported = True
-                world.autopilot._say(f"Crash: {world.collision.describe()}"[:50], 2)
+                world.autopilot.say(f"Crash: {world.collision.describe()}", mavlink.MAV_SEVERITY_CRITICAL)
         return messages
 
     def stop(self) -> None:

@@ -22,40 +22,8 @@ from tqdm import tqdm
 
 from vehicle.agent.settings import Settings, load_settings
 from vehicle.lab.experiment import Experiment, run_experiment
+from vehicle.lab.presets import THESIS_TABLE
 from vehicle.world.scene import Scene, load_scene
-
-ROOT = Path(__file__).resolve().parents[2]
-CASTLE = ROOT.parent / "shared" / "scenes" / "castle.wrl"
-
-# Table 1 of the thesis: best memory-map counts (the Square runs all collided)
-THESIS_TABLE = {
-    "square": {"castle": 6, "trees": 7, "house": 11},
-    "browse": {"castle": 13, "trees": 49, "house": 68},
-    "search": {"castle": 140, "trees": 65, "house": 258},
-    "pathfind": {"castle": 74, "trees": 37, "house": 109},
-}
-
-
-def _thesis_scenes() -> list[str]:
-    castle = f"{CASTLE}@-40,0" if CASTLE.exists() else str(ROOT / "scenes" / "default.wrl")
-    return [castle, str(ROOT / "scenes" / "trees.wrl"), str(ROOT / "scenes" / "house.wrl")]
-
-
-PRESETS = {
-    "thesis": {
-        "help": "the thesis's sweep: 48 settings x 4 missions x 3 scenes = 576 runs",
-        "missions": ["square", "browse", "search", "pathfind"],
-        "scenes": _thesis_scenes,
-        "grid": {"padding": [0.1, 2, 4], "resolution": [1, 10], "space_size": [10, 100],
-                 "closeness": [0.1, 2], "monitor_period": [0.25, 0.5]},
-    },
-    "quick": {
-        "help": "a small smoke sweep: 2 missions x the default scene x 2 paddings",
-        "missions": ["browse", "pathfind"],
-        "scenes": lambda: [str(ROOT / "scenes" / "default.wrl")],
-        "grid": {"padding": [0.1, 0.5]},
-    },
-}
 
 
 @dataclass(frozen=True)

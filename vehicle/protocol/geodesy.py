@@ -66,6 +66,16 @@ class Datum:
         return cls()
 
 
+def datum_option(text: str) -> Datum:
+    """argparse type of a ``--datum LAT,LON[,ALT]`` option."""
+    import argparse
+
+    try:
+        return Datum.parse(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def heading_vector(heading_rad: float) -> tuple[float, float]:
     """Unit (east, north) vector of a compass heading (0 = north, clockwise)."""
     return math.sin(heading_rad), math.cos(heading_rad)

@@ -15,7 +15,7 @@ from pathlib import Path
 from pymavlink import mavwp
 
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.modes import MissionItem
+from vehicle.protocol.mission import MissionItem
 
 
 class WaypointError(ValueError):

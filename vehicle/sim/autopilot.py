@@ -13,18 +13,18 @@ from collections import deque
 from dataclasses import dataclass
 
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
-from vehicle.protocol.modes import (
+from vehicle.protocol.mav import mavlink as mav
+from vehicle.protocol.mission import (
     DO_CHANGE_SPEED,
-    MODES,
     NAV_LAND,
     NAV_LOITER_UNLIM,
     NAV_RETURN_TO_LAUNCH,
     NAV_TAKEOFF,
     NAV_WAYPOINT,
-    Kind,
     MissionItem,
-    mav,
+    home_item,
 )
+from vehicle.protocol.modes import MODES, Kind
 from vehicle.sim.avoidance import ObstacleDatabase
 from vehicle.sim.physics import Body
 
@@ -64,6 +64,8 @@ class Autopilot:
         self.mode = "GUIDED" if kind is Kind.COPTER else "HOLD"
         self.mode_source = "boot"
         self.mode_changes = 0
+        self.overrides = 0  # times a ground station steered it directly (see ``overridden``)
+        self.override = ""
         self.speed = cruise_speed
         self.mission: list[MissionItem] = [self.home_item()]
         self.current = 1
@@ -102,11 +104,19 @@ class Autopilot:
         return self.body.pose.z - self.home[2]
 
     def home_item(self) -> MissionItem:
-        lat, lon = self.datum.to_global(self.home[0], self.home[1])
-        return MissionItem(NAV_WAYPOINT, lat, lon, 0.0)
+        return home_item(self.datum, self.home[0], self.home[1])
 
-    def _say(self, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
+    def say(self, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
         self.events.append(Event("text", text, severity))
+
+    def overridden(self, what: str) -> None:
+        """A ground station steered the vehicle directly (a GUIDED target, a yaw), not through a mode change."""
+        self.overrides += 1
+        self.override = what
+
+    def clear_targets(self) -> None:
+        """Drop any GUIDED position, velocity or yaw target."""
+        self._target = self._velocity = self._yaw = None
 
     def hold_here(self) -> None:
         """Hold where the vehicle comes to rest (braking first if it is moving), at its current height."""
@@ -119,24 +129,24 @@ class Autopilot:
         if self.armed:
             return ACCEPTED
         if not force and self.kind is Kind.COPTER and self.mode in ("RTL", "LAND"):
-            self._say(f"Arm: mode {self.mode} not armable", mav.MAV_SEVERITY_CRITICAL)
+            self.say(f"Arm: mode {self.mode} not armable", mav.MAV_SEVERITY_CRITICAL)
             return FAILED
         self.armed = True
         self._altitude_goal = None
         self.hold_here()
-        self._say("Arming motors")
+        self.say("Arming motors")
         return ACCEPTED
 
     def disarm(self, force: bool = False) -> int:
         if not self.armed:
             return ACCEPTED
         if self.flying and not force:
-            self._say("Disarm: vehicle is flying", mav.MAV_SEVERITY_CRITICAL)
+            self.say("Disarm: vehicle is flying", mav.MAV_SEVERITY_CRITICAL)
             return FAILED
         self.armed = False
         self.mission_running = False
         self._altitude_goal = None
-        self._say("Disarming motors" + (" (forced)" if force else ""))
+        self.say("Disarming motors" + (" (forced)" if force else ""))
         return ACCEPTED
 
     def set_mode(self, name: str, source: str = "gcs") -> int:
@@ -170,7 +180,7 @@ class Autopilot:
         self._altitude_goal = self.home[2] + altitude
         pose = self.body.pose
         self._hold = (pose.x, pose.y, self._altitude_goal)
-        self._say(f"Takeoff to {altitude:.1f} m")
+        self.say(f"Takeoff to {altitude:.1f} m")
         return ACCEPTED
 
     def _guided_ready(self) -> int | None:
@@ -231,7 +241,7 @@ class Autopilot:
         if self.mode != "AUTO" or not self.armed:
             return DENIED
         if len(self.mission) <= 1:
-            self._say("Mission: no items", mav.MAV_SEVERITY_WARNING)
+            self.say("Mission: no items", mav.MAV_SEVERITY_WARNING)
             return FAILED
         if first > 0:
             self.set_current(first)
@@ -239,7 +249,7 @@ class Autopilot:
             self.set_current(1)
         self.mission_running = True
         self._item_timer = None
-        self._say(f"Mission: {self.current} started")
+        self.say(f"Mission: {self.current} started")
         return ACCEPTED
 
     def set_current(self, seq: int) -> bool:
@@ -281,7 +291,7 @@ class Autopilot:
             self._advance()
         self.armed = False
         self.mission_running = False
-        self._say("Landed; disarming")
+        self.say("Landed; disarming")
 
     def _navigate(self, dt: float) -> tuple[float, float, float, float | None]:
         if self._altitude_goal is not None:  # GUIDED take-off: climb straight up first
@@ -368,7 +378,7 @@ class Autopilot:
         vx, vy, vz, yaw, arrived = self._fly_to(hx, hy, z, dt)
         if arrived or math.hypot(self.body.pose.x - hx, self.body.pose.y - hy) < 0.3:
             self._rtl_done = True
-            self._say("Reached home")
+            self.say("Reached home")
             self.hold_here()
         return vx, vy, vz, yaw
 
@@ -389,7 +399,7 @@ class Autopilot:
             self.current = len(self.mission)
             self.mission_running = False
             self.hold_here()
-            self._say("Mission complete")
+            self.say("Mission complete")
 
     def _auto(self, dt):
         for _ in range(len(self.mission)):  # do-commands complete at once; stop at the first nav item
@@ -406,7 +416,7 @@ class Autopilot:
                 self._advance()
                 continue
             if item.command not in (NAV_TAKEOFF, NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LAND, NAV_RETURN_TO_LAUNCH):
-                self._say(f"Mission: skipping unsupported command {item.command}", mav.MAV_SEVERITY_WARNING)
+                self.say(f"Mission: skipping unsupported command {item.command}", mav.MAV_SEVERITY_WARNING)
                 self._advance()
                 continue
             break

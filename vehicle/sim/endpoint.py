@@ -1,26 +1,31 @@
-"""The vehicle on the wire: MAVLink links to ground stations, commands, parameters, missions, failsafe.
+"""The simulated autopilot on the wire: MAVLink links, commands, parameters, missions, the GCS failsafe.
 
-It makes the simulated vehicle and its onboard agent look like ArduPilot to
-any standard ground station: every COMMAND_LONG/COMMAND_INT gets a
+It makes the simulated flight controller look like ArduPilot to any ground
+station or companion computer: every COMMAND_LONG/COMMAND_INT gets a
 COMMAND_ACK (unknown commands MAV_RESULT_UNSUPPORTED), modes use ArduPilot's
-numbers, parameters and missions follow their protocols. A mode change or a
-GUIDED target from a ground station pauses the onboard mission; AUTO +
-MISSION_START hands control back. Garbage, truncated packets and messages for other systems are counted
-and ignored. All timing here (failsafe, retries) is wall-clock time.
+numbers, missions follow their protocol. Garbage, truncated packets and
+messages for other systems are counted and ignored. All timing here
+(failsafe, retries) is wall-clock time.
+
+An onboard computer in the same process (``Onboard``: the all-in-one
+``vehicle sim``) shares the links as its own component: messages addressed to
+it are its to answer, and it serves the vehicle's parameters and takes a
+MISSION_START in AUTO when its mission waits or is paused. A GUIDED target or
+a yaw from anyone but the vehicle's own companion is recorded as an override,
+which an onboard agent takes as an operator taking over.
 """
 
 from __future__ import annotations
 
 import math
 from collections import Counter
+from typing import Protocol
 
-from vehicle.agent.agent import Agent
-from vehicle.agent.params import Parameters
 from vehicle.protocol.mav import mavlink, mavutil, pack
-from vehicle.protocol.modes import STOP_MODE, Kind, mode_name
+from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, Kind, mode_name
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.sim.mission_server import MissionServer
-from vehicle.sim.simulation import World
+from vehicle.sim.simulation import Simulation
 from vehicle.sim.telemetry import Telemetry
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
@@ -28,7 +33,8 @@ DENIED = mavlink.MAV_RESULT_DENIED
 UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
 FAILED = mavlink.MAV_RESULT_FAILED
 TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
-FORCE_DISARM = 21196
+AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
+COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 GCS = mavlink.MAV_TYPE_GCS
 MISSION_MESSAGES = {"MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_COUNT",
                     "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT"}
@@ -57,12 +63,24 @@ class _Command:
         return self.param6 * 1e-7 if self.is_int else self.param6
 
 
+class Onboard(Protocol):
+    """An onboard computer in the same process, sharing the endpoint's links as its own component."""
+
+    component: int
+
+    def handle(self, message) -> list | None:
+        """Replies to a message (addressed to it, or a parameter message for the vehicle); None: not its."""
+
+    def mission_start(self) -> bool:
+        """MISSION_START in AUTO: True if it took it (its mission waited or was paused)."""
+
+
 class Endpoint:
-    def __init__(self, urls: list[str], world: World, agent: Agent, telemetry: Telemetry, sysid: int = 1,
-                 failsafe_timeout: float = 5.0, log: TlogWriter | None = None):
+    def __init__(self, urls: list[str], world: Simulation, telemetry: Telemetry, sysid: int = 1,
+                 failsafe_timeout: float = 5.0, log: TlogWriter | None = None, onboard: Onboard | None = None):
         self.world = world
         self.autopilot = world.autopilot
-        self.agent = agent
+        self.onboard = onboard
         self.telemetry = telemetry
         self.sysid = sysid
         self.failsafe_timeout = failsafe_timeout
@@ -72,8 +90,8 @@ class Endpoint:
                       for url in urls]
         for link in self.links:
             link.mav.robust_parsing = True
-        self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)
-        self.params = Parameters(agent.settings)
+        self.packers = {component: mavlink.MAVLink(None, srcSystem=sysid, srcComponent=component)
+                        for component in {AUTOPILOT, onboard.component if onboard else AUTOPILOT}}
         self.missions = MissionServer(self.autopilot)
         self.stats: Counter[str] = Counter()
         self.gcs_seen: float | None = None  # wall time of the last GCS heartbeat
@@ -84,9 +102,11 @@ class Endpoint:
             link.close()
 
     # ---- sending -------------------------------------------------------------------------------
-    def send(self, messages: list, now: float) -> None:
+    def send(self, messages: list, now: float, component: int = AUTOPILOT) -> None:
+        """Send as the autopilot, or as the onboard computer (its ``component``)."""
+        packer = self.packers[component]
         for message in messages:
-            packet = pack(message, self.packer)
+            packet = pack(message, packer)
             for link in self.links:
                 try:
                     link.write(packet)
@@ -123,13 +143,29 @@ class Endpoint:
         if target not in (0, self.sysid):
             self.stats["for other systems"] += 1
             return
+        component = getattr(message, "target_component", 0)
+        onboard = self.onboard
+        if onboard is not None and component == onboard.component:
+            self.stats["received"] += 1
+            self.send(self._ask_onboard(message) or [], now, onboard.component)
+            return
+        if component not in (0, AUTOPILOT):
+            self.stats["for other components"] += 1
+            return
         self.stats["received"] += 1
         try:
             replies = self.handle(message, now)
         except Exception as error:  # noqa: BLE001 - one bad message must not take the vehicle down
             self.stats["messages refused"] += 1
-            replies = [self._text(f"Refused {kind}: {type(error).__name__}", mavlink.MAV_SEVERITY_WARNING)]
+            replies = self._text(f"Refused {kind}: {type(error).__name__}", mavlink.MAV_SEVERITY_WARNING)
         self.send(replies, now)
+
+    def _ask_onboard(self, message) -> list | None:
+        try:
+            return self.onboard.handle(message)
+        except Exception as error:  # noqa: BLE001 - one bad message must not take the vehicle down
+            self.stats["messages refused"] += 1
+            return self._text(f"Refused {message.get_type()}: {type(error).__name__}", mavlink.MAV_SEVERITY_WARNING)
 
     def handle(self, message, now: float) -> list:
         """The replies to one message (already checked to be for us)."""
@@ -142,11 +178,11 @@ class Endpoint:
             return self._command(message, now)
         if kind == "SET_MODE":
             result = self._set_mode(message.custom_mode) if message.base_mode & 1 else UNSUPPORTED
-            return [] if result == ACCEPTED else [self._text(f"Mode change refused ({result})", 4)]
+            return [] if result == ACCEPTED else self._text(f"Mode change refused ({result})", 4)
         if kind in MISSION_MESSAGES:
             return self.missions.handle(message, now)
         if kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
-            return self._param(message)
+            return (self.onboard.handle(message) or []) if self.onboard is not None else []
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
             self._position_target_local(message)
         elif kind == "SET_POSITION_TARGET_GLOBAL_INT":
@@ -164,6 +200,10 @@ class Endpoint:
                                                   message.get_srcComponent())
         return [ack, *replies]
 
+    def _override(self, message, what: str) -> None:
+        if (message.get_srcSystem(), message.get_srcComponent()) != (self.sysid, COMPANION):
+            self.autopilot.overridden(what)
+
     def _run_command(self, message, replies: list) -> int:
         m = _Command(message)
         cmd = m.command
@@ -174,10 +214,7 @@ class Endpoint:
             force = int(round(m.param2)) == FORCE_DISARM
             return pilot.arm(force) if m.param1 >= 0.5 else pilot.disarm(force)
         if cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
-            result = pilot.takeoff(m.param7)
-            if result == ACCEPTED:
-                self.agent.start()  # GUIDED take-off is a start of the onboard mission, if it waits
-            return result
+            return pilot.takeoff(m.param7)
         if cmd == mavlink.MAV_CMD_NAV_LAND:
             return self._set_mode_named("LAND") if self.world.kind is Kind.COPTER else UNSUPPORTED
         if cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
@@ -187,10 +224,10 @@ class Endpoint:
         if cmd == mavlink.MAV_CMD_DO_CHANGE_SPEED:
             return pilot.set_speed(m.param2)
         if cmd == mavlink.MAV_CMD_DO_REPOSITION:
-            self.agent.take_over("repositioned the vehicle")
+            self._override(message, "repositioned the vehicle")
             return self._reposition(m)
         if cmd == mavlink.MAV_CMD_CONDITION_YAW:
-            self.agent.take_over("turned the vehicle")
+            self._override(message, "turned the vehicle")
             direction = -1.0 if m.param3 < 0 else 1.0
             return pilot.set_yaw(math.radians(m.param1) * (direction if m.param4 else 1.0), relative=bool(m.param4))
         if cmd == mavlink.MAV_CMD_DO_SET_SERVO:
@@ -217,7 +254,7 @@ class Endpoint:
         """AUTO + MISSION_START: start the onboard mission if it waits, resume it if paused, else run AUTO."""
         if self.autopilot.mode != "AUTO":
             return DENIED
-        if self.agent.start() or self.agent.resume():
+        if self.onboard is not None and self.onboard.mission_start():
             return ACCEPTED
         return self.autopilot.start_mission(first)
 
@@ -253,56 +290,39 @@ class Endpoint:
         else:
             self.stats["unsupported frames"] += 1
             return
+        self._override(m, "set a guided target")
         self._apply_target(m.type_mask, x, y, altitude, m.vx, m.vy, m.vz)
 
     def _position_target_global(self, m) -> None:
         if m.target_system != self.sysid:
             return
         x, y = self.world.datum.to_local(m.lat_int * 1e-7, m.lon_int * 1e-7)
+        self._override(m, "set a guided target")
         self._apply_target(m.type_mask, x, y, m.alt, m.vx, m.vy, m.vz)
 
     def _apply_target(self, mask: int, x: float, y: float, altitude: float, vn: float, ve: float,
                       vd: float) -> None:
-        self.agent.take_over("set a guided target")
         if not mask & POSITION_IGNORED:
             self.autopilot.goto(x, y, altitude if not mask & mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE else None)
         elif not mask & VELOCITY_IGNORED:
             self.autopilot.set_velocity(ve, vn, -vd)
-
-    # ---- parameters ------------------------------------------------------------------------------
-    def _param(self, m) -> list:
-        kind = m.get_type()
-        if kind == "PARAM_REQUEST_LIST":
-            return [self.params.message(i) for i in range(len(self.params))]
-        index = self.params.find(m.param_id, getattr(m, "param_index", -1) if kind == "PARAM_REQUEST_READ" else -1)
-        if index is None:
-            return []  # ArduPilot stays silent about unknown parameters
-        if kind == "PARAM_SET":
-            param_id = self.params.ids[index]
-            refused = self.params.set(param_id, m.param_value)
-            if refused:
-                return [self._text(refused, mavlink.MAV_SEVERITY_WARNING), self.params.message(index)]
-            if param_id == "SCN_SPEED":
-                self.autopilot.set_speed(self.params.value(param_id))
-        return [self.params.message(index)]
 
     # ---- GCS failsafe ------------------------------------------------------------------------------
     def _gcs_heard(self, now: float) -> None:
         self.gcs_seen = now
         if self.in_failsafe:
             self.in_failsafe = False
-            self.send([self._text("GCS failsafe cleared: ground station back")], now)
+            self.send(self._text("GCS failsafe cleared: ground station back"), now)
 
     def _check_failsafe(self, now: float) -> None:
         if self.gcs_seen is None or self.in_failsafe or now - self.gcs_seen < self.failsafe_timeout:
             return
         self.in_failsafe = True
-        action = "RTL" if self.world.kind is Kind.COPTER else STOP_MODE[Kind.ROVER]
+        action = "RTL" if self.world.kind is Kind.COPTER else STOP_MODE["rover"]
         if self.autopilot.armed:
             self.autopilot.set_mode(action, source="failsafe")
-        self.send([self._text(f"GCS failsafe: no ground station for {self.failsafe_timeout:g} s, {action}",
-                              mavlink.MAV_SEVERITY_CRITICAL)], now)
+        self.send(self._text(f"GCS failsafe: no ground station for {self.failsafe_timeout:g} s, {action}",
+                             mavlink.MAV_SEVERITY_CRITICAL), now)
 
-    @staticmethod
-    def _text(text: str, severity: int = mavlink.MAV_SEVERITY_INFO):
-        return mavlink.MAVLink_statustext_message(severity, text[:50].encode())
+    def _text(self, text: str, severity: int = mavlink.MAV_SEVERITY_INFO) -> list:
+        return self.telemetry.text(text, severity)

@@ -13,37 +13,11 @@ empty list.
 from __future__ import annotations
 
 from vehicle.protocol.mav import mavlink
-from vehicle.protocol.modes import MissionItem
+from vehicle.protocol.mission import MISSION, MissionItem, item_from, item_message
 from vehicle.sim.autopilot import Autopilot
 
 RETRY = 1.0  # s before an item is requested again
 RETRIES = 5
-MISSION = mavlink.MAV_MISSION_TYPE_MISSION
-
-
-def item_message(item: MissionItem, seq: int, target: tuple[int, int], current: bool):
-    frame = item.frame
-    if frame == mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT:
-        frame = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
-    elif frame == mavlink.MAV_FRAME_GLOBAL:
-        frame = mavlink.MAV_FRAME_GLOBAL_INT
-    return mavlink.MAVLink_mission_item_int_message(
-        target[0], target[1], seq, frame, item.command, int(current), item.autocontinue,
-        item.param1, item.param2, item.param3, item.param4, int(round(item.lat * 1e7)),
-        int(round(item.lon * 1e7)), item.alt, MISSION)
-
-
-def item_from(message) -> MissionItem:
-    """A MissionItem from a MISSION_ITEM_INT or a legacy float MISSION_ITEM."""
-    scale = 1e-7 if message.get_type() == "MISSION_ITEM_INT" else 1.0
-    frame = message.frame
-    if frame == mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT:
-        frame = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
-    elif frame == mavlink.MAV_FRAME_GLOBAL_INT:
-        frame = mavlink.MAV_FRAME_GLOBAL
-    return MissionItem(command=message.command, lat=message.x * scale, lon=message.y * scale, alt=message.z,
-                       param1=message.param1, param2=message.param2, param3=message.param3,
-                       param4=message.param4, frame=frame, autocontinue=message.autocontinue)
 
 
 class MissionServer:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import heading_vector, wrap_pi
 from vehicle.protocol.modes import Kind
 
@@ -28,25 +29,6 @@ class Limits:
     climb_rate: float = 1.5  # m/s
     radius: float = 0.3  # m, the collision sphere
     ground_clearance: float = 0.05  # m between the ground and the bottom of the sphere when landed
-
-
-@dataclass
-class Pose:
-    """Body centre in scene metres (x east, y north, z up) and attitude in radians.
-
-    ``yaw`` is a compass heading (0 = north, clockwise), as MAVLink's ATTITUDE.yaw;
-    ``pitch`` is nose up and ``roll`` right side down, both positive.
-    """
-
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    yaw: float = 0.0
-    pitch: float = 0.0
-    roll: float = 0.0
-
-    def xyz(self) -> tuple[float, float, float]:
-        return self.x, self.y, self.z
 
 
 @dataclass

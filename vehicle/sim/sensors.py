@@ -16,32 +16,9 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from vehicle.sim.physics import Pose
+from vehicle.protocol.frames import Pose, body_to_world, mount_rotation
+from vehicle.protocol.rangefinder import Reading, Servo
 from vehicle.world.raycast import RayCaster
-
-
-@dataclass
-class Servo:
-    """A hobby servo: PWM pulse width (microseconds) maps linearly onto an angle (degrees)."""
-
-    pwm_min: int = 1000
-    pwm_max: int = 2000
-    angle_min: float = -90.0
-    angle_max: float = 90.0
-    pwm: int = 1500
-    channel: int = 9  # autopilot output that drives it (MAV_CMD_DO_SET_SERVO)
-
-    def angle(self) -> float:
-        span = (self.pwm - self.pwm_min) / (self.pwm_max - self.pwm_min)
-        return self.angle_min + span * (self.angle_max - self.angle_min)
-
-    def pwm_for(self, angle: float) -> int:
-        angle = min(self.angle_max, max(self.angle_min, angle))
-        span = (angle - self.angle_min) / (self.angle_max - self.angle_min)
-        return round(self.pwm_min + span * (self.pwm_max - self.pwm_min))
-
-    def set_angle(self, angle: float) -> None:
-        self.pwm = self.pwm_for(angle)
 
 
 @dataclass
@@ -82,27 +59,9 @@ class Sonar:
     def _mount_rotation(self) -> np.ndarray:
         yaw = self.yaw_offset
         if yaw != self._mount_key:  # only a servo moves it; cached because every step asks
-            self._mount = rotation_zy(-math.radians(yaw), math.radians(self.mount_pitch))
+            self._mount = mount_rotation(yaw, self.mount_pitch)
             self._mount_key = yaw
         return self._mount
-
-
-@dataclass
-class Reading:
-    """One sonar measurement: where the beam started, where it pointed, what it measured."""
-
-    time: float
-    sensor: int
-    origin: np.ndarray  # (3,) scene metres
-    direction: np.ndarray  # (3,) unit vector of the beam's centre
-    distance: float | None  # metres, None when nothing echoed within range
-    max_range: float
-    yaw_offset: float  # degrees, sensor relative to the nose (for DISTANCE_SENSOR orientation)
-    beam_angle: float = 0.0  # degrees, half-angle of the cone
-
-    @property
-    def hit(self) -> np.ndarray | None:
-        return None if self.distance is None else self.origin + self.direction * self.distance
 
 
 class SonarArray:
@@ -148,7 +107,7 @@ class SonarArray:
                 noisy = value + self.rng.normal(0.0, sensor.noise)
                 value = float(min(sensor.max_range, max(sensor.min_range, noisy)))
             readings.append(Reading(time, index, origin, world_axes[index], value, sensor.max_range,
-                                    sensor.yaw_offset, sensor.beam_angle))
+                                    sensor.yaw_offset, sensor.beam_angle, sensor.min_range, sensor.mount_pitch))
         return readings
 
 
@@ -173,24 +132,6 @@ def _nearest_echoes(distance, faces, directions, normals, first_ray, cos_critica
     return nearest
 
 
-SENSOR_SUITES = {
-    "single": "one sonar looking forward (the thesis's vehicle)",
-    "triple": "three sonars: forward and 45 degrees to each side (sees walls alongside the path)",
-    "servo": "one sonar on a servo that sweeps it 90 degrees either side (the thesis's servo option)",
-}
-
-
-def sensor_suite(name: str) -> list[Sonar]:
-    """The sonars of a named sensor suite (see SENSOR_SUITES)."""
-    if name == "single":
-        return [Sonar("front")]
-    if name == "triple":
-        return [Sonar("front"), Sonar("left", mount_yaw=-45.0), Sonar("right", mount_yaw=45.0)]
-    if name == "servo":
-        return [Sonar("sweep", servo=Servo())]
-    raise ValueError(f"unknown sensor suite {name!r}; suites: {', '.join(SENSOR_SUITES)}")
-
-
 def cone_rays(half_angle: float, rings: int, per_ring: int = 6) -> np.ndarray:
     """Unit rays in the sensor frame (x forward): the centre plus ``rings`` rings spread over the cone,
     ring k with k * ``per_ring`` rays, so that rays are about as far apart around a ring as between rings."""
@@ -202,30 +143,3 @@ def cone_rays(half_angle: float, rings: int, per_ring: int = 6) -> np.ndarray:
             around = 2 * math.pi * (k + 0.5 * (ring % 2)) / count
             rays.append((math.cos(tilt), math.sin(tilt) * math.cos(around), math.sin(tilt) * math.sin(around)))
     return np.array(rays)
-
-
-def rotation_zy(yaw_left: float, pitch_up: float) -> np.ndarray:
-    """Rotation by ``pitch_up`` about -y (nose up) then ``yaw_left`` about z, in a frame with x forward, z up."""
-    cy, sy = math.cos(yaw_left), math.sin(yaw_left)
-    cp, sp = math.cos(pitch_up), math.sin(pitch_up)
-    yaw = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    pitch = np.array([[cp, 0.0, -sp], [0.0, 1.0, 0.0], [sp, 0.0, cp]])
-    return yaw @ pitch
-
-
-def body_to_world(pose: Pose) -> np.ndarray:
-    """Rotation from the body frame (x forward, y left, z up) to the scene frame (x east, y north, z up).
-
-    Applies roll, then pitch, then yaw (the aerospace order the thesis uses), with
-    MAVLink's signs: yaw a compass heading, pitch nose up, roll right side down.
-    """
-    heading = math.pi / 2 - pose.yaw  # counter-clockwise angle from east: forward maps to (sin yaw, cos yaw)
-    ch, sh = math.cos(heading), math.sin(heading)
-    cp, sp = math.cos(pose.pitch), math.sin(pose.pitch)
-    cr, sr = math.cos(pose.roll), math.sin(pose.roll)
-    # Rz(heading) @ R(pitch nose up) @ Rx(roll, left side up), multiplied out
-    return np.array([
-        [ch * cp, -ch * sp * sr - sh * cr, sh * sr - ch * sp * cr],
-        [sh * cp, ch * cr - sh * sp * sr, -sh * sp * cr - ch * sr],
-        [sp, cp * sr, cp * cr],
-    ])

@@ -1,8 +1,10 @@
-"""The simulated world: a scene, one vehicle in it, its sensors, and the simulated clock.
+"""The simulation: a scene, one vehicle in it (body, autopilot, sensors, battery), and the simulated clock.
 
 Everything here runs on simulated time in fixed steps, so a run is a pure
-function of its inputs and seed. ``World.step()`` moves the vehicle one step,
-checks the swept body against the scene, and returns the sonar readings taken.
+function of its inputs and seed. ``Simulation.step()`` moves the vehicle one
+step, checks the swept body against the scene, and returns the sonar readings
+taken. It knows nothing of an onboard agent: one talks to its autopilot
+(``vehicle.sim.onboard`` in-process, or MAVLink through ``vehicle.sim.endpoint``).
 """
 
 from __future__ import annotations
@@ -11,21 +13,22 @@ import math
 
 import numpy as np
 
-from vehicle.agent.settings import Settings
+from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.modes import Kind
+from vehicle.protocol.rangefinder import Reading, Servo
 from vehicle.sim.autopilot import Autopilot
 from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.sim.avoidance import ObstacleDatabase
 from vehicle.sim.battery import Battery
-from vehicle.sim.physics import Body, Limits, Pose
-from vehicle.sim.sensors import Reading, Servo, Sonar, SonarArray, sensor_suite
+from vehicle.sim.physics import Body, Limits
+from vehicle.sim.sensors import Sonar, SonarArray
+from vehicle.sim.suites import DEFAULT_SUITE, sensor_suite
 from vehicle.world.collision import Collider, Contact, TriangleGrid
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
 
 DEFAULT_STEP = 0.05  # s
-DEFAULT_SUITE = "triple"
 SONAR_RATE = 10.0  # Hz: readings per second, as long-range ultrasonic sensors manage
 STEP_HEIGHT = 0.5  # m: a rover climbs onto surfaces at most this far above its wheels
 
@@ -34,23 +37,26 @@ class PlacementError(ValueError):
     """The vehicle cannot start where it was asked to."""
 
 
-class World:
-    def __init__(self, scene: Scene, kind: Kind | str = Kind.COPTER, settings: Settings | None = None,
-                 start: tuple[float, float] | None = None, heading: float | None = None, seed: int = 0,
-                 dt: float = DEFAULT_STEP, sensors: list[Sonar] | None = None, datum: Datum | None = None,
-                 limits: Limits | None = None, backend: str = "auto", sonar_rate: float = SONAR_RATE):
+class Simulation:
+    def __init__(self, scene: Scene, kind: Kind | str = Kind.COPTER, start: tuple[float, ...] | None = None,
+                 heading: float | None = None, seed: int = 0, dt: float = DEFAULT_STEP,
+                 sensors: list[Sonar] | None = None, datum: Datum | None = None, limits: Limits | None = None,
+                 backend: str = "auto", sonar_rate: float = SONAR_RATE, cruise_speed: float = 2.5,
+                 wp_radius: float = 2.0):
+        """``start`` is x, y (scene metres), or x, y, z: then the vehicle stands on the highest surface below
+        z (a floor under a roof); without it, the scene's own start. ``cruise_speed`` and ``wp_radius`` are
+        the autopilot's (WPNAV_SPEED, WP_RADIUS)."""
         self.scene = scene
         self.kind = Kind(kind)
-        self.settings = settings or Settings()
         self.dt = dt
         self.time = 0.0
         self.steps = 0
         self.datum = datum or Datum()
         self.caster = scene.prepared(("caster", backend), lambda: RayCaster(scene.mesh, backend))
         self.limits = limits or Limits()
-        x, y = start if start is not None else (scene.start or (0.0, 0.0))
+        x, y, *height = start if start is not None else (scene.start or (0.0, 0.0))
         heading = heading if heading is not None else (scene.start_heading or 0.0)
-        ground = self.caster.ground_height(x, y)
+        ground = self.caster.ground_height(x, y, below=height[0] if height else None)
         self.body = Body(self.kind, self.limits, Pose(x, y, 0.0, yaw=math.radians(heading) % (2 * math.pi)))
         self.body.pose.z = self.body.rest_height(ground)
         walkable = self.kind is Kind.ROVER  # a rover's wheels touch the ground it drives on
@@ -60,7 +66,7 @@ class World:
             raise PlacementError(f"the start x={x:g} y={y:g} is inside an obstacle")
         self.avoidance = ObstacleDatabase(margin=AVOID_MARGIN, accel=self.limits.accel, body_radius=self.limits.radius)
         self.autopilot = Autopilot(self.kind, self.body, (x, y, ground), self.datum,
-                                   cruise_speed=self.settings.speed, wp_radius=self.settings.closeness,
+                                   cruise_speed=cruise_speed, wp_radius=wp_radius,
                                    avoidance=self.avoidance)
         self.sonars = SonarArray(sensors if sensors is not None else sensor_suite(DEFAULT_SUITE), self.caster, seed)
         self.battery = Battery()

@@ -1,4 +1,4 @@
-"""What a ground station hears from the vehicle: ArduPilot's standard messages plus the map in TUNNEL.
+"""What a ground station hears from the simulated autopilot: ArduPilot's standard messages.
 
 ``Telemetry.tick(now)`` returns the messages due at ``now`` on a per-message
 schedule (intervals can be changed, as MAV_CMD_SET_MESSAGE_INTERVAL asks).
@@ -6,7 +6,8 @@ The schedule's clock is the caller's: wall time for a live ``vehicle sim``,
 simulated time for the log of a headless experiment; the messages are the
 same, and their ``time_boot_ms`` is always the simulated time since boot.
 Conventions: LOCAL_POSITION_NED is metres from home (north, east, down);
-DISTANCE_SENSOR carries one reading, ``max_distance + 1`` meaning no echo.
+DISTANCE_SENSOR carries one reading (``vehicle.protocol.rangefinder``). An
+onboard agent's own messages (its map, its state) are its own: component 191.
 """
 
 from __future__ import annotations
@@ -14,12 +15,11 @@ from __future__ import annotations
 import math
 
 from vehicle import __version__
-from vehicle.agent.agent import Agent
-from vehicle.protocol.mapstream import PAYLOAD, MapStreamer
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.modes import mode_number
-from vehicle.sim.sensors import Reading
-from vehicle.sim.simulation import World
+from vehicle.protocol.rangefinder import Reading, distance_sensor
+from vehicle.protocol.statustext import statustexts
+from vehicle.sim.simulation import Simulation
 
 # SYS_STATUS sensor bits we claim present, enabled and healthy (MAVProxy warns of a fence breach
 # unless the geofence bits are set)
@@ -41,20 +41,17 @@ DEFAULT_INTERVALS = {  # seconds
     mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
 }
-PATH_PERIOD = 0.5  # s between checks of the planned path
 VERSION = tuple(int(p) for p in __version__.split(".")[:3])
 
 
 class Telemetry:
-    def __init__(self, world: World, agent: Agent | None, start: float = 0.0, sysid: int = 1):
+    def __init__(self, world: Simulation, start: float = 0.0, sysid: int = 1):
         self.world = world
         self.sysid = sysid
-        self.agent = agent
         self.boot = start
         self.intervals: dict[int, float] = dict(DEFAULT_INTERVALS)
         self._due: dict[int, float] = dict.fromkeys(self.intervals, start)
-        self.streamer = MapStreamer(agent.map, agent.ctx.home) if agent is not None else None
-        self._next_path = start
+        self._texts = 0
 
     # ---- schedule ------------------------------------------------------------------------------
     def set_interval(self, message_id: int, interval: float | None) -> bool:
@@ -68,7 +65,7 @@ class Telemetry:
         return True
 
     def tick(self, now: float) -> list:
-        """Messages due at ``now``: the periodic ones, events, and map and path payloads."""
+        """Messages due at ``now``: the periodic ones and the autopilot's events."""
         out = []
         builders = self.builders()
         for message_id, interval in self.intervals.items():
@@ -76,11 +73,6 @@ class Telemetry:
                 self._due[message_id] = max(self._due.get(message_id, now) + interval, now)
                 out.append(builders[message_id](now))
         out += self.events(now)
-        if self.streamer is not None:
-            out += [self._tunnel(kind, payload) for kind, payload in self.streamer.tick(now)]
-            if now >= self._next_path:
-                self._next_path = now + PATH_PERIOD
-                out += [self._tunnel(k, p) for k, p in self.streamer.path(self.agent.ctx.planned_path)]
         return out
 
     def builders(self) -> dict:
@@ -195,33 +187,17 @@ class Telemetry:
         while events:
             event = events.popleft()
             if event.kind == "text":
-                out.append(mavlink.MAVLink_statustext_message(event.severity, event.text[:50].encode()))
+                out += self.text(event.text, event.severity)
             elif event.kind == "reached":
                 out.append(mavlink.MAVLink_mission_item_reached_message(event.seq))
             elif event.kind == "current":
                 out.append(self.mission_current(now))
         return out
 
+    def text(self, text: str, severity: int = mavlink.MAV_SEVERITY_INFO) -> list:
+        """STATUSTEXT of a text (chunks when it is long)."""
+        self._texts += 1
+        return statustexts(text, severity, self._texts)
+
     def distance_sensor(self, reading: Reading, now: float):
-        sensor = self.world.sonars.sensors[reading.sensor]
-        top = int(sensor.max_range * 100)
-        value = top + 1 if reading.distance is None else max(int(sensor.min_range * 100), int(reading.distance * 100))
-        orientation, quaternion = _orientation(reading.yaw_offset, sensor.mount_pitch)
-        fov = math.radians(2 * sensor.beam_angle)
-        return mavlink.MAVLink_distance_sensor_message(
-            self._ms(now), int(sensor.min_range * 100), top, min(value, 65535), mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND,
-            reading.sensor, orientation, 0, fov, fov, quaternion, 0)
-
-    @staticmethod
-    def _tunnel(kind: int, payload: bytes):
-        return mavlink.MAVLink_tunnel_message(0, 0, kind, len(payload), list(payload.ljust(PAYLOAD, b"\0")))
-
-
-def _orientation(yaw_offset: float, pitch: float) -> tuple[int, list[float]]:
-    """MAV_SENSOR_ORIENTATION for a mount yaw (degrees clockwise) and pitch, or CUSTOM with a quaternion."""
-    if pitch == 0 and yaw_offset % 45 == 0:
-        return int(yaw_offset % 360) // 45, [0.0, 0.0, 0.0, 0.0]  # NONE, YAW_45 ... YAW_315
-    half_yaw, half_pitch = math.radians(yaw_offset) / 2, math.radians(pitch) / 2
-    # body frame is forward-right-down: yaw about z (down) then pitch about y (right)
-    cy, sy, cp, sp = math.cos(half_yaw), math.sin(half_yaw), math.cos(half_pitch), math.sin(half_pitch)
-    return mavlink.MAV_SENSOR_ROTATION_CUSTOM, [cy * cp, -sy * sp, cy * sp, sy * cp]
+        return distance_sensor(reading, self._ms(now))

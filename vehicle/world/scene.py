@@ -51,7 +51,7 @@ class Scene:
     face_object: np.ndarray  # (n_faces,) int32 index of the Shape instance
     objects: int
     warnings: list[str] = field(default_factory=list)
-    start: tuple[float, float] | None = None  # Viewpoint "Start", x and y
+    start: tuple[float, float, float] | None = None  # Viewpoint "Start": x, y and the height of the eye
     start_heading: float | None = None  # compass degrees of its view direction; None if vertical
     hints: dict[str, str] = field(default_factory=dict)  # "name=value" strings of a WorldInfo's info
     _prepared: dict = field(default_factory=dict, init=False, repr=False, compare=False)
@@ -218,9 +218,9 @@ class _Builder:
         """The first Viewpoint DEF'd as Start gives the default start position and heading."""
         if node.name != "Start" or self.start is not None:
             return
-        x, y, _ = matrix[:3, :3] @ _vector(node, "position", (0, 0, 10)) + matrix[:3, 3]
+        x, y, z = matrix[:3, :3] @ _vector(node, "position", (0, 0, 10)) + matrix[:3, 3]
         view = matrix[:3, :3] @ _rotation(_vector(node, "orientation", (0, 0, 1, 0))) @ (0, 0, -1)
-        self.start = (float(x), float(y))
+        self.start = (float(x), float(y), float(z))
         if math.hypot(view[0], view[1]) > 1e-6 * np.linalg.norm(view):
             self.start_heading = math.degrees(math.atan2(view[0], view[1])) % 360
 

@@ -18,7 +18,7 @@ from vehicle.world.scene import Scene
 
 def render_top_view(scene: Scene, path: str | Path, size: int = 900, memory_map: MemoryMap | None = None,
                     route: list[tuple[float, float]] | None = None,
-                    start: tuple[float, float] | None = None) -> None:
+                    start: tuple[float, ...] | None = None) -> None:
     bounds = scene.bounds if len(scene.mesh.faces) else np.array([[-10.0, -10, 0], [10.0, 10, 1]])
     (x0, y0, z0), (x1, y1, z1) = bounds
     margin = 0.03 * max(x1 - x0, y1 - y0, 1.0)
@@ -48,6 +48,6 @@ def render_top_view(scene: Scene, path: str | Path, size: int = 900, memory_map:
     if route:
         draw.line([pixel(x, y) for x, y in route], fill=(80, 200, 255), width=2)
     if start is not None:
-        sx, sy = pixel(*start)
+        sx, sy = pixel(*start[:2])
         draw.ellipse([sx - 6, sy - 6, sx + 6, sy + 6], outline=(255, 255, 255), width=2)
     image.save(path)

@@ -1,36 +1,31 @@
-"""Missions, one module each: adding a mission means adding a module with a ``Mission`` subclass.
+"""Missions, one module each, named as on the command line.
 
-The registry finds every ``Mission`` subclass with a ``name`` in this package's
-modules, so the command line, the sweep and the MAVLink side list them without
-being told.
+``MISSIONS`` lists them with a line of help each, so that the command line can
+offer them without importing any (a mission pulls in the planner and its
+compiled loops); ``mission_class`` imports the one asked for. Adding a mission
+means adding a module with a ``Mission`` subclass and a line here (a test
+checks that the two agree).
 """
 
 from __future__ import annotations
 
 import importlib
-import pkgutil
 
-from vehicle.agent.missions.base import Mission
-
-_SHARED = {"base", "routines"}
-
-
-def missions() -> dict[str, type[Mission]]:
-    """Mission name (lowercase, as on the command line) -> class, in alphabetical order."""
-    found: dict[str, type[Mission]] = {}
-    for module in pkgutil.iter_modules(__path__):
-        if module.name in _SHARED:
-            continue
-        loaded = importlib.import_module(f"{__name__}.{module.name}")
-        for value in vars(loaded).values():
-            if isinstance(value, type) and issubclass(value, Mission) and getattr(value, "name", None):
-                found[value.name] = value
-    return dict(sorted(found.items()))
+MISSIONS = {
+    "browse": "turn in place at home in yaw_step increments, scanning one full circle",
+    "pathfind": "visit waypoints in order (a square around home by default), replanning with A* when blocked",
+    "search": "scan, move towards far detections with open space beside them at a stand-off distance, repeat",
+    "square": "fly preplanned AUTO waypoints in a square around home (or the given waypoints)",
+}
 
 
-def mission_class(name: str) -> type[Mission]:
-    known = missions()
-    try:
-        return known[name.lower()]
-    except KeyError:
-        raise ValueError(f"unknown mission {name!r}; missions: {', '.join(known)}") from None
+def mission_class(name: str):
+    """The ``Mission`` subclass of a mission name (lowercase, as on the command line)."""
+    if name.lower() not in MISSIONS:
+        raise ValueError(f"unknown mission {name!r}; missions: {', '.join(MISSIONS)}")
+    from vehicle.agent.missions.base import Mission
+
+    name = name.lower()
+    module = importlib.import_module(f"{__name__}.{name}")
+    return next(value for value in vars(module).values()
+                if isinstance(value, type) and issubclass(value, Mission) and getattr(value, "name", None) == name)

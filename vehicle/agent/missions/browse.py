@@ -12,7 +12,6 @@ from vehicle.agent.missions.routines import scan
 
 class Browse(Mission):
     name = "browse"
-    help = "turn in place at home in yaw_step increments, scanning one full circle"
 
     def begin(self) -> None:
         self.scan = scan(self.ctx)

@@ -14,7 +14,6 @@ from vehicle.agent.missions.square import square_corners
 
 class Pathfind(Mission):
     name = "pathfind"
-    help = "visit waypoints in order (a square around home by default), replanning with A* when blocked"
 
     def begin(self) -> None:
         ctx = self.ctx

@@ -8,8 +8,7 @@ import numpy as np
 
 from vehicle.agent.missions.base import Context, Status
 from vehicle.protocol.geodesy import wrap_pi
-from vehicle.protocol.modes import Kind
-from vehicle.sim.sensors import Reading
+from vehicle.protocol.rangefinder import Reading
 
 YAW_REACHED = math.radians(2)
 PATH_POINT_REACHED = 0.5  # m: intermediate path points count as passed this close
@@ -30,30 +29,28 @@ class Scan:
         self.ctx = ctx
         self.step_rad = math.radians(ctx.settings.yaw_step)
         self.steps = max(1, math.ceil(turn / ctx.settings.yaw_step))
-        self.start = ctx.vehicle.body.pose.yaw
+        self.start = ctx.yaw
         self.done_steps = -1
         self.readings: list[Reading] = []
-        x, y = ctx.position
-        ctx.vehicle.goto(x, y, ctx.settings.altitude if ctx.kind is Kind.COPTER else None)  # hold here
+        ctx.hold_here()
 
     def resume(self) -> None:
         """Turn again towards the heading of the current step (an operator's mode change dropped it)."""
         if self.done_steps >= 0:
-            x, y = self.ctx.position
-            self.ctx.vehicle.goto(x, y, self.ctx.settings.altitude if self.ctx.kind is Kind.COPTER else None)
-            self.ctx.vehicle.set_yaw((self.start + self.done_steps * self.step_rad) % (2 * math.pi))
+            self.ctx.hold_here()
+            self.ctx.fc.set_yaw((self.start + self.done_steps * self.step_rad) % (2 * math.pi))
 
     def step(self) -> bool:
         """True once the full turn is done."""
         if self.ctx.observation is not None:
             self.readings.extend(self.ctx.observation.readings)
         target = self.start + max(self.done_steps, 0) * self.step_rad
-        if self.done_steps >= 0 and abs(wrap_pi(self.ctx.vehicle.body.pose.yaw - target)) > YAW_REACHED:
+        if self.done_steps >= 0 and abs(wrap_pi(self.ctx.yaw - target)) > YAW_REACHED:
             return False
         self.done_steps += 1
         if self.done_steps > self.steps:
             return True
-        self.ctx.vehicle.set_yaw((self.start + self.done_steps * self.step_rad) % (2 * math.pi))
+        self.ctx.fc.set_yaw((self.start + self.done_steps * self.step_rad) % (2 * math.pi))
         return False
 
 
@@ -72,36 +69,34 @@ class ServoScan:
         angles = list(np.arange(servo.angle_min, servo.angle_max + 1e-9, step))
         coverage = servo.angle_max - servo.angle_min + step
         sweeps = max(1, math.ceil(360.0 / coverage))
-        start = ctx.vehicle.body.pose.yaw
+        start = ctx.yaw
         self.plan = [((start + math.radians(k * coverage)) % (2 * math.pi), angle)
                      for k in range(sweeps) for angle in (angles if k % 2 == 0 else angles[::-1])]
         self.index = -1
         self.readings: list[Reading] = []
-        x, y = ctx.position
-        ctx.vehicle.goto(x, y, ctx.settings.altitude if ctx.kind is Kind.COPTER else None)  # hold here
+        ctx.hold_here()
 
     def resume(self) -> None:
         if self.index >= 0:
-            x, y = self.ctx.position
-            self.ctx.vehicle.goto(x, y, self.ctx.settings.altitude if self.ctx.kind is Kind.COPTER else None)
-            self.ctx.vehicle.set_yaw(self.plan[self.index][0])
+            self.ctx.hold_here()
+            self.ctx.fc.set_yaw(self.plan[self.index][0])
 
     def step(self) -> bool:
         """True once the sweeps are done (the servo is then centred again)."""
         ctx = self.ctx
         if ctx.observation is not None:
             self.readings.extend(ctx.observation.readings)
-        if self.index >= 0 and abs(wrap_pi(ctx.vehicle.body.pose.yaw - self.plan[self.index][0])) > YAW_REACHED:
+        if self.index >= 0 and abs(wrap_pi(ctx.yaw - self.plan[self.index][0])) > YAW_REACHED:
             return False  # still turning to this sweep's heading
         self.index += 1
         servo = ctx.servo
         if self.index >= len(self.plan):
-            ctx.vehicle.set_servo(servo.channel, servo.pwm_for(0.0))
+            ctx.fc.set_servo(servo.channel, servo.pwm_for(0.0))
             return True
         heading, angle = self.plan[self.index]
         if self.index == 0 or heading != self.plan[self.index - 1][0]:
-            ctx.vehicle.set_yaw(heading)
-        ctx.vehicle.set_servo(servo.channel, servo.pwm_for(angle))
+            ctx.fc.set_yaw(heading)
+        ctx.fc.set_servo(servo.channel, servo.pwm_for(angle))
         return False
 
 
@@ -162,7 +157,7 @@ class Travel:
         ctx.planned_path = [ctx.position, *self.path]
         target = self.path[0]
         if target != self._sent:
-            ctx.vehicle.goto(target[0], target[1], ctx.settings.altitude if ctx.kind is Kind.COPTER else None)
+            ctx.goto(target)
             self._sent = target
         return Status.RUNNING
 

@@ -31,7 +31,6 @@ TIE = 1e-9  # m: arcs whose mean free distances differ by less are equally open 
 
 class Search(Mission):
     name = "search"
-    help = "scan, move towards far detections with open space beside them at a stand-off distance, repeat"
 
     def begin(self) -> None:
         self.scan: Scan | ServoScan | None = scan(self.ctx)

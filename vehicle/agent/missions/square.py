@@ -9,7 +9,8 @@ flew into objects, ours stops safely instead.
 from __future__ import annotations
 
 from vehicle.agent.missions.base import Mission, Status
-from vehicle.protocol.modes import DO_CHANGE_SPEED, NAV_TAKEOFF, NAV_WAYPOINT, Kind, MissionItem
+from vehicle.protocol.mission import DO_CHANGE_SPEED, NAV_TAKEOFF, NAV_WAYPOINT, MissionItem, home_item
+from vehicle.protocol.modes import Kind
 
 MAX_HALF_SIDE = 25.0  # m
 
@@ -23,31 +24,31 @@ def square_corners(home: tuple[float, float], space_size: float) -> list[tuple[f
 
 class Square(Mission):
     name = "square"
-    help = "fly preplanned AUTO waypoints in a square around home (or the given waypoints)"
     mode = "AUTO"
 
     def begin(self) -> None:
         ctx = self.ctx
-        datum = ctx.vehicle.datum
-        if len(ctx.vehicle.mission) > 1:  # a mission was uploaded or loaded: fly it as it is
-            self.corners = [datum.to_local(i.lat, i.lon) for i in ctx.vehicle.mission[1:] if i.has_position]
-            self.first_corner = len(ctx.vehicle.mission) - len(self.corners)
+        datum = ctx.fc.datum
+        loaded = ctx.fc.download_mission()
+        if len(loaded) > 1:  # a mission was uploaded or loaded: fly it as it is
+            self.corners = [datum.to_local(i.lat, i.lon) for i in loaded[1:] if i.has_position]
+            self.first_corner = len(loaded) - len(self.corners)
             return
         self.corners = ctx.waypoints or square_corners(ctx.home, ctx.settings.space_size)
-        items = [ctx.vehicle.home_item()]
+        items = [home_item(datum, *ctx.home)]
         if ctx.kind is Kind.COPTER:
             items.append(MissionItem(NAV_TAKEOFF, alt=ctx.settings.altitude))
         items.append(MissionItem(DO_CHANGE_SPEED, param1=1, param2=ctx.settings.speed))
         for x, y in self.corners:
             lat, lon = datum.to_global(x, y)
             items.append(MissionItem(NAV_WAYPOINT, lat, lon, ctx.settings.altitude, param2=ctx.settings.closeness))
-        ctx.vehicle.set_mission(items)
+        ctx.fc.upload_mission(items)
         self.first_corner = len(items) - len(self.corners)
 
     def step(self) -> Status:
-        vehicle = self.ctx.vehicle
-        if vehicle.current >= len(vehicle.mission):
+        progress = self.ctx.fc.mission
+        if progress.complete:
             return Status.DONE
-        remaining = self.corners[max(0, vehicle.current - self.first_corner):]
+        remaining = self.corners[max(0, progress.current - self.first_corner):]
         self.ctx.planned_path = [self.ctx.position, *remaining]
         return Status.RUNNING

@@ -1,0 +1,119 @@
+"""The agent on MAVLink: component 191 (MAV_COMP_ID_ONBOARD_COMPUTER) of its vehicle's system.
+
+What a ground station hears from the agent, whichever flight controller it
+flies: a HEARTBEAT (type ONBOARD_CONTROLLER), its memory map and planned path
+(the TUNNEL map stream), its state (running, paused and why; TUNNEL
+``AGENT_STATUS``) and its messages (STATUSTEXT, chunked when long). What it
+answers: MAV_CMD_MISSION_START addressed to it starts or resumes the mission
+(a ground station's Resume), and the parameter protocol for the mission
+parameters (``SCN_*``). The caller sends what ``tick`` and ``handle`` return,
+packed as component 191; the clock is the caller's (the wall clock live).
+"""
+
+from __future__ import annotations
+
+from vehicle.agent.agent import Agent
+from vehicle.agent.params import Parameters
+from vehicle.protocol import agent_status
+from vehicle.protocol.mapstream import PAYLOAD, MapStreamer
+from vehicle.protocol.mav import mavlink
+from vehicle.protocol.statustext import statustexts
+
+COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+HEARTBEAT_PERIOD = 1.0  # s
+PATH_PERIOD = 0.5  # s between checks of the planned path
+STATUS_PERIOD = 1.0  # s between repeats of an unchanged status
+PARAM_MESSAGES = ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET")
+
+
+def tunnel(kind: int, payload: bytes):
+    return mavlink.MAVLink_tunnel_message(0, 0, kind, len(payload), list(payload.ljust(PAYLOAD, b"\0")))
+
+
+class Companion:
+    component = COMPONENT
+
+    def __init__(self, agent: Agent, sysid: int, start: float = 0.0):
+        self.agent = agent
+        self.sysid = sysid
+        self.streamer = MapStreamer(agent.map, agent.ctx.home)
+        self.params = Parameters(agent.settings)
+        self._next_heartbeat = self._next_path = self._next_status = start
+        self._status: agent_status.AgentStatus | None = None
+        self._texts = 0
+
+    # ---- sending ----------------------------------------------------------------------------------
+    def tick(self, now: float) -> list:
+        """Messages due at ``now``."""
+        out = []
+        if now >= self._next_heartbeat:
+            self._next_heartbeat = now + HEARTBEAT_PERIOD
+            out.append(self.heartbeat())
+        out += self.texts()
+        out += [tunnel(kind, payload) for kind, payload in self.streamer.tick(now)]
+        if now >= self._next_path:
+            self._next_path = now + PATH_PERIOD
+            out += [tunnel(kind, payload) for kind, payload in self.streamer.path(self.agent.ctx.planned_path)]
+        status = self.status()
+        if status != self._status or now >= self._next_status:
+            self._status, self._next_status = status, now + STATUS_PERIOD
+            out.append(tunnel(agent_status.AGENT_STATUS, agent_status.encode(status)))
+        return out
+
+    def final(self) -> list:
+        """A heartbeat, the messages not sent yet, the status and a full map snapshot: the last word of a log."""
+        return [self.heartbeat(), *self.texts(), tunnel(agent_status.AGENT_STATUS, agent_status.encode(self.status())),
+                *[tunnel(kind, payload) for kind, payload in self.streamer.snapshot()]]
+
+    def heartbeat(self):
+        agent = self.agent
+        state = mavlink.MAV_STATE_STANDBY if agent.paused or agent.done else mavlink.MAV_STATE_ACTIVE
+        return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID,
+                                                 0, 0, state, 3)
+
+    def texts(self) -> list:
+        out = []
+        outbox = self.agent.outbox
+        while outbox:
+            severity, text = outbox.popleft()
+            self._texts += 1
+            out += statustexts(text, severity, self._texts)
+        return out
+
+    def status(self) -> agent_status.AgentStatus:
+        agent = self.agent
+        reason = agent.pause_reason if agent.paused else agent.reason
+        return agent_status.AgentStatus(agent.phase.value, agent.paused, agent.outcome or "", agent.mission_name,
+                                        reason)
+
+    # ---- receiving --------------------------------------------------------------------------------
+    def handle(self, message) -> list | None:
+        """The replies to a message addressed to the agent; None if it is not one the agent answers."""
+        kind = message.get_type()
+        if kind in ("COMMAND_LONG", "COMMAND_INT") and message.command == mavlink.MAV_CMD_MISSION_START:
+            result = mavlink.MAV_RESULT_ACCEPTED if self.mission_start() else mavlink.MAV_RESULT_DENIED
+            return [mavlink.MAVLink_command_ack_message(message.command, result, 0, 0, message.get_srcSystem(),
+                                                        message.get_srcComponent())]
+        if kind in PARAM_MESSAGES:
+            return self._param(message)
+        return None
+
+    def mission_start(self) -> bool:
+        """Start the mission if it waits, resume it if paused; False if neither (it runs, or just ended)."""
+        return self.agent.start() or self.agent.resume()
+
+    def _param(self, m) -> list:
+        kind = m.get_type()
+        if kind == "PARAM_REQUEST_LIST":
+            return [self.params.message(i) for i in range(len(self.params))]
+        index = self.params.find(m.param_id, getattr(m, "param_index", -1) if kind == "PARAM_REQUEST_READ" else -1)
+        if index is None:
+            return []  # ArduPilot stays silent about unknown parameters
+        if kind == "PARAM_SET":
+            param_id = self.params.ids[index]
+            refused = self.params.set(param_id, m.param_value)
+            if refused:
+                return [*statustexts(refused, mavlink.MAV_SEVERITY_WARNING, 0), self.params.message(index)]
+            if param_id == "SCN_SPEED":
+                self.agent.fc.set_speed(self.params.value(param_id))
+        return [self.params.message(index)]

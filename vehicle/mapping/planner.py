@@ -1,0 +1,172 @@
+"""Planning on the memory map: paths that keep clear of what the sonar saw, and checks of lines and spots.
+
+``MapPlanner`` answers the questions a mission asks of its map: a path from
+here to there around known obstacles (A* in a window around both, see
+``planning``), whether a polyline or a spot is clear, and with how much
+margin. Obstacles are grown by the body radius plus a padding, and by at
+least twice the margin the autopilot's own obstacle avoidance keeps, so a
+planned path never runs into the autopilot's stop.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vehicle.mapping import planning
+from vehicle.mapping.memory_map import MemoryMap
+
+PLAN_MARGINS = (15.0, 40.0)  # m around start and goal that planning searches, the small window first
+UNSEEN_EXTENT = 1.0  # m: unknown cells this close to an obstacle are presumed to be more of it
+
+Point = tuple[float, float]
+
+
+class MapPlanner:
+    def __init__(self, memory_map: MemoryMap, radius: float, avoid_margin: float = 0.0):
+        self.map = memory_map
+        self.radius = radius  # of the vehicle body, m
+        self.avoid_margin = avoid_margin  # m the autopilot's avoidance keeps from echoes
+
+    def plan(self, start: Point, goal: Point, padding: float, relax: bool = False,
+             level: int = 0) -> tuple[list[Point] | None, int]:
+        """A path (scene metres, excluding ``start``) to ``goal`` around known obstacles, ``padding`` m clear.
+
+        Searches a window around start and goal first (fast), then a wider one.
+        Obstacles are grown by the body radius plus the padding; a vehicle that
+        is already closer first escapes the shortest way out. If the goal sits
+        inside that margin, it retries with the avoidance margin only. With
+        ``relax`` (going home), an unreachable goal is tried again without
+        presuming unseen obstacles: getting home along a tight path beats not
+        getting home. Returns the path (None if there is none) and the level of
+        relaxation that found it, to start from next time.
+        """
+        start_cell = self.map.cell_of(*start)
+        goal_cell = self.map.cell_of(*goal)
+        if start_cell is None or goal_cell is None:
+            return None, level
+        if level == 0 and self.path_clear(start, [goal], horizon=math.inf, padding=padding):
+            return [goal], level  # in the open: no search needed
+        attempts = [(padding, True), (0.0, True)] + ([(0.0, False)] if relax else [])
+        for index, (kept, presume) in enumerate(attempts[level:], start=level):
+            for wider, margin in enumerate(PLAN_MARGINS):
+                window = self._window(start_cell, goal_cell, margin)
+                try:  # a wider window is tried when a smaller one had no path: there may be none
+                    cells = self._plan_in(start_cell, goal_cell, kept, window, presume, doubtful=wider > 0)
+                except planning.NoPath as failure:
+                    if failure.reason == planning.UNREACHABLE:
+                        continue  # a wider window may find a way round
+                    break  # start or goal inside the padding: try with less
+                points = [self.map.center_of(r, c) for r, c in cells[1:]]
+                if points:
+                    points[-1] = goal
+                return points or [goal], index
+            else:
+                if not relax:
+                    return None, level  # less padding would only squeeze through gaps never seen
+        return None, level
+
+    def margin_cells(self, padding: float) -> float:
+        """How far paths keep from obstacles, in cells: the body radius plus padding, and at least twice the
+        margin of the autopilot's avoidance, so that a planned path never runs into the avoidance's stop."""
+        return (self.radius + max(padding, 2 * self.avoid_margin)) * self.map.resolution
+
+    def _window(self, a: tuple[int, int], b: tuple[int, int], margin_m: float) -> tuple[slice, slice]:
+        """The rows and columns within ``margin_m`` of the box around cells a and b."""
+        margin = int(margin_m * self.map.resolution)
+        r0, r1 = max(0, min(a[0], b[0]) - margin), min(self.map.size, max(a[0], b[0]) + margin + 1)
+        c0, c1 = max(0, min(a[1], b[1]) - margin), min(self.map.size, max(a[1], b[1]) + margin + 1)
+        return slice(r0, r1), slice(c0, c1)
+
+    def blocked_in(self, rows: slice, cols: slice, presume: bool = True) -> np.ndarray:
+        """Cells to plan around in a window: obstacles, and unknown cells right next to them.
+
+        A sonar sees a wall only where it faces the beam; the part of a wall that
+        runs along the path stays unknown until the vehicle is beside it. So the
+        unknown surroundings of what was seen are presumed to be more of it, and
+        paths keep that much further away until the sonar shows them free.
+        """
+        occupied = self.map.occupied_in(rows, cols)
+        if not presume:
+            return occupied
+        presumed = planning.inflate(occupied, UNSEEN_EXTENT * self.map.resolution)
+        return occupied | (presumed & ~self.map.free_in(rows, cols))
+
+    def _plan_in(self, start, goal, padding: float, window, presume: bool, doubtful: bool = False) -> np.ndarray:
+        obstacles, offset = self.blocked_in(*window, presume), (window[0].start, window[1].start)
+        local_start = (start[0] - offset[0], start[1] - offset[1])
+        if presume:  # where the body is now is no presumed obstacle, whatever the sonar has not seen
+            reach = int(math.ceil(self.radius * self.map.resolution))
+            rows = slice(max(0, local_start[0] - reach), local_start[0] + reach + 1)
+            cols = slice(max(0, local_start[1] - reach), local_start[1] + reach + 1)
+            obstacles[rows, cols] &= self.map.occupied_in(slice(rows.start + offset[0], rows.stop + offset[0]),
+                                                          slice(cols.start + offset[1], cols.stop + offset[1]))
+        local_goal = (goal[0] - offset[0], goal[1] - offset[1])
+        local = planning.plan(obstacles, local_start, local_goal, self.margin_cells(padding), doubtful)
+        return local + np.array(offset)
+
+    def path_clear(self, start: Point, points: list[Point], horizon: float = 15.0, padding: float = 0.0) -> bool:
+        """Whether the polyline from ``start`` through ``points`` keeps clear of known obstacles (by ``padding``).
+
+        Only the first ``horizon`` metres are checked: that is where new obstacles
+        matter now, and the rest is checked again as the vehicle gets there.
+        """
+        chain = [start]
+        length = 0.0
+        for point in points:
+            length += math.dist(chain[-1], point)
+            chain.append(point)
+            if length > horizon:
+                break
+        if len(chain) < 2:
+            return True
+        cells = [self.map.cell_of(*p) for p in chain]
+        if any(c is None for c in cells):
+            return False
+        rows = [c[0] for c in cells]
+        cols = [c[1] for c in cells]
+        pad = int(math.ceil(self.margin_cells(padding))) + 1
+        r0, r1 = max(0, min(rows) - pad), min(self.map.size, max(rows) + pad + 1)
+        c0, c1 = max(0, min(cols) - pad), min(self.map.size, max(cols) + pad + 1)
+        obstacles = self.blocked_in(slice(r0, r1), slice(c0, c1))
+        blocked = planning.inflate(obstacles, self.margin_cells(padding))
+        local = [(r - r0, c - c0) for r, c in cells]
+        if blocked[local[0]]:
+            # the vehicle is already within the margin of an obstacle (it stopped near a wall):
+            # the first leg may cross the margin to get out, as long as it never gets any closer
+            exit_cell = _leave_margin(local[0], local[1], blocked, obstacles)
+            if exit_cell is None:
+                return False
+            local[0] = exit_cell
+        return all(planning.line_is_clear(blocked, a, b) for a, b in zip(local, local[1:], strict=False))
+
+    def is_clear(self, point: Point, padding: float) -> bool:
+        """Whether the body (plus padding) would fit at ``point`` without touching a known obstacle."""
+        cell = self.map.cell_of(*point)
+        if cell is None:
+            return False
+        radius = self.margin_cells(padding)
+        reach = int(math.ceil(radius))
+        r0, c0 = max(0, cell[0] - reach), max(0, cell[1] - reach)
+        window = self.map.occupied_in(slice(r0, cell[0] + reach + 1), slice(c0, cell[1] + reach + 1))
+        rows, cols = np.nonzero(window)
+        return not np.any((rows + r0 - cell[0]) ** 2 + (cols + c0 - cell[1]) ** 2 <= radius * radius)
+
+
+def _leave_margin(a: tuple[int, int], b: tuple[int, int], blocked: np.ndarray,
+                  obstacles: np.ndarray) -> tuple[int, int] | None:
+    """The first cell on the way from a to b out of the margin; None if on the way there the distance to the
+    nearest obstacle ever shrinks below where it started."""
+    from scipy import ndimage
+
+    distance = ndimage.distance_transform_edt(~obstacles)
+    start = distance[a]
+    steps = max(abs(b[0] - a[0]), abs(b[1] - a[1]))
+    for k in range(1, steps + 1):
+        cell = (a[0] + round((b[0] - a[0]) * k / steps), a[1] + round((b[1] - a[1]) * k / steps))
+        if distance[cell] < start - 0.5:
+            return None
+        if not blocked[cell]:
+            return cell
+    return b

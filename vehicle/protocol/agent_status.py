@@ -1,0 +1,60 @@
+"""The onboard agent's state on the wire: one TUNNEL payload, both ends here.
+
+A ground station shows the autopilot's mode from its HEARTBEAT; whether the
+onboard mission runs, waits, was paused by an operator or has ended, and why,
+only the agent knows. It sends it in TUNNEL (385) payload type ``AGENT_STATUS``
+(32803, after the map stream's 32800-32802), as component 191, once a second
+and on every change: ``<BBBB`` phase, flags (bit 0: paused), outcome, length
+of the mission name; then the mission name and the reason (UTF-8, cut to fit
+the 128-byte payload).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+AGENT_STATUS = 32803
+PAYLOAD = 128
+PHASES = ("waiting", "preflight", "takeoff", "mission", "homing", "landing", "done")
+OUTCOMES = ("", "finished", "stopped")
+_HEADER = struct.Struct("<BBBB")
+
+
+@dataclass(frozen=True)
+class AgentStatus:
+    phase: str
+    paused: bool
+    outcome: str  # "" while the mission has not ended
+    mission: str
+    reason: str  # why it is paused, or why the mission ended
+
+    @property
+    def state(self) -> str:
+        """One word for the page: running, paused, waiting, finished or stopped."""
+        if self.paused:
+            return "paused"
+        if self.phase == "waiting":
+            return "waiting"
+        return self.outcome if self.outcome and self.phase == "done" else "running"
+
+
+def encode(status: AgentStatus) -> bytes:
+    mission = status.mission.encode("utf-8")[:32]
+    head = _HEADER.pack(PHASES.index(status.phase), int(status.paused), OUTCOMES.index(status.outcome),
+                        len(mission)) + mission
+    reason = status.reason.encode("utf-8")[:PAYLOAD - len(head)]
+    return head + reason.decode("utf-8", "ignore").encode("utf-8")  # never half a character
+
+
+def decode(payload: bytes) -> AgentStatus | None:
+    """The status in a payload; None if it is malformed."""
+    if len(payload) < _HEADER.size:
+        return None
+    phase, flags, outcome, length = _HEADER.unpack_from(payload)
+    if phase >= len(PHASES) or outcome >= len(OUTCOMES) or _HEADER.size + length > len(payload):
+        return None
+    body = payload[_HEADER.size:]
+    mission = body[:length].decode("utf-8", "replace")
+    reason = body[length:].rstrip(b"\0").decode("utf-8", "replace")
+    return AgentStatus(PHASES[phase], bool(flags & 1), OUTCOMES[outcome], mission, reason)

@@ -1,0 +1,151 @@
+"""Distance readings and how they travel: DISTANCE_SENSOR both ways, OBSTACLE_DISTANCE in, the sonar's servo.
+
+A reading is where a beam started, where it pointed and what it measured, in
+the scene frame. On the wire a reading is one DISTANCE_SENSOR: distances in
+centimetres, ``max_distance + 1`` meaning no echo, the mount as a
+MAV_SENSOR_ORIENTATION (a servo-swept sensor: ROTATION_CUSTOM with the mount
+in ``quaternion``, body frame forward-right-down). A receiver turns it back
+into a reading with the pose it knows; both ends are here so they agree.
+Whatever a peer sends, decoding yields a finite reading or none.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from vehicle.protocol.frames import Pose, beam_axis
+from vehicle.protocol.mav import mavlink
+
+CUSTOM = mavlink.MAV_SENSOR_ROTATION_CUSTOM
+UNKNOWN_DISTANCE = 65535  # OBSTACLE_DISTANCE: no sensor in this sector
+
+
+@dataclass
+class Reading:
+    """One range measurement in the scene frame."""
+
+    time: float
+    sensor: int
+    origin: np.ndarray  # (3,) scene metres
+    direction: np.ndarray  # (3,) unit vector of the beam's centre
+    distance: float | None  # metres, None when nothing echoed within range
+    max_range: float
+    yaw_offset: float  # degrees clockwise of the nose (mount plus servo)
+    beam_angle: float = 0.0  # degrees, half-angle of the cone
+    min_range: float = 0.0
+    pitch: float = 0.0  # degrees up of the mount
+
+    @property
+    def hit(self) -> np.ndarray | None:
+        return None if self.distance is None else self.origin + self.direction * self.distance
+
+
+@dataclass
+class Servo:
+    """A hobby servo turning a sensor: PWM pulse width (microseconds) maps linearly onto an angle (degrees)."""
+
+    pwm_min: int = 1000
+    pwm_max: int = 2000
+    angle_min: float = -90.0
+    angle_max: float = 90.0
+    pwm: int = 1500
+    channel: int = 9  # autopilot output that drives it (MAV_CMD_DO_SET_SERVO)
+
+    def angle(self) -> float:
+        span = (self.pwm - self.pwm_min) / (self.pwm_max - self.pwm_min)
+        return self.angle_min + span * (self.angle_max - self.angle_min)
+
+    def pwm_for(self, angle: float) -> int:
+        angle = min(self.angle_max, max(self.angle_min, angle))
+        span = (angle - self.angle_min) / (self.angle_max - self.angle_min)
+        return round(self.pwm_min + span * (self.pwm_max - self.pwm_min))
+
+    def set_angle(self, angle: float) -> None:
+        self.pwm = self.pwm_for(angle)
+
+
+# ---- sending -----------------------------------------------------------------------------------------
+def orientation_of(yaw_offset: float, pitch: float) -> tuple[int, list[float]]:
+    """MAV_SENSOR_ORIENTATION for a mount yaw (degrees clockwise) and pitch (up), or CUSTOM with a quaternion."""
+    if pitch == 0 and yaw_offset % 45 == 0:
+        return int(yaw_offset % 360) // 45, [0.0, 0.0, 0.0, 0.0]  # NONE, YAW_45 ... YAW_315
+    half_yaw, half_pitch = math.radians(yaw_offset) / 2, math.radians(pitch) / 2
+    # body frame is forward-right-down: yaw about z (down) then pitch about y (right)
+    cy, sy, cp, sp = math.cos(half_yaw), math.sin(half_yaw), math.cos(half_pitch), math.sin(half_pitch)
+    return CUSTOM, [cy * cp, -sy * sp, cy * sp, sy * cp]
+
+
+def distance_sensor(reading: Reading, time_boot_ms: int):
+    """The DISTANCE_SENSOR message of a reading."""
+    top = min(int(reading.max_range * 100), 65534)
+    bottom = int(reading.min_range * 100)
+    value = top + 1 if reading.distance is None else max(bottom, int(reading.distance * 100))
+    orientation, quaternion = orientation_of(reading.yaw_offset, reading.pitch)
+    fov = math.radians(2 * reading.beam_angle)
+    return mavlink.MAVLink_distance_sensor_message(
+        time_boot_ms & 0xFFFFFFFF, bottom, top, min(value, 65535), mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND,
+        reading.sensor & 0xFF, orientation, 0, fov, fov, quaternion, 0)
+
+
+# ---- receiving ---------------------------------------------------------------------------------------
+def mount_of(orientation: int, quaternion) -> tuple[float, float] | None:
+    """(yaw degrees clockwise of the nose, pitch degrees up) of a MAV_SENSOR_ORIENTATION; None for mounts a
+    horizontal map cannot use (rolled, upside down) or a quaternion that is no rotation."""
+    if 0 <= orientation < 8:  # NONE, YAW_45 ... YAW_315: clockwise from the nose
+        return 45.0 * orientation, 0.0
+    if orientation == mavlink.MAV_SENSOR_ROTATION_PITCH_270:
+        return 0.0, -90.0
+    if orientation == mavlink.MAV_SENSOR_ROTATION_PITCH_90:
+        return 0.0, 90.0
+    if orientation != CUSTOM:
+        return None
+    try:
+        w, qx, qy, qz = (float(q) for q in quaternion)
+    except (TypeError, ValueError):
+        return None
+    norm = w * w + qx * qx + qy * qy + qz * qz
+    if not math.isfinite(norm) or abs(norm - 1.0) > 0.1:
+        return None
+    fx = 1 - 2 * (qy * qy + qz * qz)  # the sensor's x axis in the body frame (forward-right-down)
+    fy = 2 * (qx * qy + w * qz)
+    fz = 2 * (qx * qz - w * qy)
+    return math.degrees(math.atan2(fy, fx)), math.degrees(math.atan2(-fz, math.hypot(fx, fy)))
+
+
+def reading_from(message, pose: Pose, time: float) -> Reading | None:
+    """The reading a DISTANCE_SENSOR describes, taken from a body at ``pose``; None if it is unusable."""
+    mount = mount_of(message.orientation, getattr(message, "quaternion", None))
+    if mount is None or message.max_distance <= 0:
+        return None
+    max_range = message.max_distance / 100.0
+    current = message.current_distance
+    distance = None if current > message.max_distance or current == 0 or current < message.min_distance \
+        else current / 100.0
+    fov = getattr(message, "horizontal_fov", 0.0)
+    beam = math.degrees(fov) / 2 if math.isfinite(fov) and 0 < fov < math.pi else 0.0
+    yaw_offset, pitch = mount
+    return Reading(time, message.id, np.array(pose.xyz()), beam_axis(pose, yaw_offset, pitch), distance, max_range,
+                   yaw_offset, beam, message.min_distance / 100.0, pitch)
+
+
+def readings_from_obstacles(message, pose: Pose, time: float) -> list[Reading]:
+    """The readings of an OBSTACLE_DISTANCE (one per sector with a sensor), from a body at ``pose``."""
+    increment = message.increment_f if getattr(message, "increment_f", 0.0) > 0 else float(message.increment)
+    offset = float(getattr(message, "angle_offset", 0.0))
+    if not (math.isfinite(increment) and math.isfinite(offset)) or increment <= 0 or message.max_distance <= 0:
+        return []
+    earth = getattr(message, "frame", mavlink.MAV_FRAME_BODY_FRD) in (
+        mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_LOCAL_NED)  # angles from north, not from the nose
+    max_range = message.max_distance / 100.0
+    readings = []
+    for sector, value in enumerate(message.distances):
+        if value == UNKNOWN_DISTANCE or sector * increment >= 360:
+            continue
+        yaw_offset = offset + sector * increment - (math.degrees(pose.yaw) if earth else 0.0)
+        distance = None if value > message.max_distance or value < message.min_distance else value / 100.0
+        readings.append(Reading(time, 100 + sector, np.array(pose.xyz()), beam_axis(pose, yaw_offset), distance,
+                                max_range, yaw_offset % 360, increment / 2, message.min_distance / 100.0))
+    return readings

@@ -1,0 +1,28 @@
+"""The named sensor suites a simulated vehicle can carry (``--sensors``).
+
+Kept apart from the sensor model so that a command line can list them
+without loading the ray casting and its compiled loops.
+"""
+
+from __future__ import annotations
+
+SENSOR_SUITES = {
+    "single": "one sonar looking forward (the thesis's vehicle)",
+    "triple": "three sonars: forward and 45 degrees to each side (sees walls alongside the path)",
+    "servo": "one sonar on a servo that sweeps it 90 degrees either side (the thesis's servo option)",
+}
+DEFAULT_SUITE = "triple"
+
+
+def sensor_suite(name: str) -> list:
+    """The sonars (``vehicle.sim.sensors.Sonar``) of a named sensor suite (see SENSOR_SUITES)."""
+    from vehicle.protocol.rangefinder import Servo
+    from vehicle.sim.sensors import Sonar
+
+    if name == "single":
+        return [Sonar("front")]
+    if name == "triple":
+        return [Sonar("front"), Sonar("left", mount_yaw=-45.0), Sonar("right", mount_yaw=45.0)]
+    if name == "servo":
+        return [Sonar("sweep", servo=Servo())]
+    raise ValueError(f"unknown sensor suite {name!r}; suites: {', '.join(SENSOR_SUITES)}")
