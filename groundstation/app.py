@@ -35,7 +35,7 @@ from groundstation.export import export_html
 from groundstation.link import LinkError
 from groundstation.replay import ReplayError
 from vehicle import __version__
-from vehicle.mapping.memory_map import MemoryMap, state_image
+from vehicle.mapping.memory_map import FREE_AT, OCCUPIED_AT, state_image, states_of
 from vehicle.protocol.waypoints import WaypointError, mission_text, parse_mission
 
 if TYPE_CHECKING:
@@ -144,14 +144,11 @@ def create_app(station: GroundStation) -> FastAPI:
             r0, c0 = (int(rows[0]), int(cols[0])) if len(rows) else (0, 0)
             r1, c1 = (int(rows[-1]) + 1, int(cols[-1]) + 1) if len(rows) else (0, 0)
             return {"source": source, "resolution": resolution, "origin": list(origin), "size": values.shape[0],
-                    "occupied_at": MemoryMap.OCCUPIED_AT, "free_at": MemoryMap.FREE_AT,
-                    "occupied": int(np.count_nonzero(values >= MemoryMap.OCCUPIED_AT)),
+                    "occupied_at": OCCUPIED_AT, "free_at": FREE_AT,
+                    "occupied": int(np.count_nonzero(values >= OCCUPIED_AT)),
                     "window": {"row": r0, "col": c0, "rows": r1 - r0, "cols": c1 - c0},
                     "values": values[r0:r1, c0:c1].tolist()}
-        states = np.zeros(values.shape, dtype=np.uint8)
-        states[values <= MemoryMap.FREE_AT] = 1
-        states[values >= MemoryMap.OCCUPIED_AT] = 2
-        rgba = state_image(states)
+        rgba = state_image(states_of(values))
         background = np.full(rgba.shape, (40, 42, 48, 255), dtype=np.uint8)
         alpha = rgba[..., 3:4] / 255.0
         picture = (rgba * alpha + background * (1 - alpha)).astype(np.uint8)

@@ -21,7 +21,7 @@ import numpy as np
 import viser
 
 from groundstation.state import Fleet, VehicleState
-from vehicle.mapping.memory_map import MemoryMap, state_image
+from vehicle.mapping.memory_map import state_image, states_of
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
 
@@ -235,9 +235,7 @@ class SceneView:
             return
         drawn["map"] = stream_version
         values, resolution, origin = grid
-        states = np.zeros(values.shape, dtype=np.uint8)
-        states[values <= MemoryMap.FREE_AT] = 1
-        states[values >= MemoryMap.OCCUPIED_AT] = 2
+        states = states_of(values)
         rows = np.flatnonzero(states.any(axis=1))
         cols = np.flatnonzero(states.any(axis=0))
         if not len(rows):

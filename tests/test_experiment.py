@@ -247,12 +247,12 @@ def test_the_warm_up_flight_reaches_every_compiled_loop():
     vehicle for seconds on a fresh install. In a process of its own, so no other test has called them;
     the loops these call are compiled into them."""
     script = """
-from vehicle.mapping import memory_map, planning
+from vehicle.mapping import planning, tracing
 from vehicle.sim import avoidance, sensors
 from vehicle.world import collision
 from vehicle.lab.experiment import warm_up
 warm_up()
-loops = [memory_map._project, memory_map._free_cells, sensors._nearest_echoes, avoidance._nearest_and_ahead,
+loops = [tracing.project, tracing.free_cells, sensors._nearest_echoes, avoidance._nearest_and_ahead,
          planning._supercover_is_clear, collision._point_triangle_distance]
 print([loop.__name__ for loop in loops if not loop.signatures])
 """
