@@ -106,8 +106,11 @@ def create_app(station: GroundStation) -> FastAPI:
 
     @app.get("/api/health", tags=["status"])
     def health():
+        scene = station.scene
         return {"status": "ok", "version": __version__, "mode": station.mode, "vehicles": len(station.fleet.ids()),
-                "links": station.link_urls}
+                "links": station.link_urls,
+                "scene": None if scene is None else {"name": scene.path.name if scene.path else None,
+                                                     "triangles": len(scene.mesh.faces)}}
 
     @app.get("/api/auth", tags=["status"], dependencies=[Depends(operator)])
     def auth():

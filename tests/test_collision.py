@@ -147,6 +147,35 @@ def test_world_accepts_a_start_just_clear_of_a_wall(wall_scene):
     Simulation(wall_scene, Kind.COPTER, start=(0.0, WALL_FACE_Y - RADIUS - 0.05))
 
 
+@pytest.fixture
+def roofed_room(make_scene, box):
+    """Ground, and a 6 x 6 m room around the origin: walls 3 m high, a floor slab 0.2 m thick and a roof on top."""
+    return make_scene(box(0, 0, -0.05, 100, 100, 0.1), box(0, 0, 0.1, 6, 6, 0.2), box(0, 0, 3.05, 6.4, 6.4, 0.1),
+                      box(3.1, 0, 1.5, 0.2, 6, 3), box(-3.1, 0, 1.5, 0.2, 6, 3), box(0, 3.1, 1.5, 6, 0.2, 3),
+                      box(0, -3.1, 1.5, 6, 0.2, 3))
+
+
+def test_a_start_height_stands_the_vehicle_on_the_floor_below_it_not_on_the_roof(roofed_room):
+    inside = Simulation(roofed_room, Kind.COPTER, start=(0.0, 0.0, 1.7))
+    assert inside.home[2] == pytest.approx(0.2)  # the floor's top
+    assert inside.pose.z == pytest.approx(0.2 + RADIUS + inside.limits.ground_clearance)
+    above = Simulation(roofed_room, Kind.COPTER, start=(0.0, 0.0))  # without a height: the highest surface
+    assert above.home[2] == pytest.approx(3.1)
+
+
+def test_the_start_viewpoints_height_counts_as_the_start_height(make_scene, box):
+    room = make_scene(box(0, 0, -0.05, 100, 100, 0.1), box(0, 0, 3.05, 6.4, 6.4, 0.1),
+                      'DEF Start Viewpoint { position 1 1 1.7 orientation 1 0 0 1.5708 }\n')
+    world = Simulation(room, Kind.ROVER)
+    assert (world.home[0], world.home[1]) == pytest.approx((1.0, 1.0))
+    assert world.home[2] == pytest.approx(0.0, abs=1e-4)  # under the roof, on the ground
+
+
+def test_a_start_height_with_nothing_below_it_is_refused(roofed_room):
+    with pytest.raises(PlacementError, match="nothing to stand on below the start"):
+        Simulation(roofed_room, Kind.COPTER, start=(20.0, 20.0, -5.0))
+
+
 def fly_into_the_wall(wall_scene) -> Simulation:
     world = Simulation(wall_scene, Kind.COPTER, start=(0.0, 0.0), sensors=REAR_ONLY)
     world.autopilot.arm()

@@ -71,7 +71,7 @@ def test_the_layers_are_where_the_rules_expect_them():
 @pytest.mark.parametrize("package", sorted(ALLOWED))
 def test_each_package_imports_only_the_packages_below_it(package):
     checked, broken = 0, []
-    for name, path in modules(package):
+    for _, path in modules(package):
         for line, imported in project_imports(path):
             checked += 1
             target = package_of(imported)
@@ -107,3 +107,19 @@ def test_importing_the_whole_ground_station_loads_neither_numba_nor_the_simulato
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("command", [["vehicle", "--help"], ["vehicle", "scene", "--help"],
+                                     ["vehicle", "experiment", "--help"], ["vehicle", "sweep", "--help"],
+                                     ["groundstation", "--help"], ["groundstation", "demo", "--help"]])
+def test_help_loads_no_mission_geometry_or_compiled_code(command):
+    """Asking for help answers at once: it loads no mission, no trimesh or scipy, and nothing compiled."""
+    script = (f"import sys\nfrom {command[0]}.cli import main\ntry:\n    main({command[1:]!r})\n"
+              "except SystemExit:\n    pass\n"
+              "heavy = ('numba', 'trimesh', 'scipy', 'embreex', 'viser', 'fastapi', 'vehicle.agent.missions.')\n"
+              "print(sorted({m.split('.')[0] if not m.startswith('vehicle') else m for m in sys.modules "
+              "if m.startswith(heavy)}), file=sys.stderr)")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "usage:" in done.stdout
+    assert done.stderr.strip() == "[]"

@@ -56,7 +56,11 @@ class Simulation:
         self.limits = limits or Limits()
         x, y, *height = start if start is not None else (scene.start or (0.0, 0.0))
         heading = heading if heading is not None else (scene.start_heading or 0.0)
-        ground = self.caster.ground_height(x, y, below=height[0] if height else None)
+        ground = self.caster.ground_height(x, y)
+        if height and ground > height[0]:  # a roof above the start height: stand on what is below it
+            ground = self.caster.ground_height(x, y, default=math.nan, below=height[0])
+            if math.isnan(ground):
+                raise PlacementError(f"nothing to stand on below the start x={x:g} y={y:g} z={height[0]:g}")
         self.body = Body(self.kind, self.limits, Pose(x, y, 0.0, yaw=math.radians(heading) % (2 * math.pi)))
         self.body.pose.z = self.body.rest_height(ground)
         walkable = self.kind is Kind.ROVER  # a rover's wheels touch the ground it drives on

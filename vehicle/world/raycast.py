@@ -94,16 +94,9 @@ class RayCaster:
 
     def ground_height(self, x: float, y: float, default: float = 0.0, below: float | None = None) -> float:
         """Height of the highest surface a vertical ray from above meets at (x, y); with ``below``, the highest
-        surface below that height (the floor of a roofed room, not its roof)."""
+        surface below that height (the floor of a roofed room, not its roof). ``default`` where there is none."""
         if self._empty:
             return default
-        for top in (self.top + 10.0, below):  # from above everything first: under open sky that is all
-            if top is None:
-                break
-            distance, _ = self.cast(np.array([[x, y, top]]), np.array([[0.0, 0.0, -1.0]]))
-            if not np.isfinite(distance[0]):
-                return default
-            height = top - float(distance[0])
-            if below is None or height <= below:
-                return height
-        return default
+        top = self.top + 10.0 if below is None else below
+        distance, _ = self.cast(np.array([[x, y, top]]), np.array([[0.0, 0.0, -1.0]]))
+        return default if not np.isfinite(distance[0]) else top - float(distance[0])

@@ -198,7 +198,9 @@ class _Builder:
         if build is None:
             self.skipped[f"unsupported node {geometry.type}"] += 1
             return
-        vertices, faces = build(geometry)
+        vertices, faces, *dropped = build(geometry)
+        if dropped and dropped[0]:
+            self.skipped["faces whose coordIndex points past their coordinates"] += dropped[0]
         if len(faces):
             self._add(node, vertices, faces, matrix)
 
@@ -295,15 +297,21 @@ def _color(appearance: Node | None) -> tuple[int, ...]:
 # --- geometry: each returns (vertices (n, 3) float, faces (m, 3) int) in the node's local frame -----
 
 
-def _indexed_face_set(node: Node) -> tuple[np.ndarray, np.ndarray]:
+def _indexed_face_set(node: Node) -> tuple[np.ndarray, np.ndarray, int]:
+    """Its points and triangles, and how many faces it dropped for naming a point it does not have (as VRML
+    browsers do, the rest of the shape stands)."""
     points = _coordinates(node)
     index = _integers(node, "coordIndex")
-    bad = index[(index < -1) | (index >= len(points))]
-    if bad.size:
-        raise node.error(f"coordIndex {bad[0]} out of range for {len(points)} points", "coordIndex")
+    bad = (index < -1) | (index >= len(points))
+    dropped = 0
+    if bad.any():
+        face = np.cumsum(index == -1) - (index == -1)  # the face each entry belongs to (a -1 ends its own)
+        broken = np.unique(face[bad])
+        dropped = len(broken)
+        index = index[~np.isin(face, broken)]
     with np.errstate(over="ignore", invalid="ignore"):  # polygons too huge for their normal are dropped
         faces = _triangulate(points, index)
-    return points, faces if _bool(node, "ccw", True) else faces[:, ::-1]
+    return points, faces if _bool(node, "ccw", True) else faces[:, ::-1], dropped
 
 
 def _coordinates(node: Node) -> np.ndarray:

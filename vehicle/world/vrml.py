@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 HEADER = "#VRML V2.0 utf8"
+_HEADER = re.compile(r"[ \t]*#VRML[ \t]+V2\.0[ \t]+utf-?8(?:[ \t\r\n]|$)", re.IGNORECASE)  # as browsers read it
 MAX_DEPTH = 64  # node nesting: real exports use 6-20; parse + walk of an Inline stay < 600 frames
 MAX_DECOMPRESSED = 512 * 2**20
 
@@ -190,8 +191,8 @@ class _Parser:
     # --- statements -------------------------------------------------------------------------
 
     def document(self) -> list[Node]:
-        if not self.text.startswith(HEADER):
-            found = self.text[:40].partition("\n")[0]
+        if not _HEADER.match(self.text):
+            found = self.text[:40].partition("\n")[0].rstrip("\r")
             raise self.source.error(0, f"expected header {HEADER!r} but found {found!r}")
         self.pos = _LINE.match(self.text).end()  # the rest of the header line is a comment
         nodes = []
