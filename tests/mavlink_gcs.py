@@ -1,32 +1,20 @@
 """A minimal independent ground station for tests: pymavlink's mavlink_connection on a real UDP socket.
 
-Waits are bounded in the vehicle's simulated time (the ``time_boot_ms`` it
-reports, as ArduPilot's autotest waits on SITL time), with a generous wall
-clock backstop so a broken vehicle fails a test instead of hanging it.
+Its waits are the harness's (``harness.wait_sim``), bounded in the vehicle's
+simulated time: the ``time_boot_ms`` it reports.
 """
 
 from __future__ import annotations
 
-import socket
-import threading
 import time
 from collections.abc import Callable
 
-from vehicle.lab.live import SimOptions, SimVehicle
+from harness import WaitTimeout, wait_sim
+
 from vehicle.protocol.mav import mavlink, mavutil
 
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
-
-
-class WaitTimeout(AssertionError):
-    """A condition did not come true within its simulated-time budget."""
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 class Gcs:
@@ -65,22 +53,19 @@ class Gcs:
     def wait(self, kind: str | None, condition: Callable = lambda m: True, sim_timeout: float = 30.0,
              heartbeats: bool = True, component: int | None = AUTOPILOT):
         """The first message of ``kind`` from ``component`` (the autopilot unless told; None: any) for which
-        ``condition`` holds, within ``sim_timeout`` simulated s."""
-        start_sim = None
-        wall_deadline = time.monotonic() + sim_timeout / self.speedup * 4 + 15
+        ``condition`` holds, within ``sim_timeout`` simulated s. Sends its own heartbeat meanwhile."""
         last_beat = 0.0
-        while time.monotonic() < wall_deadline:
+
+        def read():
+            nonlocal last_beat
             if heartbeats and time.monotonic() - last_beat > 0.3:
                 self.heartbeat()
                 last_beat = time.monotonic()
             message = self.recv(component=component)
-            if start_sim is None and self.sim_time > 0:
-                start_sim = self.sim_time
-            if start_sim is not None and self.sim_time - start_sim > sim_timeout:
-                break
-            if message is not None and (kind is None or message.get_type() == kind) and condition(message):
-                return message
-        raise WaitTimeout(f"no {kind} matching the condition within {sim_timeout} s of simulated time")
+            matches = message is not None and (kind is None or message.get_type() == kind)
+            return (message if matches else None), (self.sim_time or None)
+
+        return wait_sim(read, condition, sim_timeout, self.speedup, f"{kind or 'a message'} matching the condition")
 
     def wait_text(self, fragment: str, since: int = 0, sim_timeout: float = 30.0, heartbeats: bool = True) -> str:
         """A STATUSTEXT containing ``fragment``, among those received from index ``since`` on."""
@@ -110,19 +95,3 @@ class Gcs:
         """A HEARTBEAT in that mode. Heartbeats come once a wall second, so the wait covers at least
         three of them however fast the simulation runs."""
         return self.wait("HEARTBEAT", lambda m: m.custom_mode == number, max(sim_timeout, 3.0 * self.speedup))
-
-
-class RunningSim:
-    """A SimVehicle on its own thread, talking over real UDP sockets."""
-
-    def __init__(self, stepper, urls: list[str], speedup: float = 10.0, **options):
-        self.sim = SimVehicle(stepper, SimOptions(urls, speedup=speedup, **options))
-        self.thread = threading.Thread(target=self.sim.run, daemon=True)
-
-    def __enter__(self) -> SimVehicle:
-        self.thread.start()
-        return self.sim
-
-    def __exit__(self, *exc) -> None:
-        self.sim.stop()
-        self.thread.join(timeout=5)

@@ -29,8 +29,18 @@ import msgspec
 import numpy as np
 import pytest
 import zstandard
-from browser_harness import CHROMIUM, Copter, Station, launch_chromium, load_default_scene, poll
+from harness import (
+    CHROMIUM,
+    RunningSim,
+    RunningStation,
+    launch_chromium,
+    load_default_scene,
+    start_sim,
+    wait_wall,
+)
 from PIL import Image
+
+from vehicle.agent.settings import Settings
 
 pytestmark = pytest.mark.browser
 
@@ -59,16 +69,21 @@ def scene():
 
 @pytest.fixture(scope="module")
 def station(scene, tmp_path_factory):
-    running = Station(scene, TOKEN, tmp_path_factory.mktemp("recordings")).start()
-    yield running
-    running.close()
+    with RunningStation(scene, tmp_path_factory.mktemp("recordings"), TOKEN) as running:
+        yield running
+
+
+def copter_for(station: RunningStation, scene, sysid: int, mission: str = "browse", autostart: bool = False,
+               start: tuple[float, float] | None = None) -> RunningSim:
+    """A simulated copter in the scene sending to the station, started."""
+    return start_sim(station, scene, sysid, "copter", mission, autostart, start, Settings(), SPEEDUP).start()
 
 
 @pytest.fixture(scope="module")
 def flyer(scene, station):
     """A copter flying the search mission from the scene's start for the whole module."""
-    copter = Copter(scene, station.mavlink_port, FLYER, mission="search", autostart=True, speedup=SPEEDUP).start()
-    poll(lambda: station.vehicle(FLYER), 15, what="the flying copter is heard")
+    copter = copter_for(station, scene, FLYER, mission="search", autostart=True)
+    wait_wall(lambda: station.http.vehicle(FLYER), 15, "the flying copter is heard")
     yield copter
     copter.stop()
 
@@ -76,12 +91,12 @@ def flyer(scene, station):
 @pytest.fixture
 def copters(scene, station):
     """Start idle copters for one test: ``copters(sysid, start=(x, y))``; stopped at the end of the test."""
-    started: list[Copter] = []
+    started: list[RunningSim] = []
 
-    def start(sysid: int, start: tuple[float, float] | None = None, mission: str = "browse") -> Copter:
-        copter = Copter(scene, station.mavlink_port, sysid, mission=mission, speedup=SPEEDUP, start=start).start()
+    def start(sysid: int, start: tuple[float, float] | None = None, mission: str = "browse") -> RunningSim:
+        copter = copter_for(station, scene, sysid, mission=mission, start=start)
         started.append(copter)
-        poll(lambda: station.vehicle(sysid), 15, what=f"vehicle {sysid} is heard")
+        wait_wall(lambda: station.http.vehicle(sysid), 15, f"vehicle {sysid} is heard")
         return copter
 
     yield start
@@ -100,7 +115,7 @@ def browser():
 class Page:
     """A fresh browser context (no stored token) with one page, recording JavaScript errors."""
 
-    def __init__(self, browser, station: Station):
+    def __init__(self, browser, station: RunningStation):
         self.context = browser.new_context(viewport={"width": 1200, "height": 760})
         self.context.set_default_timeout(UI_TIMEOUT)
         self.page = self.context.new_page()
@@ -128,7 +143,7 @@ class Page:
 
     def poll(self, condition, timeout: float, what: str):
         """Like ``poll``, but waiting inside Playwright so the page's events keep arriving."""
-        return poll(condition, timeout, 0.0, what, sleep=lambda: self.page.wait_for_timeout(200))
+        return wait_wall(condition, timeout, what, sleep=lambda: self.page.wait_for_timeout(200))
 
     def _request(self, request) -> None:
         if request.method == "POST" and "/commands" in request.url:
@@ -140,7 +155,7 @@ class Page:
         if not view:
             self.page.route("**/viz/**", lambda route: route.fulfill(
                 body="<!doctype html><title>3D view left out</title>", content_type="text/html"))
-        self.page.goto(f"{self.station.url}/{fragment}")
+        self.page.goto(f"{self.station.base}/{fragment}")
         return self.page
 
     def wait_for_view(self, tmp_path: Path, sysid: int) -> None:
@@ -234,8 +249,8 @@ def press(button) -> None:
     button.dispatch_event("click")
 
 
-def wait_sim(station: Station, sysid: int, condition, sim_timeout: float, what: str) -> dict:
-    return station.wait_vehicle(sysid, condition, sim_timeout, SPEEDUP, what)
+def wait_sim(station: RunningStation, sysid: int, condition, sim_timeout: float, what: str) -> dict:
+    return station.http.wait_vehicle(sysid, condition, sim_timeout, SPEEDUP, what)
 
 
 # ---- the tests ---------------------------------------------------------------------------------------
@@ -259,17 +274,17 @@ def test_status_updates_while_the_vehicle_flies(browser_page, station, flyer):
     expect(card.locator(".position")).to_have_text(re.compile(r"^x "))
     first_clock = card.locator(".sim-time").inner_text()
     first_position = card.locator(".position").inner_text()
-    start = station.vehicle(FLYER)["time_boot_s"]
+    start = station.http.vehicle(FLYER)["time_boot_s"]
     clocks, positions = {first_clock}, {first_position}
     deadline = time.monotonic() + 30 / SPEEDUP * 4 + 15
     while len(clocks) < 3 or len(positions) < 3:
         clocks.add(card.locator(".sim-time").inner_text())
         positions.add(card.locator(".position").inner_text())
-        now = station.vehicle(FLYER)["time_boot_s"]
+        now = station.http.vehicle(FLYER)["time_boot_s"]
         assert now - start <= 30 and time.monotonic() < deadline, \
             f"the card did not follow the vehicle for 30 s of its time: clocks {clocks}, positions {positions}"
         # the page shows the vehicle's own clock (to 0.1 s), never ahead of what the vehicle reported since
-        assert sim_time(card.locator(".sim-time").inner_text()) <= station.vehicle(FLYER)["time_boot_s"] + 0.05
+        assert sim_time(card.locator(".sim-time").inner_text()) <= station.http.vehicle(FLYER)["time_boot_s"] + 0.05
         browser_page.page.wait_for_timeout(200)
     for text in positions:
         position(text)  # every one is a well-formed position
@@ -294,8 +309,8 @@ def test_commands_need_the_token(browser_page, station, flyer):
         return [(await send({})).status, (await send({Authorization: `Bearer ${token}`})).status];
     }""", [FLYER, TOKEN + "-wrong"])
     assert status == [401, 401]
-    assert station.vehicle(FLYER)["mode"] != "RTL"
-    assert browser_page.commands == [f"{station.url}/api/vehicles/{FLYER}/commands"] * 2  # only ours
+    assert station.http.vehicle(FLYER)["mode"] != "RTL"
+    assert browser_page.commands == [f"{station.base}/api/vehicles/{FLYER}/commands"] * 2  # only ours
 
 
 def test_sign_in_and_return_home(browser_page, station, copters):
@@ -327,7 +342,7 @@ def test_token_in_the_url_signs_in(browser_page, station, flyer):
 def test_kill_needs_a_second_click(browser_page, station, copters):
     sysid = 3
     copters(sysid)
-    assert station.command(sysid, action="arm") == "accepted"
+    assert station.http.result(sysid, action="arm") == "accepted"
     page = browser_page.open(f"#token={TOKEN}")
     card = browser_page.card(sysid)
     expect(card.locator(".armed")).to_have_text("ARMED")
@@ -339,12 +354,12 @@ def test_kill_needs_a_second_click(browser_page, station, copters):
     expect(kill).to_have_class(re.compile(r"\bconfirming\b"))
     page.wait_for_timeout(1500)  # a command would be acked in well under a second
     assert browser_page.commands == []
-    assert station.vehicle(sysid)["armed"] is True
+    assert station.http.vehicle(sysid)["armed"] is True
     expect(card.locator(".armed")).to_have_text("ARMED")
 
     press(kill)
     expect(card.locator(".ack")).to_have_text(re.compile(r"^Kill: accepted"))
-    assert browser_page.commands == [f"{station.url}/api/vehicles/{sysid}/commands"]
+    assert browser_page.commands == [f"{station.base}/api/vehicles/{sysid}/commands"]
     wait_sim(station, sysid, lambda v: v["armed"] is False, 5, "disarmed by the kill")
     expect(card.locator(".armed")).to_have_text("disarmed")
     expect(kill).to_have_text("Kill")
@@ -352,7 +367,7 @@ def test_kill_needs_a_second_click(browser_page, station, copters):
 
 def test_link_loss_shows_and_clears(browser_page, station, scene):
     sysid = 4
-    copter = Copter(scene, station.mavlink_port, sysid, speedup=SPEEDUP).start()
+    copter = copter_for(station, scene, sysid)
     try:
         page = browser_page.open()
         card = browser_page.card(sysid)
@@ -368,7 +383,7 @@ def test_link_loss_shows_and_clears(browser_page, station, scene):
         expect(card.locator(".lost-banner")).to_be_visible()
         assert shown <= 5.0, f"link loss took {shown:.1f} s to show"
 
-        copter = Copter(scene, station.mavlink_port, sysid, speedup=SPEEDUP).start()
+        copter = copter_for(station, scene, sysid)
         expect(card).not_to_have_class(re.compile(r"\blost\b"), timeout=8000)
         expect(card.locator(".link")).to_have_text(re.compile(r"^link ok"))
         expect(card.locator(".lost-banner")).to_be_hidden()
@@ -400,7 +415,8 @@ def test_replay_in_the_page(browser_page, station, flyer, tmp_path):
             expect(button).to_be_disabled()
             expect(button).to_have_attribute("title", REPLAY_HINT)
         expect(card.locator(".command-hint")).to_have_text(REPLAY_HINT)
-        refused = station.post(f"/api/vehicles/{FLYER}/commands", {"action": "rtl"})
+        refused = station.http.post(f"/api/vehicles/{FLYER}/commands", json={"action": "rtl"},
+                                       headers=station.http.operator)
         assert refused.status_code == 409, refused.text
 
         play = page.locator("#replay-play")
@@ -420,15 +436,15 @@ def test_replay_in_the_page(browser_page, station, flyer, tmp_path):
             clock = f"{fixed(value)} / {fixed(duration)} s"
             expect(page.locator("#replay-clock")).to_have_text(clock)
             # the server has seeked there, and the card shows the vehicle as it was then
-            poll(lambda: abs(station.http.get("/api/replay").json()["replay"]["time"] - value) < 0.05, 10,
-                 what=f"the replay is at {value} s")
-            replayed = station.vehicle(FLYER)
+            wait_wall(lambda: abs(station.http.get("/api/replay").json()["replay"]["time"] - value) < 0.05, 10,
+                      f"the replay is at {value} s")
+            replayed = station.http.vehicle(FLYER)
             expected = f"x {replayed['position']['x']:.1f} m, y {replayed['position']['y']:.1f} m, " \
                        f"alt {replayed['position']['z']:.1f} m"
             expect(card.locator(".position")).to_have_text(re.compile(
                 r"^x -?[\d.]+ m, y -?[\d.]+ m, alt -?[\d.]+ m$"))
-            poll(lambda: _close(position(card.locator(".position").inner_text()), position(expected)), 10,
-                 what=f"the card shows the replayed position {expected}")
+            wait_wall(lambda: _close(position(card.locator(".position").inner_text()), position(expected)), 10,
+                      f"the card shows the replayed position {expected}")
             expect(page.locator("#replay-clock")).to_have_text(clock)
             return card.locator(".position").inner_text(), card.locator(".sim-time").inner_text()
 
@@ -449,7 +465,7 @@ def test_replay_in_the_page(browser_page, station, flyer, tmp_path):
         expect(card.locator(".command-hint")).to_be_hidden()
         assert station.http.get("/api/replay").json()["mode"] == "live"
     finally:
-        station.post("/api/replay/stop", {})
+        station.http.post("/api/replay/stop", json={}, headers=station.http.operator)
 
 
 def _close(shown: tuple[float, ...], expected: tuple[float, ...], tolerance: float = 0.11) -> bool:

@@ -31,11 +31,11 @@ from test_browser import (  # noqa: E402, F401 - fixtures are used by name
 def test_click_to_go(browser_page, station, copters, tmp_path):
     sysid = 5
     copters(sysid, start=(6.0, 6.0))  # north-east of the scene's centre, in the open
-    assert station.command(sysid, action="set_mode", mode="GUIDED") == "accepted"
-    assert station.command(sysid, action="arm") == "accepted"
-    assert station.command(sysid, action="takeoff", altitude=4) == "accepted"
+    assert station.http.result(sysid, action="set_mode", mode="GUIDED") == "accepted"
+    assert station.http.result(sysid, action="arm") == "accepted"
+    assert station.http.result(sysid, action="takeoff", altitude=4) == "accepted"
     wait_sim(station, sysid, lambda v: v["position"]["alt"] > 2.0, 20, "airborne")
-    assert station.command(sysid, action="abort") == "accepted"  # hold there (the operator takes over)
+    assert station.http.result(sysid, action="abort") == "accepted"  # hold there (the operator takes over)
     wait_sim(station, sysid, lambda v: v["mode"] == "BRAKE", 5, "holding in BRAKE")
 
     page = browser_page.open(f"#token={TOKEN}", view=True)
@@ -59,7 +59,7 @@ def test_click_to_go(browser_page, station, copters, tmp_path):
     page.select_option("#target-vehicle", str(sysid))
     go = page.locator("#go-here")
     expect(go).to_be_enabled()
-    before = station.vehicle(sysid)["position"]
+    before = station.http.vehicle(sysid)["position"]
     distance = math.dist((before["x"], before["y"]), target)
     assert distance > 4, (before, target)
     press(go)

@@ -28,10 +28,11 @@ import httpx
 import numpy as np
 import pytest
 import websockets.sync.client
-from groundstation_harness import (
+from harness import (
     TOKEN,
     RunningStation,
     free_tcp_port,
+    free_udp_port,
     small_scene,
     start_sim,
     take_off,
@@ -39,7 +40,6 @@ from groundstation_harness import (
     wait_mode,
     wait_wall,
 )
-from mavlink_gcs import free_udp_port
 from PIL import Image
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
@@ -352,7 +352,7 @@ def test_abort_brakes_a_copter(api, flyer):
     assert api.command(1, action="abort").json()["result"] == "accepted"
     wait_mode(api, 1, "BRAKE")
     stopped = api.wait_vehicle(1, lambda v: v["speed"] < 0.05, sim_timeout=10, what="standstill")
-    later = api.wait_sim(1, 3.0)
+    later = api.wait_sim_time(1, 3.0)
     assert later["mode"] == "BRAKE"
     assert math.dist((later["position"]["x"], later["position"]["y"]),
                      (stopped["position"]["x"], stopped["position"]["y"])) < 0.1
@@ -405,7 +405,7 @@ def test_arm_and_disarm_answer_with_result_words(api, grounded, flyer):
     wait_armed(api, 2, False)
     airborne(api)
     assert api.command(1, action="disarm").json()["result"] == "failed"  # flying: ArduPilot refuses
-    after = api.wait_sim(1, 1.0)
+    after = api.wait_sim_time(1, 1.0)
     assert after["armed"] and after["position"]["alt"] > 3.0
 
 

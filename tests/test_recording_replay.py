@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from groundstation_harness import (
+from harness import (
     SCENE_TEXT,
     Api,
     RunningStation,

@@ -14,7 +14,8 @@ import time
 
 import numpy as np
 import pytest
-from mavlink_gcs import COMPANION, Gcs, RunningSim, free_udp_port
+from harness import RunningSim, free_udp_port
+from mavlink_gcs import COMPANION, Gcs
 
 from vehicle.agent.settings import Settings
 from vehicle.lab.stepper import simulate

@@ -1,0 +1,282 @@
+"""The one test harness: real ground stations, simulated vehicles on real sockets, Chromium, and the waits.
+
+- ``RunningStation``: a ``GroundStation`` and its web app under uvicorn on a
+  thread, listening for MAVLink on a free UDP port (``udpin``), recording to a
+  folder; ``station.api()`` gives an httpx client that knows the operator token.
+- ``RunningSim``: a simulated vehicle (``vehicle sim``'s SimVehicle) on a
+  thread; ``start_sim`` makes one that sends to a station.
+- Waits: ``wait_sim`` bounds a wait in the vehicle's simulated time (as
+  ArduPilot's autotest waits on SITL time), with a wall-clock backstop so a
+  vehicle that stops talking fails a test instead of hanging it; ``wait_wall``
+  bounds a wait on what runs on the wall clock (the status stream, link loss).
+  Both raise ``WaitTimeout``.
+- ``launch_chromium``: Debian's Chromium with the flags that give WebGL
+  through SwiftShader (see FIELD-NOTES.md); a browser is never downloaded.
+"""
+
+from __future__ import annotations
+
+import functools
+import socket
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import httpx
+import uvicorn
+
+from groundstation.app import create_app
+from groundstation.server import GroundStation
+from vehicle.agent.settings import Settings
+from vehicle.lab.live import SimOptions, SimVehicle
+from vehicle.lab.stepper import Stepper, simulate
+from vehicle.world.bundled import default_scene
+from vehicle.world.scene import Scene, load_scene, parse_scene
+
+TOKEN = "test-operator-token"
+SPEEDUP = 10.0
+# heartbeats (mode, armed) come once a wall second, that is every SPEEDUP simulated seconds: waits on them
+# need that much simulated time and some
+HEARTBEAT_WAIT = 2.5 * SPEEDUP
+WALL_Y = 8.0  # the south face of a wall north of the origin in ``small_scene``
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+
+# flat ground, a wall north of the start and one east of it: something for the sonar to see
+SCENE_TEXT = f"""#VRML V2.0 utf8
+Transform {{ translation 0 0 -0.5 children Shape {{ geometry Box {{ size 80 80 1 }} }} }}
+Transform {{ translation 0 {WALL_Y + 0.25} 3 children Shape {{ geometry Box {{ size 20 0.5 6 }} }} }}
+Transform {{ translation 9.25 0 3 children Shape {{ geometry Box {{ size 0.5 12 6 }} }} }}
+"""
+
+
+class WaitTimeout(AssertionError):
+    """A condition did not come true within its budget."""
+
+
+def small_scene() -> Scene:
+    return parse_scene(SCENE_TEXT)
+
+
+def load_default_scene() -> Scene:
+    return load_scene(default_scene())
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def free_tcp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+# ---- waits ----------------------------------------------------------------------------------------------
+def wait_sim(read: Callable[[], tuple[object, float | None]], condition: Callable[[object], object],
+             sim_timeout: float, speedup: float = SPEEDUP, what: str = "condition"):
+    """The first value ``read()`` gives that ``condition`` holds for, within ``sim_timeout`` seconds of the
+    vehicle's simulated time. ``read`` returns (value or None, the vehicle's latest simulated time or None);
+    the wall clock only backs the wait up (four times the budget at ``speedup``, and 15 s)."""
+    deadline = time.monotonic() + sim_timeout / speedup * 4 + 15
+    start = last = None
+    while time.monotonic() < deadline:
+        value, sim = read()
+        if value is not None:
+            last = value
+            if condition(value):
+                return value
+        if sim is not None:
+            start = sim if start is None else start
+            if sim - start > sim_timeout:
+                break
+    raise WaitTimeout(f"{what}: not met within {sim_timeout:g} s of simulated time; last: {last}")
+
+
+def wait_wall(condition: Callable[[], object], timeout: float, what: str = "condition", period: float = 0.05,
+              sleep: Callable[[], None] | None = None):
+    """``condition()``'s first truthy value within ``timeout`` wall seconds (for wall-clock properties).
+
+    ``sleep`` replaces ``time.sleep(period)``: with Playwright's sync API, events (websocket
+    frames, requests) reach their handlers only while Playwright waits, so pass a page's wait."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise WaitTimeout(f"{what} not met within {timeout} s")
+        if sleep is not None:
+            sleep()
+        else:
+            time.sleep(period)
+
+
+# ---- vehicles ---------------------------------------------------------------------------------------------
+class RunningSim:
+    """A SimVehicle on its own thread, talking over real UDP sockets (a context manager, or start/stop)."""
+
+    def __init__(self, stepper: Stepper, urls: list[str], speedup: float = SPEEDUP, **options):
+        self.sim = SimVehicle(stepper, SimOptions(urls, speedup=speedup, **options))
+        self.world = stepper.simulation
+        self.speedup = speedup
+        self.thread = threading.Thread(target=self.sim.run, daemon=True)
+
+    def __enter__(self) -> SimVehicle:
+        self.thread.start()
+        return self.sim
+
+    def __exit__(self, *exc) -> None:
+        self.sim.stop()
+        self.thread.join(timeout=5)
+
+    def start(self) -> RunningSim:
+        self.__enter__()
+        return self
+
+    def stop(self) -> None:
+        if self.thread.is_alive():
+            self.__exit__(None, None, None)
+
+
+def make_vehicle(scene: Scene, kind: str = "copter", mission: str = "browse", autostart: bool = False,
+                 settings: Settings | None = None, start: tuple[float, ...] | None = None) -> Stepper:
+    return simulate(scene, mission, kind, settings or Settings(space_size=20), start, autostart=autostart)
+
+
+def start_sim(station: RunningStation, scene: Scene, sysid: int = 1, kind: str = "copter", mission: str = "browse",
+              autostart: bool = False, start: tuple[float, ...] | None = None, settings: Settings | None = None,
+              speedup: float = SPEEDUP, **options) -> RunningSim:
+    """A simulated vehicle sending to the station (not started: use it as a context manager or ``start()``)."""
+    stepper = make_vehicle(scene, kind, mission, autostart, settings, start)
+    return RunningSim(stepper, [station.vehicle_url()], speedup=speedup, sysid=sysid, **options)
+
+
+# ---- the ground station ------------------------------------------------------------------------------------
+class RunningStation:
+    """GroundStation on ``udpin:127.0.0.1:<free port>`` with its app served by uvicorn on a thread."""
+
+    def __init__(self, scene: Scene | None, record_dir: str | Path | None, token: str = TOKEN, **station):
+        self.mavlink_port = free_udp_port()
+        self.url = f"udpin:127.0.0.1:{self.mavlink_port}"
+        self.station = GroundStation([self.url], scene, token, record_dir, **station)
+        self.token = token
+        self.http_port = free_tcp_port()
+        self.base = f"http://127.0.0.1:{self.http_port}"
+        config = uvicorn.Config(create_app(self.station), host="127.0.0.1", port=self.http_port,
+                                log_level="warning", ws_ping_interval=None)
+        self.server = uvicorn.Server(config)
+        self._thread = threading.Thread(target=self.server.run, name="uvicorn", daemon=True)
+
+    def __enter__(self) -> RunningStation:
+        self._thread.start()
+        wait_wall(lambda: self.server.started or not self._thread.is_alive(), 20, "uvicorn started")
+        assert self.server.started, "uvicorn did not start"
+        self.station.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.server.should_exit = True
+        self._thread.join(timeout=10)
+        if "http" in self.__dict__:
+            self.http.close()
+        self.station.close()
+
+    def vehicle_url(self) -> str:
+        """The pymavlink URL a vehicle sends to."""
+        return f"udpout:127.0.0.1:{self.mavlink_port}"
+
+    def api(self, **kwargs) -> Api:
+        """A new httpx client for the station (close it, or use it as a context manager)."""
+        return Api(self.base, self.token, **kwargs)
+
+    @functools.cached_property
+    def http(self) -> Api:
+        """The station's own client, closed with it."""
+        return self.api()
+
+
+class Api(httpx.Client):
+    """httpx client for the station that knows the operator token."""
+
+    def __init__(self, base: str, token: str, timeout: float = 30.0):
+        super().__init__(base_url=base, timeout=timeout)
+        self.token = token
+
+    @property
+    def operator(self) -> dict[str, str]:
+        return {"Authorization": f"Bearer {self.token}"}
+
+    def command(self, sysid: int, **body) -> httpx.Response:
+        return self.post(f"/api/vehicles/{sysid}/commands", json=body, headers=self.operator)
+
+    def result(self, sysid: int, **body) -> str:
+        """POST a command with the token; the vehicle's ACK result ("accepted", ...)."""
+        response = self.command(sysid, **body)
+        assert response.status_code == 200, (response.status_code, response.text)
+        return response.json()["result"]
+
+    def vehicles(self) -> dict[int, dict]:
+        return {v["sysid"]: v for v in self.get("/api/vehicles").json()}
+
+    def vehicle(self, sysid: int) -> dict | None:
+        response = self.get(f"/api/vehicles/{sysid}")
+        return response.json() if response.status_code == 200 else None
+
+    def wait_vehicle(self, sysid: int, condition: Callable[[dict], object], sim_timeout: float = 30.0,
+                     speedup: float = SPEEDUP, what: str = "condition") -> dict:
+        """GET /api/vehicles/{sysid} until ``condition(vehicle)``, within ``sim_timeout`` of its simulated time."""
+        def read():
+            vehicle = self.vehicle(sysid)
+            if vehicle is None:
+                time.sleep(0.05)
+                return None, None
+            time.sleep(0.05)
+            return vehicle, vehicle["time_boot_s"]
+
+        return wait_sim(read, condition, sim_timeout, speedup, f"vehicle {sysid}: {what}")
+
+    def wait_sim_time(self, sysid: int, seconds: float, speedup: float = SPEEDUP) -> dict:
+        """Let ``seconds`` of the vehicle's simulated time pass."""
+        start = self.wait_vehicle(sysid, lambda v: v["time_boot_s"] is not None, speedup=speedup,
+                                  what="time_boot_s")["time_boot_s"]
+        return self.wait_vehicle(sysid, lambda v: v["time_boot_s"] >= start + seconds, seconds + 5, speedup,
+                                 f"{seconds} s of simulated time")
+
+
+def command_ok(api: Api, sysid: int, **body) -> None:
+    assert api.result(sysid, **body) == "accepted", body
+
+
+def wait_mode(api: Api, sysid: int, mode: str) -> dict:
+    return api.wait_vehicle(sysid, lambda v: v["mode"] == mode, sim_timeout=HEARTBEAT_WAIT, what=f"mode {mode}")
+
+
+def wait_armed(api: Api, sysid: int, armed: bool = True) -> dict:
+    return api.wait_vehicle(sysid, lambda v: v["armed"] is armed, sim_timeout=HEARTBEAT_WAIT,
+                            what="armed" if armed else "disarmed")
+
+
+def take_off(api: Api, sysid: int, altitude: float = 4.0, hover: bool = True) -> dict:
+    """GUIDED, arm, take off; returns the vehicle once at altitude and armed. A take-off starts the onboard
+    mission if it waits: with ``hover`` the operator takes over (BRAKE, then GUIDED), so the vehicle hovers."""
+    for body in ({"action": "set_mode", "mode": "GUIDED"}, {"action": "arm"},
+                 {"action": "takeoff", "altitude": altitude}):
+        command_ok(api, sysid, **body)
+    api.wait_vehicle(sysid, lambda v: v["position"] is not None and v["position"]["alt"] > altitude - 0.3,
+                     sim_timeout=30, what="take-off altitude")
+    if hover:
+        command_ok(api, sysid, action="set_mode", mode="BRAKE")
+        command_ok(api, sysid, action="set_mode", mode="GUIDED")
+        wait_mode(api, sysid, "GUIDED")
+    return wait_armed(api, sysid)
+
+
+# ---- the browser -------------------------------------------------------------------------------------------
+def launch_chromium(playwright):
+    return playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
