@@ -11,7 +11,7 @@
   bounds a wait on what runs on the wall clock (the status stream, link loss).
   Both raise ``WaitTimeout``.
 - ``launch_chromium``: Debian's Chromium with the flags that give WebGL
-  through SwiftShader (see FIELD-NOTES.md); a browser is never downloaded.
+  through SwiftShader (software WebGL); a browser is never downloaded.
 """
 
 from __future__ import annotations

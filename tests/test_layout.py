@@ -1,4 +1,4 @@
-"""The architecture's rules, checked on the code itself (DESIGN.md, "Layout").
+"""The architecture's rules (the README's "Layout"), checked on the code itself.
 
 Every import statement of the project, at module level or inside a function, is
 read from the source; each package may import only the packages below it:

@@ -113,11 +113,10 @@ def test_bug2_resumed_browse_finishes_its_turn():
 
 
 def test_bug3_the_monitor_lets_the_vehicle_get_well_inside_the_safety_distance():
-    # DESIGN.md: "The monitor runs every step: ... stop the vehicle before it gets closer than the safety
-    # distance". With closeness 2 m and the autopilot's avoidance off, a copter on the square's east leg
-    # is flagged at 1.7 m and comes to rest 0.51 m (centre) from the wall face: the monitor only reacts
-    # once inside `closeness`, ignoring the braking distance (v^2 / 2a = 1.25 m at 2.5 m/s) and the
-    # monitor period (0.25 s = 0.6 m).
+    # The monitor must stop the vehicle before it gets closer than the safety distance. With closeness 2 m
+    # and the autopilot's avoidance off, a copter on the square's east leg was flagged at 1.7 m and came
+    # to rest 0.51 m (centre) from the wall face: the monitor only reacted once inside `closeness`,
+    # ignoring the braking distance (v^2 / 2a = 1.25 m at 2.5 m/s) and the monitor period (0.25 s = 0.6 m).
     settings = Settings(space_size=20, time_limit=200)
     stepper = simulate(scene((5, 0, 2, 4, 0.2, 6)), "square", "copter", settings)
     world, agent = stepper.simulation, stepper.agent

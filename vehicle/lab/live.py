@@ -4,7 +4,7 @@ The all-in-one vehicle puts the autopilot (component 1) and its onboard agent
 (component 191, ``vehicle.agent.companion``) on the same links, as a flight
 controller and its companion computer are seen from a ground station.
 
-Two clocks run side by side (see Clocks in the design): the world advances on
+Two clocks run side by side: the world advances on
 simulated time, ``speedup`` times faster than the wall clock, while everything
 a ground station observes (message rates, heartbeats, the GCS failsafe, log
 timestamps) runs on the wall clock. ``time_boot_ms`` in the messages is the

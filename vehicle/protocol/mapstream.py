@@ -6,11 +6,12 @@ little-endian):
 
 * ``MAP_SNAPSHOT`` (32800): one chunk of a full map. Chunk header
   ``<HHH`` = snapshot id, chunk index, chunk count, then up to 122 bytes of
-  the snapshot blob. The blob, once its chunks are joined, is ``<BHffI``
+  the snapshot blob. The blob, once its chunks are joined, is ``<BHfffIHHHH``
   (format version 1, cells per side, resolution in cells/m, south-west corner
-  x and y in metres east and north of home) then ``<I`` (the number of the
-  last delta already in it) then the zlib-compressed grid: int8 log-odds,
-  rows south to north, columns west to east.
+  x and y in metres east and north of home, the number of the last delta
+  already in it, then the first row, first column, rows and columns of the
+  part of the grid that is not all zero) followed by that part
+  zlib-compressed: int8 log-odds, rows south to north, columns west to east.
 * ``MAP_DELTA`` (32801): ``<IH`` = delta number, cell count n, then a raw
   deflate stream (zlib, wbits -15) of: n cell indices in increasing order, each
   as the LEB128 varint of its difference from the previous one (the first from

@@ -1,10 +1,10 @@
-"""The world a simulated vehicle moves in: a VRML97 file as one triangle mesh (see DESIGN.md, "Scene").
+"""The world a simulated vehicle moves in: a VRML97 file as one triangle mesh, with colours and a start.
 
 Frame: right-handed, Z-up, metres, x east, y north. The Blender exports we meet are already Z-up, so
 coordinates are used as they are; VRML's Y-up only shows in the local frames of primitives and
 ElevationGrid, which the file's own transforms place. Triangles are kept as the file gives them
 (trimesh `process=False`): sensors cast rays into them, and merging or dropping faces would change
-what they see. Parsing is in `vehicle.vrml`; this module interprets the node tree.
+what they see. Parsing is in `vehicle.world.vrml`; this module interprets the node tree.
 """
 
 import functools
