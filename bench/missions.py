@@ -26,8 +26,8 @@ from common import CASTLE, ROOT, castle_or_default, code_state, table
 from vehicle.agent.settings import load_settings
 from vehicle.lab.experiment import Experiment, run_experiment, warm_up
 from vehicle.lab.presets import THESIS_TABLE
-from vehicle.sim.sensors import SENSOR_SUITES
-from vehicle.sim.simulation import DEFAULT_SUITE, Simulation
+from vehicle.sim.simulation import Simulation
+from vehicle.sim.suites import DEFAULT_SUITE, SENSOR_SUITES
 from vehicle.world.scene import load_scene
 
 MISSIONS = ["square", "browse", "search", "pathfind"]
@@ -56,7 +56,7 @@ def main() -> None:
         scene = load_scene(path)
         settings = load_settings(scene_hints=scene.hints)
         started = time.perf_counter()
-        Simulation(scene, "copter", settings, start)  # builds the scene's ray-casting BVH and collision grid
+        Simulation(scene, "copter", start)  # builds the scene's ray-casting BVH and collision grid
         prepared = time.perf_counter() - started
         where = f"{path.name}" + (f" @{start[0]:g},{start[1]:g}" if start else "")
         runs += [(where, prepared, Experiment(str(path), mission, "copter", start, None, settings, sensors=suite),

@@ -13,8 +13,7 @@ import time
 import numpy as np
 from common import castle_or_default, table
 
-from vehicle.sim.sensors import sensor_suite
-from vehicle.sim.simulation import DEFAULT_SUITE
+from vehicle.sim.suites import DEFAULT_SUITE, sensor_suite
 from vehicle.world.raycast import RayCaster, embree_available
 from vehicle.world.scene import load_scene
 
@@ -40,11 +39,11 @@ def main() -> None:
         origins = centre + rng.uniform(-40, 40, (batch, 3)) * (1, 1, 0.1)
         directions = rng.normal(size=(batch, 3))
         directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-        caster = RayCaster(scene.mesh, backend)
+        caster = RayCaster(scene, backend)
         rate = rays_per_second(caster, origins, directions)
         target = ">= 1,000,000" if (backend, batch) == ("embree", 100_000) else "-"
         rows.append([backend, f"{batch:,}", f"{rate:,.0f}", target])
-    print(f"scene: {scene_path.name}, {len(scene.mesh.faces)} triangles")
+    print(f"scene: {scene_path.name}, {len(scene.faces)} triangles")
     print(table(["backend", "rays per call", "rays/s", "target"], rows))
 
 

@@ -70,7 +70,7 @@ def report(name: str, data: bytes, load: Callable[[], object]) -> None:
     scene = load()
     print(
         f"{name} ({len(data) / 1000:.0f} KB): parse {parse * 1e3:.1f} ms, load {loaded * 1e3:.1f} ms"
-        f" -> {len(scene.mesh.faces)} triangles, {scene.objects} objects"
+        f" -> {len(scene.faces)} triangles, {scene.objects} objects"
     )
 
 

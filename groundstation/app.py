@@ -110,7 +110,7 @@ def create_app(station: GroundStation) -> FastAPI:
         return {"status": "ok", "version": __version__, "mode": station.mode, "vehicles": len(station.fleet.ids()),
                 "links": station.link_urls,
                 "scene": None if scene is None else {"name": scene.path.name if scene.path else None,
-                                                     "triangles": len(scene.mesh.faces)}}
+                                                     "triangles": len(scene.faces)}}
 
     @app.get("/api/auth", tags=["status"], dependencies=[Depends(operator)])
     def auth():

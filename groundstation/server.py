@@ -39,8 +39,8 @@ class GroundStation:
         ground = None
         if scene is not None:
             datum = Datum.of_scene(scene.hints, datum)
-            if len(scene.mesh.faces):
-                ground = RayCaster(scene.mesh).ground_height
+            if len(scene.faces):
+                ground = RayCaster(scene).ground_height
         self.datum = datum  # None (no scene, none given): the first home heard becomes the origin
         self.live = Fleet(datum, ground)
         self.record_dir = Path(record_dir) if record_dir else None

@@ -49,7 +49,7 @@ class SceneView:
             self.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)  # loopback: proxied only
         self.server.request_share_url = _refuse_share  # never open a public tunnel, whoever asks
         self.port = self.server.get_port()
-        self.caster = RayCaster(scene.mesh) if scene is not None and len(scene.mesh.faces) else None
+        self.caster = RayCaster(scene) if scene is not None and len(scene.faces) else None
         self._on_target: Callable[[int, float, float], None] | None = None
         self._on_connect: list[Callable[[int], None]] = []
         self._drawn: dict[int, dict] = {}
@@ -66,7 +66,7 @@ class SceneView:
         server.scene.set_up_direction("+z")
         # a dimmer environment than viser's default, so the scene's own colours show (not washed out)
         server.scene.configure_environment_map("city", environment_intensity=0.35)
-        if self.scene is not None and len(self.scene.mesh.faces):
+        if self.scene is not None and len(self.scene.faces):
             server.scene.add_mesh_trimesh("/scene", self.scene.mesh)
             low, high = self.scene.bounds
             size = float(max(high[0] - low[0], high[1] - low[1], 20))

@@ -67,8 +67,8 @@ def cmd_scene(args: argparse.Namespace) -> int:
     from vehicle.world.topview import render_top_view
 
     scene = load_scene(args.file)
-    bounds = [[round(float(v), 3) for v in row] for row in scene.bounds] if len(scene.mesh.faces) else None
-    report = {"triangles": len(scene.mesh.faces), "objects": scene.objects, "bounds": bounds,
+    bounds = [[round(float(v), 3) for v in row] for row in scene.bounds] if len(scene.faces) else None
+    report = {"triangles": len(scene.faces), "objects": scene.objects, "bounds": bounds,
               "warnings": scene.warnings}
     if scene.start is not None:
         report["start"] = [round(v, 3) for v in scene.start]

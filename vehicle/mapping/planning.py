@@ -50,7 +50,6 @@ from collections import deque
 import numba
 import numpy as np
 import pyastar2d
-from scipy import ndimage
 
 START_BLOCKED = "start is inside an obstacle"
 GOAL_BLOCKED = "goal is inside an obstacle"
@@ -185,6 +184,8 @@ def astar(blocked_inflated: np.ndarray, start, goal, doubtful: bool = False) -> 
 
 def _connected(blocked: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> bool:
     """Whether start and goal lie in one 8-connected region of free cells."""
+    from scipy import ndimage  # loaded by the first plan that needs it, not by every run
+
     labels, _ = ndimage.label(~blocked, structure=np.ones((3, 3), dtype=bool))
     return labels[start] == labels[goal]
 

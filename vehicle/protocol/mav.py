@@ -2,7 +2,10 @@
 
 pymavlink chooses the wire version and dialect when ``mavutil`` is first
 imported and when ``set_dialect`` runs, process-wide; importing it through
-this module makes every part of the project (and a test) agree.
+this module makes every part of the project (and a test) agree. ``mavlink``
+(the dialect: messages and constants) loads at once; ``mavutil``
+(connections, mode tables) on first use, since a headless run needs no link
+and mavutil costs a command-line run a tenth of a second.
 """
 
 from __future__ import annotations
@@ -11,10 +14,17 @@ import os
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from pymavlink import mavutil  # noqa: E402 - must follow the environment setting
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402 - must follow the environment setting
 
-mavutil.set_dialect("ardupilotmega")
-mavlink = mavutil.mavlink
+
+def __getattr__(name: str):
+    if name == "mavutil":
+        from pymavlink import mavutil
+
+        mavutil.set_dialect("ardupilotmega")  # the module ``mavlink`` above, as every part of the project uses
+        assert mavutil.mavlink is mavlink
+        return mavutil
+    raise AttributeError(name)
 
 
 
@@ -29,4 +39,4 @@ def pack(message, packer) -> bytes:
     return packet
 
 
-__all__ = ["mavlink", "mavutil", "pack"]
+__all__ = ["mavlink", "pack"]  # and mavutil, on first use

@@ -12,8 +12,6 @@ import os
 import tempfile
 from pathlib import Path
 
-from pymavlink import mavwp
-
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mission import MissionItem
 
@@ -24,6 +22,8 @@ class WaypointError(ValueError):
 
 def load_mission(path: str | Path) -> list[MissionItem]:
     """Mission items from a QGC WPL file (item 0 is home)."""
+    from pymavlink import mavwp  # loaded when a mission file is read (mavutil comes with it)
+
     loader = mavwp.MAVWPLoader()
     try:
         loader.load(str(path))

@@ -52,7 +52,7 @@ class Simulation:
         self.time = 0.0
         self.steps = 0
         self.datum = datum or Datum()
-        self.caster = scene.prepared(("caster", backend), lambda: RayCaster(scene.mesh, backend))
+        self.caster = scene.prepared(("caster", backend), lambda: RayCaster(scene, backend))
         self.limits = limits or Limits()
         x, y, *height = start if start is not None else (scene.start or (0.0, 0.0))
         heading = heading if heading is not None else (scene.start_heading or 0.0)
@@ -64,7 +64,7 @@ class Simulation:
         self.body = Body(self.kind, self.limits, Pose(x, y, 0.0, yaw=math.radians(heading) % (2 * math.pi)))
         self.body.pose.z = self.body.rest_height(ground)
         walkable = self.kind is Kind.ROVER  # a rover's wheels touch the ground it drives on
-        grid = scene.prepared(("triangles", walkable), lambda: TriangleGrid(scene.mesh, ignore_walkable=walkable))
+        grid = scene.prepared(("triangles", walkable), lambda: TriangleGrid(scene, ignore_walkable=walkable))
         self.collider = Collider(grid, self.limits.radius)
         if self.collider.touches(np.array(self.body.pose.xyz())):
             raise PlacementError(f"the start x={x:g} y={y:g} is inside an obstacle")

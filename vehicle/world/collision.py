@@ -1,7 +1,7 @@
 """Swept-sphere collision of the vehicle body against the scene mesh.
 
 trimesh answers point-to-mesh distance through an R-tree at about a millisecond a
-query, too slow for every simulation step; embreex offers no distance queries. So
+query, too slow for every simulation step (and too slow to import for a run); embreex offers no distance queries. So
 this module keeps a coarse grid of triangles over the ground plane and measures
 exact segment-to-triangle distances on the few triangles near the vehicle. Most
 steps cost nothing: after each exact check the body is known to be clear of
@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-import trimesh
 
 LARGE_SPAN = 64  # grid cells: triangles covering more are checked by their bounding box alone
 WALKABLE_NORMAL_Z = 0.7  # faces flatter than ~45 degrees are ground a rover may drive on
@@ -40,12 +39,13 @@ class TriangleGrid:
     triangles) and shared by every collider in it: it never changes.
     """
 
-    def __init__(self, mesh: trimesh.Trimesh, ignore_walkable: bool = False, cell_size: float = 2.0):
+    def __init__(self, geometry, ignore_walkable: bool = False, cell_size: float = 2.0):
+        """``geometry``: a Scene or a trimesh (anything with ``triangles`` and ``face_normals``)."""
         self.cell_size = float(cell_size)
-        triangles = np.asarray(mesh.triangles, dtype=np.float64).reshape(-1, 3, 3)
+        triangles = np.asarray(geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
         face_ids = np.arange(len(triangles))
         if ignore_walkable and len(triangles):
-            keep = np.asarray(mesh.face_normals)[:, 2] <= WALKABLE_NORMAL_Z
+            keep = np.asarray(geometry.face_normals)[:, 2] <= WALKABLE_NORMAL_Z
             triangles, face_ids = triangles[keep], face_ids[keep]
         self.triangles = triangles
         self.face_ids = face_ids
@@ -88,14 +88,13 @@ class TriangleGrid:
 
 
 class Collider:
-    """Answers whether a sphere of ``radius`` moving from p0 to p1 touches the mesh.
+    """Answers whether a sphere of ``radius`` moving from p0 to p1 touches the scene's triangles.
 
-    Takes the mesh, or its ``TriangleGrid`` when several colliders share one.
+    Takes the scene (or a trimesh), or its ``TriangleGrid`` when several colliders share one.
     """
 
-    def __init__(self, mesh: trimesh.Trimesh | TriangleGrid, radius: float, ignore_walkable: bool = False,
-                 search: float = 4.0):
-        self.grid = mesh if isinstance(mesh, TriangleGrid) else TriangleGrid(mesh, ignore_walkable)
+    def __init__(self, geometry, radius: float, ignore_walkable: bool = False, search: float = 4.0):
+        self.grid = geometry if isinstance(geometry, TriangleGrid) else TriangleGrid(geometry, ignore_walkable)
         self.radius = float(radius)
         self.search = max(float(search), 2 * self.radius)
         self._triangles = self.grid.triangles

@@ -11,7 +11,6 @@ float32, so they agree to a fraction of a millimetre).
 from __future__ import annotations
 
 import numpy as np
-import trimesh
 
 try:  # embreex ships wheels for x86_64 only
     from embreex import rtcore_scene
@@ -34,7 +33,8 @@ class RayCaster:
     (float32 and int32 arrays from Embree, float64 and int64 from the numpy fallback).
     """
 
-    def __init__(self, mesh: trimesh.Trimesh, backend: str = "auto"):
+    def __init__(self, geometry, backend: str = "auto"):
+        """``geometry``: a Scene or a trimesh (anything with ``triangles`` and ``face_normals``)."""
         if backend == "auto":
             backend = "embree" if embree_available() else "numpy"
         if backend not in ("embree", "numpy"):
@@ -42,18 +42,21 @@ class RayCaster:
         if backend == "embree" and not embree_available():
             raise RuntimeError("the embree backend needs the embreex package")
         self.backend = backend
-        self.mesh = mesh
-        self._empty = len(mesh.faces) == 0
         # plain arrays: trimesh's cached properties re-hash the mesh on every access
-        self.triangles = np.asarray(mesh.triangles, dtype=np.float64).reshape(-1, 3, 3)
-        self.face_normals = np.asarray(mesh.face_normals, dtype=np.float64).reshape(-1, 3)
-        self.top = float(mesh.bounds[1, 2]) if not self._empty else 0.0
+        self.triangles = np.asarray(geometry.triangles, dtype=np.float64).reshape(-1, 3, 3)
+        self.face_normals = np.asarray(geometry.face_normals, dtype=np.float64).reshape(-1, 3)
+        self._empty = len(self.triangles) == 0
+        self.top = float(self.triangles[..., 2].max()) if not self._empty else 0.0
         if self._empty:
             return
         if backend == "embree":
             self._scene = rtcore_scene.EmbreeScene()
             TriangleMesh(self._scene, self.triangles.astype(np.float32))
         else:
+            import trimesh  # the pure-numpy fallback is trimesh's
+
+            mesh = trimesh.Trimesh(self.triangles.reshape(-1, 3), np.arange(3 * len(self.triangles)).reshape(-1, 3),
+                                   process=False, validate=False)
             self._intersector = trimesh.ray.ray_triangle.RayMeshIntersector(mesh)
 
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

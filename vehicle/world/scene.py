@@ -18,7 +18,6 @@ from typing import TypeVar
 
 import mapbox_earcut
 import numpy as np
-import trimesh
 
 from vehicle.world.vrml import MAX_DEPTH, Node, SceneError, decode, parse
 
@@ -38,15 +37,22 @@ _NON_GEOMETRIC = frozenset(
 )
 _WITHOUT_TRIANGLES = frozenset({"IndexedLineSet", "PointSet"})
 _NO_FACES = np.zeros((0, 3), dtype=np.int64)
+_ZERO = 1e-12  # a cross product shorter than this has no direction (trimesh's tolerance)
 T = TypeVar("T")
 
 
 @dataclass
 class Scene:
-    """A loaded scene: its triangles, a colour and a Shape instance per triangle, and its start."""
+    """A loaded scene: its triangles, a colour and a Shape instance per triangle, and its start.
+
+    The triangles are plain arrays: the simulation casts rays into them and sweeps the body against
+    them without trimesh, whose import alone costs a command-line run half a second. ``mesh`` builds
+    the trimesh (for display, and for the ray caster's pure-numpy fallback) on first use.
+    """
 
     path: Path | None
-    mesh: trimesh.Trimesh
+    vertices: np.ndarray  # (n, 3) float64, scene metres
+    faces: np.ndarray  # (n_faces, 3) int64 indices into vertices
     face_colors: np.ndarray  # (n_faces, 4) uint8 RGBA
     face_object: np.ndarray  # (n_faces,) int32 index of the Shape instance
     objects: int
@@ -56,10 +62,39 @@ class Scene:
     hints: dict[str, str] = field(default_factory=dict)  # "name=value" strings of a WorldInfo's info
     _prepared: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
+    @functools.cached_property
+    def triangles(self) -> np.ndarray:
+        """(n_faces, 3, 3) corners of every triangle."""
+        return self.vertices[self.faces]
+
+    @functools.cached_property
+    def face_normals(self) -> np.ndarray:
+        """(n_faces, 3) unit normals (by the right-hand rule), zero for a triangle without area; the same
+        floating-point values trimesh gives."""
+        corners = self.triangles
+        crosses = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 1])
+        norm = np.sqrt(np.dot(crosses * crosses, [1.0, 1.0, 1.0]))
+        valid = norm > _ZERO
+        norm[valid] **= -1
+        return np.where(valid[:, None], crosses * norm.reshape((-1, 1)), 0.0)
+
     @property
     def bounds(self) -> np.ndarray:
         """(2, 3) lowest and highest corner of the triangles; zeros for an empty scene."""
-        return self.mesh.bounds if len(self.mesh.faces) else np.zeros((2, 3))
+        if not len(self.faces):
+            return np.zeros((2, 3))
+        corners = self.triangles.reshape(-1, 3)
+        return np.array([corners.min(axis=0), corners.max(axis=0)])
+
+    @functools.cached_property
+    def mesh(self):
+        """The scene as a ``trimesh.Trimesh`` with its face colours (built, and trimesh loaded, on first use)."""
+        import trimesh
+
+        mesh = trimesh.Trimesh(self.vertices, self.faces, process=False, validate=False)
+        if len(self.faces):
+            mesh.visual.face_colors = self.face_colors
+        return mesh
 
     def prepared(self, key: Hashable, build: Callable[[], T]) -> T:
         """What ``build()`` makes from the triangles (a ray caster's BVH, a collision grid), made once
@@ -69,8 +104,10 @@ class Scene:
         return self._prepared[key]
 
     def __getstate__(self) -> dict:
-        """Pickled (to a worker process) without what was prepared: an Embree scene does not pickle."""
-        return {**self.__dict__, "_prepared": {}}
+        """Pickled (to a worker process) without what was prepared or derived: an Embree scene does not
+        pickle, and the rest is quicker made again."""
+        derived = ("triangles", "face_normals", "mesh")
+        return {**{k: v for k, v in self.__dict__.items() if k not in derived}, "_prepared": {}}
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -239,15 +276,13 @@ class _Builder:
         vertices = np.concatenate(self.vertices) if self.vertices else np.zeros((0, 3))
         faces = np.concatenate([f + o for f, o in zip(self.faces, offsets, strict=True)] or [_NO_FACES])
         colors = np.repeat(np.array(self.colors, dtype=np.uint8).reshape(-1, 4), counts, axis=0)
-        mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
-        if len(faces):
-            mesh.visual.face_colors = colors
         warnings = [f"skipped {what}" + (f" ({n} times)" if n > 1 else "") for what, n in self.skipped.items()]
         if not len(faces):
             warnings.append("scene has no geometry")
         return Scene(
             path=path,
-            mesh=mesh,
+            vertices=np.asarray(vertices, dtype=np.float64),
+            faces=np.asarray(faces, dtype=np.int64),
             face_colors=colors,
             face_object=np.repeat(np.arange(len(counts), dtype=np.int32), counts),
             objects=len(counts),
@@ -282,7 +317,11 @@ def _rotation(axis_angle: np.ndarray) -> np.ndarray:
     axis, angle = axis_angle[:3], axis_angle[3]
     if np.linalg.norm(axis) < 1e-12:
         return np.eye(3)
-    return trimesh.transformations.rotation_matrix(angle, axis)[:3, :3]
+    axis = axis / np.sqrt(np.dot(axis, axis))  # Rodrigues' formula, as trimesh.transformations writes it
+    sin, cos = np.sin(angle), np.cos(angle)
+    matrix = np.diag([cos, cos, cos]) + np.outer(axis, axis) * (1.0 - cos)
+    x, y, z = axis * sin
+    return matrix + np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def _color(appearance: Node | None) -> tuple[int, ...]:
@@ -427,10 +466,23 @@ def _sphere(node: Node) -> tuple[np.ndarray, np.ndarray]:
     return vertices * _float(node, "radius", 1.0), faces
 
 
+_BOX_VERTICES = np.array([[-0.5, -0.5, -0.5], [-0.5, -0.5, 0.5], [-0.5, 0.5, -0.5], [-0.5, 0.5, 0.5],
+                          [0.5, -0.5, -0.5], [0.5, -0.5, 0.5], [0.5, 0.5, -0.5], [0.5, 0.5, 0.5]])
+_BOX_FACES = np.array([[1, 3, 0], [4, 1, 0], [0, 3, 2], [2, 4, 0], [1, 7, 3], [5, 1, 4], [5, 7, 1], [3, 7, 2],
+                       [6, 4, 2], [2, 7, 6], [6, 5, 4], [7, 5, 6]], dtype=np.int64)
+
+
 @functools.cache
 def _unit_mesh(kind: str) -> tuple[np.ndarray, np.ndarray]:
-    mesh = trimesh.creation.box(extents=(1, 1, 1)) if kind == "box" else trimesh.creation.icosphere(2)
-    vertices, faces = np.array(mesh.vertices), np.array(mesh.faces, dtype=np.int64)
+    """A unit cube (trimesh's ``creation.box``, written out), or a unit sphere (trimesh's ``icosphere(2)``,
+    loaded with trimesh only when a scene has a sphere)."""
+    if kind == "box":
+        vertices, faces = _BOX_VERTICES.copy(), _BOX_FACES.copy()
+    else:
+        import trimesh
+
+        mesh = trimesh.creation.icosphere(2)
+        vertices, faces = np.array(mesh.vertices), np.array(mesh.faces, dtype=np.int64)
     vertices.flags.writeable = faces.flags.writeable = False  # shared by every instance
     return vertices, faces
 

@@ -19,7 +19,7 @@ from vehicle.world.scene import Scene
 def render_top_view(scene: Scene, path: str | Path, size: int = 900, memory_map: MemoryMap | None = None,
                     route: list[tuple[float, float]] | None = None,
                     start: tuple[float, ...] | None = None) -> None:
-    bounds = scene.bounds if len(scene.mesh.faces) else np.array([[-10.0, -10, 0], [10.0, 10, 1]])
+    bounds = scene.bounds if len(scene.faces) else np.array([[-10.0, -10, 0], [10.0, 10, 1]])
     (x0, y0, z0), (x1, y1, z1) = bounds
     margin = 0.03 * max(x1 - x0, y1 - y0, 1.0)
     x0, y0, x1, y1 = x0 - margin, y0 - margin, x1 + margin, y1 + margin
@@ -31,7 +31,7 @@ def render_top_view(scene: Scene, path: str | Path, size: int = 900, memory_map:
     def pixel(x: float, y: float) -> tuple[float, float]:
         return (x - x0) * scale, height - (y - y0) * scale
 
-    triangles = np.asarray(scene.mesh.triangles)
+    triangles = scene.triangles
     tops = triangles[:, :, 2].max(axis=1)
     span = max(z1 - z0, 1e-6)
     for index in np.argsort(tops, kind="stable"):
