@@ -29,21 +29,24 @@ from common import CASTLE, DEFAULT_SCENE, castle_or_default, code_state, table
 BIN = Path(sys.executable).parent
 
 
-def run(command: list[str]) -> tuple[float, float, str]:
-    """Wall seconds, peak resident MB and standard output of one run of ``command``."""
+PEAK = ("import runpy, sys\nsys.argv = sys.argv[1:]\ntry:\n    runpy.run_module(sys.argv[0], run_name='__main__')\n"
+        "except SystemExit:\n    pass\nfinally:\n    print(next(line.split()[1] for line in open('/proc/self/status')\n"
+        "               if line.startswith('VmHWM')), file=sys.stderr)")
+
+
+def run(module: str, *args: str) -> tuple[float, float, str]:
+    """Wall seconds, peak resident MB (VmHWM, read by the process itself as it ends) and standard output of
+    one run of ``python -m module args``."""
     started = time.perf_counter()
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    out = process.stdout.read()
-    _, status, usage = os.wait4(process.pid, 0)
+    done = subprocess.run([sys.executable, "-c", PEAK, module, *args], capture_output=True, text=True)
     wall = time.perf_counter() - started
-    process.returncode = os.waitstatus_to_exitcode(status)
-    if process.returncode != 0:
-        raise SystemExit(f"{' '.join(command)} failed with {process.returncode}")
-    return wall, usage.ru_maxrss / 1024, out
+    if done.returncode != 0:
+        raise SystemExit(f"{module} {' '.join(args)} failed: {done.stderr}")
+    return wall, int(done.stderr.split()[-1]) / 1024, done.stdout
 
 
-def best(command: list[str], repeats: int) -> tuple[float, float, str]:
-    return min((run(command) for _ in range(repeats)), key=lambda r: r[0])
+def best(module: str, args: list[str], repeats: int) -> tuple[float, float, str]:
+    return min((run(module, *args) for _ in range(repeats)), key=lambda r: r[0])
 
 
 def free_port(kind: int) -> int:
@@ -95,13 +98,14 @@ def main() -> None:
     args = parser.parse_args()
     rows = []
     for name in ("vehicle --help", "vehicle scene --help", "groundstation --help"):
-        wall, peak, _ = best([str(BIN / name.split()[0]), *name.split()[1:]], args.repeats)
+        program, *rest = name.split()
+        wall, peak, _ = best(f"{program}.cli", rest, args.repeats)
         rows.append([f"`{name}`", f"{wall:.2f} s", f"{peak:.0f} MB", "< 0.3 s"])
     scene = castle_or_default()
     start = ["--start=-40,0"] if scene == CASTLE else []
-    command = [str(BIN / "vehicle"), "experiment", "--scene", str(scene), "--mission", "browse", *start, "--json"]
-    run(command)  # the first run may compile the simulation's loops (once after an install)
-    wall, peak, out = best(command, args.repeats)
+    command = ["experiment", "--scene", str(scene), "--mission", "browse", *start, "--json"]
+    run("vehicle.cli", *command)  # the first run may compile the simulation's loops (once after an install)
+    wall, peak, out = best("vehicle.cli", command, args.repeats)
     inside = json.loads(out)["wall_time_s"]
     rows.append([f"`vehicle experiment` (browse in {scene.name}), process overhead",
                  f"{wall - inside:.2f} s (of {wall:.2f} s)", f"{peak:.0f} MB", "< 0.8 s"])

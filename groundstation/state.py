@@ -38,6 +38,7 @@ HITS_KEPT = 600
 MESSAGES_KEPT = 50
 OWN_MAP_SPACE = 100.0  # m around home, for maps built from DISTANCE_SENSOR
 OWN_MAP_RESOLUTION = 5.0  # cells/m
+OWN_MAP_AFTER = 2.0  # s a vehicle is heard without a map stream or a companion before the station builds a map
 
 TYPES = {
     mavlink.MAV_TYPE_GROUND_ROVER: "rover", mavlink.MAV_TYPE_SURFACE_BOAT: "boat",
@@ -102,12 +103,19 @@ class VehicleState:
     companion_heartbeat: float | None = None  # when its onboard agent (component 191) was last heard
     agent: agent_status.AgentStatus | None = None  # the onboard agent's own state
     own_map: MemoryMap | None = None  # built here when the vehicle streams none
+    unmapped: deque = field(default_factory=lambda: deque(maxlen=HITS_KEPT))  # readings waiting for own_map
+    first_heard: float = 0.0  # receiver clock
     waypoints: list[tuple[float, float]] = field(default_factory=list)  # the AUTO mission, scene x, y
     version: int = 0  # bumps on every change, for views that redraw
 
     @property
     def kind(self) -> str:
         return TYPES.get(self.mav_type, "other")
+
+    @property
+    def streams_map(self) -> bool:
+        """The vehicle's own agent sends its map (or speaks for it): the station builds none of its own."""
+        return self.map_stream.payloads > 0 or self.companion_heartbeat is not None
 
     def has_companion(self, now: float) -> bool:
         """An onboard agent on a companion computer speaks for this vehicle (heard within the link timeout)."""
@@ -177,7 +185,7 @@ class Fleet:
                 if kind != "HEARTBEAT" or message.type in NOT_VEHICLES or message.autopilot == \
                         mavlink.MAV_AUTOPILOT_INVALID:
                     return  # only a vehicle's heartbeat makes a vehicle
-                vehicle = self.vehicles[sysid] = VehicleState(sysid)
+                vehicle = self.vehicles[sysid] = VehicleState(sysid, first_heard=now)
             handler = getattr(self, f"_{kind.lower()}", None)
             vehicle.last_message = now
             vehicle.messages_received += 1
@@ -298,10 +306,17 @@ class Fleet:
                                     reading.max_range, now)
         if reading.distance is not None:
             vehicle.hits.append(tuple(reading.hit.tolist()))
-        if vehicle.map_stream.grid is None and vehicle.home is not None:
-            if vehicle.own_map is None:
-                vehicle.own_map = MemoryMap(vehicle.home, OWN_MAP_SPACE, OWN_MAP_RESOLUTION)
-            vehicle.own_map.add_reading(reading.origin, reading.direction, reading.distance, reading.max_range)
+        if vehicle.streams_map or vehicle.home is None:
+            vehicle.unmapped.clear()
+            return
+        vehicle.unmapped.append(reading)
+        if vehicle.own_map is None and now - vehicle.first_heard < OWN_MAP_AFTER:
+            return  # a vehicle whose agent streams its map says so within a second or two: wait for it
+        if vehicle.own_map is None:
+            vehicle.own_map = MemoryMap(vehicle.home, OWN_MAP_SPACE, OWN_MAP_RESOLUTION)
+        while vehicle.unmapped:
+            done = vehicle.unmapped.popleft()
+            vehicle.own_map.add_reading(done.origin, done.direction, done.distance, done.max_range)
 
     # ---- views --------------------------------------------------------------------------------
     def describe(self, v: VehicleState, now: float) -> dict:

@@ -183,12 +183,14 @@ def ardupilot_copter(station, api):
     try:
         vehicle.heartbeat(mavlink1.MAV_TYPE_QUADROTOR, 5)  # LOITER
         wait_wall(lambda: api.vehicle(7), 5, "the station hears system 7")
-        for _ in range(5):
+
+        def send() -> bool:  # as a vehicle does, all along: the station builds a map once it sees no stream
             vehicle.pose(datum, *ARDU_XY, 4.0, 0.0)
             vehicle.heartbeat(mavlink1.MAV_TYPE_QUADROTOR, 5)
             vehicle.distance(int(ARDU_ECHO * 100))
-            time.sleep(0.02)
-        wait_wall(lambda: (api.vehicle(7) or {}).get("map", {}).get("occupied"), 5, "a map for system 7")
+            return (api.vehicle(7) or {}).get("map", {}).get("occupied")
+
+        wait_wall(send, 10, "a map for system 7", period=0.1)
         yield vehicle
     finally:
         vehicle.close()

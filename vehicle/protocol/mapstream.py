@@ -205,6 +205,7 @@ class MapReceiver:
     snapshots: int = 0
     gaps: int = 0
     version: int = 0  # increments whenever the grid changes (for redraws)
+    payloads: int = 0  # of ours received, whole or damaged: the sender streams a map
     _parts: dict[int, dict[int, bytes]] = field(default_factory=dict)
     _pending: dict[int, bytes] = field(default_factory=dict)  # deltas waiting for a snapshot
     _path_parts: dict[int, dict[int, list]] = field(default_factory=dict)
@@ -221,7 +222,8 @@ class MapReceiver:
             else:
                 return False
         except (struct.error, zlib.error, ValueError, IndexError, KeyError):
-            return True  # ours but damaged: ignore, the next snapshot repairs
+            pass  # ours but damaged: ignore, the next snapshot repairs
+        self.payloads += 1
         return True
 
     def _delta(self, payload: bytes) -> None:

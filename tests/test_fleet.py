@@ -1,0 +1,105 @@
+"""The ground station's picture of a vehicle (groundstation.state.Fleet), message by message.
+
+Messages are real pymavlink messages, packed and decoded as on a link; the
+receiver's clock is given explicitly, so these tests need neither sockets nor sleeps.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from groundstation.state import OWN_MAP_AFTER, Fleet
+from vehicle.mapping.memory_map import HIT
+from vehicle.protocol import agent_status
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mav import mavlink
+from vehicle.protocol.statustext import statustexts
+
+SYSID = 3
+DATUM = Datum()
+
+
+class Sender:
+    """Packs messages as one component of system SYSID and decodes them, as a link would deliver them."""
+
+    def __init__(self, component: int):
+        self.packer = mavlink.MAVLink(None, srcSystem=SYSID, srcComponent=component)
+        self.parser = mavlink.MAVLink(None)
+
+    def __call__(self, message):
+        return self.parser.decode(bytearray(message.pack(self.packer)))
+
+
+autopilot, companion = Sender(1), Sender(191)
+
+
+def heartbeat(kind=mavlink.MAV_TYPE_QUADROTOR, autopilot_type=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, mode=4):
+    return mavlink.MAVLink_heartbeat_message(kind, autopilot_type, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode,
+                                             mavlink.MAV_STATE_ACTIVE, 3)
+
+
+def position(x=0.0, y=0.0, alt=4.0):
+    lat, lon = DATUM.to_global(x, y)
+    return mavlink.MAVLink_global_position_int_message(1000, int(lat * 1e7), int(lon * 1e7), 0, int(alt * 1000),
+                                                       0, 0, 0, 0)
+
+
+def echo(distance_cm=500):
+    return mavlink.MAVLink_distance_sensor_message(1000, 2, 4000, distance_cm, mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND,
+                                                   0, 0, 0, 0.26, 0.26, [0.0] * 4, 0)
+
+
+@pytest.fixture
+def fleet():
+    return Fleet(DATUM)
+
+
+def hear(fleet, now, *messages):
+    for message in messages:
+        fleet.apply(message, now)
+
+
+def test_the_companions_heartbeat_neither_makes_a_vehicle_nor_changes_its_mode(fleet):
+    hear(fleet, 0.0, companion(heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0)))
+    assert fleet.ids() == []  # a companion alone is no vehicle
+    hear(fleet, 1.0, autopilot(heartbeat(mode=4)),
+         companion(heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0)))
+    vehicle = fleet.get(SYSID)
+    assert vehicle.mode == "GUIDED" and vehicle.kind == "copter"
+    assert vehicle.has_companion(1.5) and not vehicle.has_companion(10.0)  # heard within the link timeout
+
+
+def test_the_agents_status_shows_on_its_vehicle(fleet):
+    status = agent_status.AgentStatus("mission", True, "", "search", "operator switched to BRAKE")
+    payload = agent_status.encode(status)
+    tunnel = mavlink.MAVLink_tunnel_message(0, 0, agent_status.AGENT_STATUS, len(payload),
+                                            list(payload.ljust(128, b"\0")))
+    hear(fleet, 0.0, autopilot(heartbeat()), companion(tunnel))
+    shown = fleet.describe(fleet.get(SYSID), 0.0)["agent"]
+    assert shown["state"] == "paused" and shown["reason"] == "operator switched to BRAKE"
+    assert shown["mission"] == "search" and shown["phase"] == "mission"
+
+
+def test_a_long_message_in_chunks_is_shown_whole(fleet):
+    text = "Mission search: finished (search time used (12 legs)); going home now, at cruise speed"
+    hear(fleet, 0.0, autopilot(heartbeat()), *[companion(m) for m in statustexts(text, 6, 7)])
+    assert [m["text"] for m in fleet.get(SYSID).messages] == [text]
+
+
+def test_the_station_builds_no_map_of_its_own_for_a_vehicle_whose_agent_streams_one(fleet):
+    hear(fleet, 0.0, autopilot(heartbeat()), autopilot(position()), autopilot(echo()))
+    hear(fleet, 0.5, companion(heartbeat(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0)))
+    for k in range(20):
+        hear(fleet, 1.0 + k * 0.5, autopilot(echo()))
+    assert fleet.get(SYSID).own_map is None and fleet.get(SYSID).map_source is None
+
+
+def test_the_station_builds_a_map_for_a_vehicle_without_a_stream_from_all_its_readings(fleet):
+    hear(fleet, 0.0, autopilot(heartbeat()), autopilot(position()), autopilot(echo()))
+    assert fleet.get(SYSID).own_map is None  # not yet: its agent may still speak up
+    hear(fleet, OWN_MAP_AFTER + 0.1, autopilot(echo()))
+    vehicle = fleet.get(SYSID)
+    assert vehicle.map_source == "groundstation"
+    assert fleet.describe(vehicle, OWN_MAP_AFTER)["map"]["occupied"] == 1  # both readings, the same cell
+    assert vehicle.own_map.grid.max() == 2 * HIT  # the reading from before the decision counts too
+    assert vehicle.own_map.cells_ever_hit == 1 and not vehicle.unmapped
