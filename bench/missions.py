@@ -27,8 +27,8 @@ from vehicle.agent.settings import load_settings
 from vehicle.lab.experiment import Experiment, run_experiment, warm_up
 from vehicle.lab.presets import THESIS_TABLE
 from vehicle.sim.simulation import Simulation
-from vehicle.sim.suites import DEFAULT_SUITE, SENSOR_SUITES
 from vehicle.world.scene import load_scene
+from vehicle.world.suites import DEFAULT_SUITE, SENSOR_SUITES
 
 MISSIONS = ["square", "browse", "search", "pathfind"]
 TARGET = 500.0

@@ -11,9 +11,9 @@ import time
 
 from common import CASTLE, castle_or_default, table
 
-from vehicle.sim.sensors import Sonar
 from vehicle.sim.simulation import Simulation
 from vehicle.world.scene import load_scene
+from vehicle.world.sonar import Sonar
 
 
 def main(sim_seconds: float = 600.0) -> None:

@@ -13,9 +13,9 @@ import time
 import numpy as np
 from common import castle_or_default, table
 
-from vehicle.sim.suites import DEFAULT_SUITE, sensor_suite
 from vehicle.world.raycast import RayCaster, embree_available
 from vehicle.world.scene import load_scene
+from vehicle.world.suites import DEFAULT_SUITE, sensor_suite
 
 
 def rays_per_second(caster: RayCaster, origins: np.ndarray, directions: np.ndarray, seconds: float = 1.0) -> float:

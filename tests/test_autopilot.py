@@ -21,8 +21,8 @@ from vehicle.protocol.mission import (
 from vehicle.protocol.modes import MODES, STOP_MODE, Kind, mode_name, mode_number
 from vehicle.sim.autopilot import ACCEPTED, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, VELOCITY_TIMEOUT
 from vehicle.sim.physics import Limits
-from vehicle.sim.sensors import Sonar
 from vehicle.sim.simulation import Simulation
+from vehicle.world.sonar import Sonar
 
 ALTITUDE = 4.0
 REST_Z = 0.35  # body centre of a landed vehicle on ground at z = 0 (radius 0.3 + clearance 0.05)

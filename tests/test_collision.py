@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from vehicle.protocol.modes import Kind
-from vehicle.sim.sensors import Sonar
 from vehicle.sim.simulation import PlacementError, Simulation
 from vehicle.world.collision import Collider, point_triangle_distance
+from vehicle.world.sonar import Sonar
 
 RADIUS = 0.3
 WALL_FACE_Y = 9.9  # south face of the wall in the wall_scene fixture

@@ -248,7 +248,8 @@ def test_the_warm_up_flight_reaches_every_compiled_loop():
     the loops these call are compiled into them."""
     script = """
 from vehicle.mapping import planning, tracing
-from vehicle.sim import avoidance, sensors
+from vehicle.sim import avoidance
+from vehicle.world import sonar as sensors
 from vehicle.world import collision
 from vehicle.lab.experiment import warm_up
 warm_up()

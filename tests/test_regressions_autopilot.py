@@ -5,9 +5,9 @@ import math
 import pytest
 
 from vehicle.protocol.modes import Kind
-from vehicle.sim.sensors import Sonar
 from vehicle.sim.simulation import Simulation
 from vehicle.world.scene import parse_scene
+from vehicle.world.sonar import Sonar
 
 GROUND = "#VRML V2.0 utf8\nTransform { translation 0 0 -0.05 children Shape { geometry Box { size 200 200 0.1 } } }\n"
 

@@ -8,10 +8,10 @@ import pytest
 from vehicle.protocol.frames import Pose, body_to_world
 from vehicle.protocol.modes import Kind
 from vehicle.protocol.rangefinder import Servo
-from vehicle.sim.sensors import Sonar, SonarArray, cone_rays
 from vehicle.sim.simulation import Simulation
-from vehicle.sim.suites import SENSOR_SUITES, sensor_suite
 from vehicle.world.raycast import RayCaster
+from vehicle.world.sonar import Sonar, SonarArray, cone_rays
+from vehicle.world.suites import SENSOR_SUITES, sensor_suite
 
 NORTH = 10.0  # distance from the origin to the north wall's south face
 EAST = 6.0  # distance from the origin to the east wall's west face
@@ -240,8 +240,8 @@ def test_a_small_face_off_the_beam_axis_still_echoes():
     wall end, and a copter flew along the wall into it)."""
     import trimesh
 
-    from vehicle.sim.sensors import SonarArray
     from vehicle.world.raycast import RayCaster
+    from vehicle.world.sonar import SonarArray
 
     off_axis = math.radians(5.0)
     post = trimesh.creation.box(extents=(0.13, 0.13, 0.3))

@@ -1,4 +1,4 @@
-"""``vehicle``: the onboard side's command line (scene, experiment, sweep, sim)."""
+"""``vehicle``: the onboard side's command line (scene, experiment, sweep, sim, agent)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from pathlib import Path
 from vehicle import __version__
 from vehicle.agent.missions import MISSIONS
 from vehicle.protocol.geodesy import datum_option
-from vehicle.sim.suites import DEFAULT_SUITE, SENSOR_SUITES
 from vehicle.world.bundled import default_scene
+from vehicle.world.suites import DEFAULT_SUITE, SENSOR_SUITES
 
 DEFAULT_SCENE = default_scene()
 
@@ -132,8 +132,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from vehicle.lab.stepper import simulate
     from vehicle.protocol.geodesy import Datum
     from vehicle.protocol.waypoints import load_mission, parse_points, positions
-    from vehicle.sim.suites import sensor_suite
     from vehicle.world.scene import load_scene
+    from vehicle.world.suites import sensor_suite
 
     scene = load_scene(args.scene)
     settings = settings_from(args, scene)
@@ -145,18 +145,25 @@ def cmd_sim(args: argparse.Namespace) -> int:
     items = load_mission(args.waypoints) if args.waypoints else None
     waypoints = positions(items, datum) if items else (
         parse_points(scene.hints["waypoints"]) if "waypoints" in scene.hints else None)
-    stepper = simulate(scene, args.mission, args.vehicle, settings, args.start, args.heading, waypoints,
-                       autostart=args.autostart, seed=args.seed, sensors=sensor_suite(args.sensors), datum=datum)
+    autopilot = args.role == "autopilot"
+    if not autopilot and not args.mission:
+        raise ValueError("--mission is needed (or --role autopilot, for an onboard agent in another process)")
+    stepper = simulate(scene, None if autopilot else args.mission, args.vehicle, settings, args.start, args.heading,
+                       waypoints, autostart=args.autostart, seed=args.seed, sensors=sensor_suite(args.sensors),
+                       datum=datum)
     world = stepper.simulation
     if items:
         world.autopilot.set_mission(items)
     options = SimOptions(args.mavlink or ["udpout:127.0.0.1:14550"], args.sysid, args.speedup,
-                         args.failsafe_timeout, args.log)
+                         args.failsafe_timeout, args.log, sim_clock=autopilot)
     sim = SimVehicle(stepper, options)
-    start = "starting the mission now" if args.autostart else "waiting for arm + AUTO/MISSION_START or GUIDED takeoff"
+    if autopilot:
+        start = "a plain autopilot: an onboard agent flies it over MAVLink"
+    else:
+        start = f"mission {args.mission}, " + ("starting now" if args.autostart else
+                                                "waiting for arm + AUTO/MISSION_START or GUIDED takeoff")
     print(f"vehicle {args.sysid}: {args.vehicle} in {Path(args.scene).name} at {world.home[0]:.1f}, "
-          f"{world.home[1]:.1f}, mission {args.mission}, x{args.speedup:g}, on {', '.join(options.urls)}; {start}",
-          flush=True)
+          f"{world.home[1]:.1f}, x{args.speedup:g}, on {', '.join(options.urls)}; {start}", flush=True)
     try:
         sim.run(args.duration)
     except KeyboardInterrupt:
@@ -165,6 +172,37 @@ def cmd_sim(args: argparse.Namespace) -> int:
         stats = ", ".join(f"{k} {v}" for k, v in sorted(sim.endpoint.stats.items()))
         print(f"vehicle {args.sysid}: stopped at {world.time:.1f} s simulated; {stats}", flush=True)
     return 0
+
+
+def cmd_agent(args: argparse.Namespace) -> int:
+    from vehicle.agent.process import AgentOptions, run_agent
+    from vehicle.agent.settings import load_settings
+    from vehicle.protocol.geodesy import Datum
+    from vehicle.protocol.waypoints import load_positions, parse_points
+
+    scene = None
+    if args.scene:
+        from vehicle.world.scene import load_scene
+
+        scene = load_scene(args.scene)
+    elif args.sensors == "scene":
+        raise ValueError("--sensors scene needs --scene")
+    hints = scene.hints if scene is not None else {}
+    settings = load_settings(args.config, args.assignments, hints, altitude=args.altitude)
+    datum = Datum.of_scene(hints, args.datum)
+    waypoints = load_positions(args.waypoints, datum) if args.waypoints else (
+        parse_points(hints["waypoints"]) if "waypoints" in hints else None)
+    options = AgentOptions(args.connect, args.mission, args.vehicle, settings, waypoints, scene, args.sensors,
+                           args.suite, args.gcs, datum, args.log, args.wait, args.connect_timeout)
+    result = run_agent(options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{result['mission']} ({args.vehicle} over {args.connect}): {result['outcome']} - {result['reason']}")
+        if "detections" in result:
+            print(f"detections {result['detections']}; {result['sim_time_s']:.1f} s of the autopilot's clock in "
+                  f"{result['wall_time_s']:.1f} s; {result['distance_m']:.1f} m flown")
+    return 0 if result["outcome"] != "error" else 1
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -212,7 +250,10 @@ def main(argv: list[str] | None = None) -> int:
     experiment.set_defaults(run=cmd_experiment)
 
     sim = commands.add_parser("sim", help="a simulated vehicle with its onboard agent, live on MAVLink")
-    add_run_options(sim)
+    add_run_options(sim, mission_required=False)
+    sim.add_argument("--role", choices=["vehicle", "autopilot"], default="vehicle",
+                     help="vehicle: the autopilot and its onboard agent in one (default); autopilot: a plain "
+                          "ArduPilot-like flight controller, for `vehicle agent` to fly")
     sim.add_argument("--mavlink", action="append", metavar="URL",
                      help="pymavlink connection string, repeatable (default udpout:127.0.0.1:14550)")
     sim.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
@@ -223,6 +264,40 @@ def main(argv: list[str] | None = None) -> int:
     sim.add_argument("--log", metavar="FILE.tlog", help="record the vehicle's own MAVLink traffic")
     sim.add_argument("--duration", type=float, help="stop after this many wall seconds")
     sim.set_defaults(run=cmd_sim)
+
+    agent = commands.add_parser("agent", help="the onboard agent on a companion computer, flying an autopilot "
+                                               "(ArduPilot, or vehicle sim --role autopilot) over MAVLink")
+    agent.add_argument("--connect", required=True, metavar="URL",
+                       help="the flight controller, in pymavlink's form: tcp:HOST:PORT, udpin:HOST:PORT, "
+                            "/dev/ttyAMA0,921600 ...")
+    agent.add_argument("--mission", required=True, type=str.lower, choices=list(MISSIONS),
+                       help="; ".join(f"{name}: {text}" for name, text in MISSIONS.items()))
+    agent.add_argument("--vehicle", default="copter", choices=["rover", "copter"],
+                       help="what the flight controller must be (it is refused otherwise)")
+    agent.add_argument("--scene", help="VRML scene the vehicle flies in (for --sensors scene; its hints apply too)")
+    agent.add_argument("--sensors", default="fc", choices=["fc", "scene"],
+                       help="fc: the autopilot's DISTANCE_SENSOR and OBSTACLE_DISTANCE (default); scene: sonar "
+                            "cast in --scene at the pose the autopilot reports, fed to it as DISTANCE_SENSOR")
+    agent.add_argument("--suite", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
+                       help="the sonars cast with --sensors scene (default %(default)s)")
+    agent.add_argument("--altitude", type=float, help="operating altitude above home, m")
+    agent.add_argument("--set", dest="assignments", action="append", default=[], metavar="NAME=VALUE",
+                       help="set a mission parameter (as for vehicle experiment)")
+    agent.add_argument("--config", help="TOML file of mission parameters")
+    agent.add_argument("--waypoints", help="QGC WPL 110 file of waypoints (square, pathfind)")
+    agent.add_argument("--gcs", action="append", default=[], metavar="URL",
+                       help="a ground station to send the map, path and state to directly too (repeatable)")
+    agent.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
+                       help="where the scene origin lies on Earth (default: the scene's hint, else ArduPilot's "
+                            "simulator home)")
+    agent.add_argument("--log", metavar="FILE.tlog", help="record the agent's MAVLink traffic, both ways")
+    agent.add_argument("--wait", action="store_true",
+                       help="wait for a ground station's MISSION_START (to component 191) before starting")
+    agent.add_argument("--connect-timeout", type=float, default=60.0,
+                       help="wall seconds to wait for the autopilot's heartbeat, home and position (default 60)")
+    agent.add_argument("--duration", type=float, help="stop after this many wall seconds")
+    agent.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    agent.set_defaults(run=cmd_agent)
 
     from vehicle.lab.presets import PRESETS
 

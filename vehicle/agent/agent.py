@@ -103,10 +103,11 @@ class Agent:
             self._travel.resume()
         return True
 
-    def _pause(self, what: str) -> None:
+    def pause(self, reason: str) -> None:
+        """Stop commanding until resumed: someone took over, or the flight controller refused or went silent."""
         self.paused = True
-        self.pause_reason = f"operator {what}"
-        self.say(f"Agent: paused, operator {what}")
+        self.pause_reason = reason
+        self.say(f"Agent: paused, {reason}", mavlink.MAV_SEVERITY_WARNING)
 
     def _set_mode(self, mode: str) -> None:
         self.fc.set_mode(mode)
@@ -126,7 +127,7 @@ class Agent:
                 self.start()  # the operator's GUIDED take-off starts the mission
             return
         if taken is not None:
-            self._pause(taken)
+            self.pause(taken)
         if self.paused:
             return
         if fc.blocked:

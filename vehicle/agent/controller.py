@@ -76,8 +76,9 @@ class FlightController(Protocol):
         """Distance readings taken since the last call."""
 
     def took_over(self) -> str | None:
-        """What someone else did to the vehicle since the last call (a mode change the agent did not make, a
-        target another ground station set), in words; None if nothing."""
+        """Why the agent must stop commanding, in words, if something happened since the last call: someone
+        else took over (a mode change the agent did not make, another ground station's target), or the flight
+        controller refused a command, did not answer, or went silent. None if nothing."""
 
     # ---- act (each returns a MAV_RESULT) ------------------------------------------------------------
     def arm(self) -> int: ...

@@ -17,8 +17,8 @@ from vehicle.lab.stepper import Stepper, simulate
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.rangefinder import Reading
 from vehicle.protocol.waypoints import parse_points
-from vehicle.sim.suites import DEFAULT_SUITE, sensor_suite
 from vehicle.world.scene import Scene, load_scene
+from vehicle.world.suites import DEFAULT_SUITE, sensor_suite
 
 OUTCOMES = ("finished", "stopped", "collision", "timeout", "error")
 

@@ -2,7 +2,10 @@
 
 The all-in-one vehicle puts the autopilot (component 1) and its onboard agent
 (component 191, ``vehicle.agent.companion``) on the same links, as a flight
-controller and its companion computer are seen from a ground station.
+controller and its companion computer are seen from a ground station. As a
+plain autopilot (``--role autopilot``) it has no agent: an onboard agent in
+another process flies it over MAVLink, and its telemetry runs on simulated
+time, as ArduPilot's SITL does, so that agent sees the same rates at any speed-up.
 
 Two clocks run side by side: the world advances on
 simulated time, ``speedup`` times faster than the wall clock, while everything
@@ -37,6 +40,7 @@ class SimOptions:
     speedup: float = 1.0
     failsafe_timeout: float = 5.0
     log: str | None = None
+    sim_clock: bool = False  # telemetry rates in simulated time, as ArduPilot's SITL keeps them (a plain autopilot)
 
 
 class SimVehicle:
@@ -46,7 +50,8 @@ class SimVehicle:
         self.agent = stepper.agent
         self.options = options
         now = time.time()
-        self.telemetry = Telemetry(self.world, start=now, sysid=options.sysid)
+        self.telemetry = Telemetry(self.world, start=self.world.time if options.sim_clock else now,
+                                   sysid=options.sysid)
         self.companion = Companion(self.agent, options.sysid, start=now) if self.agent is not None else None
         self.log = TlogWriter(options.log) if options.log else None
         self.endpoint = Endpoint(options.urls, self.world, self.telemetry, options.sysid, options.failsafe_timeout,
@@ -72,7 +77,8 @@ class SimVehicle:
                 outgoing = self._advance(target, now, deadline=wall + MAX_LAG)
                 if self.world.time < target - MAX_LAG * self.options.speedup:
                     self.lagging += target - self.world.time  # too slow: let simulated time slip
-                outgoing += self.telemetry.tick(now)
+                if not self.options.sim_clock:
+                    outgoing += self.telemetry.tick(now)
                 self.endpoint.send(outgoing, now)
                 if self.companion is not None:
                     self.endpoint.send(self.companion.tick(now), now, COMPONENT)
@@ -92,6 +98,8 @@ class SimVehicle:
         while world.time + world.dt / 2 <= target and time.monotonic() < deadline:
             readings = stepper.step()
             messages += [self.telemetry.distance_sensor(r, world.time) for r in readings]
+            if self.options.sim_clock:
+                messages += self.telemetry.tick(world.time)
             if world.collision is not None and not self._crash_reported:
                 self._crash_reported = True
                 world.autopilot.say(f"Crash: {world.collision.describe()}", mavlink.MAV_SEVERITY_CRITICAL)

@@ -24,6 +24,7 @@ from typing import Protocol
 from vehicle.protocol.mav import mavlink, mavutil, pack
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, Kind, mode_name
 from vehicle.protocol.tlog import TlogWriter
+from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.sim.mission_server import MissionServer
 from vehicle.sim.simulation import Simulation
 from vehicle.sim.telemetry import Telemetry
@@ -182,7 +183,9 @@ class Endpoint:
         if kind in MISSION_MESSAGES:
             return self.missions.handle(message, now)
         if kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
-            return (self.onboard.handle(message) or []) if self.onboard is not None else []
+            if self.onboard is not None:  # one vehicle to the outside: its agent's mission parameters
+                return self.onboard.handle(message) or []
+            return self._autopilot_param(message)
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
             self._position_target_local(message)
         elif kind == "SET_POSITION_TARGET_GLOBAL_INT":
@@ -291,21 +294,51 @@ class Endpoint:
             self.stats["unsupported frames"] += 1
             return
         self._override(m, "set a guided target")
-        self._apply_target(m.type_mask, x, y, altitude, m.vx, m.vy, m.vz)
+        self._apply_target(m.type_mask, x, y, altitude, m.vx, m.vy, m.vz, m.yaw)
 
     def _position_target_global(self, m) -> None:
         if m.target_system != self.sysid:
             return
         x, y = self.world.datum.to_local(m.lat_int * 1e-7, m.lon_int * 1e-7)
         self._override(m, "set a guided target")
-        self._apply_target(m.type_mask, x, y, m.alt, m.vx, m.vy, m.vz)
+        self._apply_target(m.type_mask, x, y, m.alt, m.vx, m.vy, m.vz, m.yaw)
 
     def _apply_target(self, mask: int, x: float, y: float, altitude: float, vn: float, ve: float,
-                      vd: float) -> None:
+                      vd: float, yaw: float) -> None:
+        """A position target, else a velocity target, each with a heading if one is given; or a heading alone
+        (what ArduPilot's Rover takes for turning in place). Non-finite numbers are no target."""
+        values = (x, y, altitude, vn, ve, vd, yaw)
+        if not all(math.isfinite(v) for v in values):
+            self.stats["non-finite targets"] += 1
+            return
         if not mask & POSITION_IGNORED:
             self.autopilot.goto(x, y, altitude if not mask & mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE else None)
         elif not mask & VELOCITY_IGNORED:
             self.autopilot.set_velocity(ve, vn, -vd)
+        if not mask & mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE:
+            self.autopilot.set_yaw(yaw % (2 * math.pi))
+
+    # ---- the autopilot's own parameters (as a plain autopilot) ------------------------------------------
+    def _autopilot_params(self) -> dict[str, float]:
+        """What an onboard agent reads to plan as the autopilot flies (ArduPilot's names); read-only here."""
+        return {"AVOID_ENABLE": 7.0 if self.autopilot.avoidance is not None else 0.0, "AVOID_MARGIN": AVOID_MARGIN,
+                "WP_RADIUS": self.autopilot.wp_radius}
+
+    def _autopilot_param(self, m) -> list:
+        params = self._autopilot_params()
+        names = list(params)
+        kind = m.get_type()
+        if kind == "PARAM_REQUEST_LIST":
+            indices = range(len(names))
+        else:
+            wanted = m.param_id.rstrip("\0") if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
+            index = getattr(m, "param_index", -1) if kind == "PARAM_REQUEST_READ" else -1
+            found = index if 0 <= index < len(names) else (names.index(wanted) if wanted in names else None)
+            if found is None:
+                return []  # ArduPilot stays silent about unknown parameters
+            indices = [found]
+        return [mavlink.MAVLink_param_value_message(names[i].encode(), float(params[names[i]]),
+                                                    mavlink.MAV_PARAM_TYPE_REAL32, len(names), i) for i in indices]
 
     # ---- GCS failsafe ------------------------------------------------------------------------------
     def _gcs_heard(self, now: float) -> None:

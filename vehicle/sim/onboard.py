@@ -102,10 +102,10 @@ class SimController:
         if pilot.mode_changes != self._mode_changes:
             self._mode_changes = pilot.mode_changes
             if pilot.mode_source != SOURCE:
-                what = f"switched to {pilot.mode}"
+                what = f"operator switched to {pilot.mode}"
         if pilot.overrides != self._overrides:
             self._overrides = pilot.overrides
-            what = what or pilot.override
+            what = what or f"operator {pilot.override}"
         return what
 
     # ---- act --------------------------------------------------------------------------------------

@@ -22,11 +22,11 @@ from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.sim.avoidance import ObstacleDatabase
 from vehicle.sim.battery import Battery
 from vehicle.sim.physics import Body, Limits
-from vehicle.sim.sensors import Sonar, SonarArray
-from vehicle.sim.suites import DEFAULT_SUITE, sensor_suite
 from vehicle.world.collision import Collider, Contact, TriangleGrid
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
+from vehicle.world.sonar import Sonar, SonarArray
+from vehicle.world.suites import DEFAULT_SUITE, sensor_suite
 
 DEFAULT_STEP = 0.05  # s
 SONAR_RATE = 10.0  # Hz: readings per second, as long-range ultrasonic sensors manage

@@ -28,7 +28,7 @@ SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR
            | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
            | mavlink.MAV_SYS_STATUS_SENSOR_RC_RECEIVER | mavlink.MAV_SYS_STATUS_GEOFENCE
            | mavlink.MAV_SYS_STATUS_AHRS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
-           | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY)
+           | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY | mavlink.MAV_SYS_STATUS_PREARM_CHECK)
 
 DEFAULT_INTERVALS = {  # seconds
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
@@ -87,6 +87,7 @@ class Telemetry:
             mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: self.mission_current,
             mavlink.MAVLINK_MSG_ID_HOME_POSITION: self.home_position,
             mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
+            mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self.extended_sys_state,
         }
 
     def _ms(self, now: float) -> int:
@@ -169,6 +170,19 @@ class Telemetry:
         return mavlink.MAVLink_home_position_message(
             int(round(lat * 1e7)), int(round(lon * 1e7)), int((self.world.datum.alt + home[2]) * 1000),
             0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
+
+    def extended_sys_state(self, now: float):
+        """On the ground, taking off, in the air or landing (a companion asks for it, as of ArduPilot)."""
+        pilot = self.world.autopilot
+        if self.world.kind != "copter":
+            state = mavlink.MAV_LANDED_STATE_ON_GROUND
+        elif pilot.taking_off:
+            state = mavlink.MAV_LANDED_STATE_TAKEOFF
+        elif not pilot.flying:
+            state = mavlink.MAV_LANDED_STATE_ON_GROUND
+        else:
+            state = mavlink.MAV_LANDED_STATE_LANDING if pilot.mode == "LAND" else mavlink.MAV_LANDED_STATE_IN_AIR
+        return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_UNDEFINED, state)
 
     def autopilot_version(self, now: float):
         capabilities = (mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT

@@ -1,4 +1,5 @@
-"""The named sensor suites a simulated vehicle can carry (``--sensors``).
+"""The named sensor suites a vehicle in a simulated scene can carry (``vehicle sim --sensors``, ``vehicle agent
+--suite``).
 
 Kept apart from the sensor model so that a command line can list them
 without loading the ray casting and its compiled loops.
@@ -15,9 +16,9 @@ DEFAULT_SUITE = "triple"
 
 
 def sensor_suite(name: str) -> list:
-    """The sonars (``vehicle.sim.sensors.Sonar``) of a named sensor suite (see SENSOR_SUITES)."""
+    """The sonars (``vehicle.world.sonar.Sonar``) of a named sensor suite (see SENSOR_SUITES)."""
     from vehicle.protocol.rangefinder import Servo
-    from vehicle.sim.sensors import Sonar
+    from vehicle.world.sonar import Sonar
 
     if name == "single":
         return [Sonar("front")]

@@ -1,4 +1,5 @@
-"""Simulated distance sensors (ultrasonic sonar) and the servo that can sweep one.
+"""Distance sensors (ultrasonic sonar) cast into the scene: the simulator's, and an onboard agent's that flies
+a real autopilot in a simulated scene (``vehicle agent --sensors scene``).
 
 The model follows the thesis and the HC-SR04 datasheet: readings between a
 minimum and a maximum range, a beam that is a cone rather than a single ray

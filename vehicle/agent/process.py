@@ -1,0 +1,236 @@
+"""``vehicle agent``: the onboard agent as a process of its own, on a companion computer beside an autopilot.
+
+It connects to the flight controller (serial, TCP or UDP), identifies itself
+as component 191 of the autopilot's system, waits until the autopilot is
+ready, and flies the mission through ``MavlinkController`` on the autopilot's
+clock: every ``monitor_period`` of ``time_boot_ms`` the agent steps. Its own
+messages (``Companion``: heartbeat, map, path, state, texts) go to the
+autopilot, which routes them to every ground station, and straight to the
+``--gcs`` links. A ground station's MISSION_START addressed to component 191
+resumes it.
+
+Readings come from the autopilot's DISTANCE_SENSOR / OBSTACLE_DISTANCE
+(``--sensors fc``, sonars wired to a real vehicle), or (``--sensors scene``)
+from the sonar cast into a VRML scene at the pose the autopilot reports, ten
+times a second of its clock: then the agent also checks that trajectory
+against the scene's triangles (a collision ends the run) and feeds the
+readings to the autopilot as DISTANCE_SENSOR, as a sensor on the companion
+would (ArduPilot's PRX1_TYPE 2 proximity).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vehicle import __version__
+from vehicle.agent.agent import Agent
+from vehicle.agent.companion import Companion
+from vehicle.agent.mavlink_controller import FlightControllerError, MavlinkController
+from vehicle.agent.settings import Settings
+from vehicle.protocol.frames import Pose
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mav import mavlink, mavutil, pack
+from vehicle.protocol.rangefinder import distance_sensor
+from vehicle.protocol.tlog import TlogWriter
+from vehicle.world.scene import Scene
+
+SONAR_RATE = 10.0  # Hz of the autopilot's clock
+READY_TIMEOUT = 180.0  # wall s for the autopilot's pre-arm checks to pass (ArduPilot's EKF takes ~45 s)
+IDLE = 0.002  # wall s to wait when nothing came in
+RADIUS = 0.3  # m, the vehicle body the agent plans around
+CLEARANCE = 0.05  # m between the ground and the body when the vehicle stands
+
+
+@dataclass
+class AgentOptions:
+    connect: str
+    mission: str
+    kind: str = "copter"
+    settings: Settings = field(default_factory=Settings)
+    waypoints: list[tuple[float, float]] | None = None
+    scene: Scene | None = None
+    sensors: str = "fc"  # "fc" | "scene"
+    suite: str = "triple"
+    gcs: list[str] = field(default_factory=list)
+    datum: Datum = field(default_factory=Datum)
+    log: str | None = None
+    wait: bool = False  # wait for a ground station's MISSION_START before starting
+    connect_timeout: float = 60.0
+
+
+class OnboardAgent:
+    def __init__(self, options: AgentOptions):
+        self.options = options
+        self.log = TlogWriter(options.log) if options.log else None
+        self.conn = mavutil.mavlink_connection(options.connect, source_system=1, source_component=191,
+                                               autoreconnect=True, retries=60)
+        self.gcs = [mavutil.mavlink_connection(url, source_system=1, source_component=191) for url in options.gcs]
+        for link in (self.conn, *self.gcs):
+            link.mav.robust_parsing = True
+        self.sonars = self.collider = None
+        ground = None
+        servo = None
+        if options.sensors == "scene":
+            if options.scene is None:
+                raise ValueError("--sensors scene needs --scene")
+            from vehicle.world.collision import Collider
+            from vehicle.world.raycast import RayCaster
+            from vehicle.world.sonar import SonarArray
+            from vehicle.world.suites import sensor_suite
+
+            caster = RayCaster(options.scene)
+            ground = self.ground = caster.ground_height
+            self.sonars = SonarArray(sensor_suite(options.suite), caster)
+            servo = next((s.servo for s in self.sonars.sensors if s.servo is not None), None)
+            self.collider = Collider(options.scene, RADIUS, ignore_walkable=options.kind == "rover")
+        self.fc = MavlinkController(self.conn, options.kind, options.datum, ground, radius=RADIUS, servo=servo,
+                                    use_fc_sensors=options.sensors == "fc", extra_links=tuple(self.gcs))
+        self.agent: Agent | None = None
+        self.companion: Companion | None = None
+        self.collision = None
+        self.distance = 0.0
+        self._last_xyz: tuple[float, float, float] | None = None
+
+    # ---- the run ------------------------------------------------------------------------------------
+    def run(self, duration: float | None = None, say=print) -> dict:
+        """Connect, wait for the autopilot, fly; returns the result (as ``vehicle experiment`` does)."""
+        options, fc = self.options, self.fc
+        started = time.monotonic()
+        fc.connect(options.connect_timeout)
+        say(f"agent: {options.kind} {fc.sysid} at home {fc.home[0]:.1f}, {fc.home[1]:.1f}; mission "
+            f"{options.mission}; readings from {'the scene' if self.sonars else 'the flight controller'}")
+        self.agent = Agent(fc, options.mission, options.settings, options.waypoints, autostart=False)
+        self.companion = Companion(self.agent, fc.sysid, start=time.time())
+        fc.handler = self.companion.handle
+        fc.avoid_margin = self._avoid_margin()
+        fc.prefer_speed(options.settings.speed)
+        begun = fc.time
+        next_step = next_reading = fc.time
+        waiting_since = time.monotonic()
+        outcome = reason = None
+        period = options.settings.monitor_period
+        while outcome is None:
+            now = time.time()
+            came = fc.pump()
+            self._record(came, now)
+            if self.sonars is not None and fc.time >= next_reading:
+                next_reading = fc.time + 1.0 / SONAR_RATE
+                self._sense(now)
+            if self.collision is not None:
+                outcome, reason = "collision", self.collision.describe()
+                break
+            agent = self.agent
+            if agent.phase.value == "waiting" and not options.wait:
+                if fc.mode != "GUIDED" and fc.set_mode("GUIDED") == 0:
+                    waiting_since = time.monotonic()
+                if fc.ready() and fc.mode == "GUIDED":
+                    agent.start()
+                elif time.monotonic() - waiting_since > READY_TIMEOUT:
+                    outcome, reason = "error", "the flight controller's pre-arm checks never passed"
+            if fc.time >= next_step:
+                next_step = max(next_step + period, fc.time)
+                agent.step()
+                if agent.done:
+                    outcome, reason = agent.outcome, agent.reason
+            if fc.lost and not agent.paused and agent.phase.value not in ("waiting", "done"):
+                agent.step()  # it reads the loss from took_over() and pauses, saying so
+            self._broadcast(self.companion.tick(now), now)
+            if fc.time - begun > options.settings.time_limit + 120:
+                outcome, reason = "timeout", f"time limit of {options.settings.time_limit:g} s reached"
+            if duration is not None and time.monotonic() - started > duration:
+                outcome, reason = outcome or "stopped", reason or "stopped after the given duration"
+            if not came:
+                time.sleep(IDLE)
+        self._broadcast(self.companion.final(), time.time())
+        result = self.result(outcome, reason, begun, time.monotonic() - started)
+        self.close()
+        return result
+
+    def _avoid_margin(self) -> float:
+        """How far the autopilot's own obstacle avoidance keeps from echoes (AVOID_MARGIN when AVOID_ENABLE)."""
+        values = {}
+        for name in ("AVOID_ENABLE", "AVOID_MARGIN"):
+            self.fc.send(mavlink.MAVLink_param_request_read_message(self.fc.sysid, 1, name.encode(), -1))
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline and len(values) < 2:
+            for message in self.fc.pump():
+                if message.get_type() == "PARAM_VALUE":
+                    values[message.param_id.rstrip("\0")] = message.param_value
+            time.sleep(IDLE)
+        return float(values.get("AVOID_MARGIN", 0.0)) if values.get("AVOID_ENABLE", 0) else 0.0
+
+    def _sense(self, now: float) -> None:
+        """Cast the sonar at the pose the autopilot reports; check the way there against the scene."""
+        fc = self.fc
+        pose = self._body(fc.pose)
+        here = pose.xyz()
+        if self._last_xyz is not None:
+            self.distance += math.dist(self._last_xyz, here)
+            contact = self.collider.sweep(np.array(self._last_xyz), np.array(here))
+            if contact is not None:
+                self.collision = contact
+                fc.hold()
+                self.agent.say(f"Crash: {contact.describe()}", mavlink.MAV_SEVERITY_CRITICAL)
+        self._last_xyz = here
+        readings = self.sonars.read(pose, fc.time)
+        fc.collect(readings)
+        ms = int(fc.time * 1000)
+        self._broadcast([distance_sensor(r, ms) for r in readings], now, to_ground=False)
+
+    def _body(self, reported: Pose) -> Pose:
+        """Where the body is in the scene: the autopilot's height is that of the vehicle resting on its feet (0
+        on the ground at home), so the body's centre sits a radius and a clearance higher; a rover rides on the
+        scene's ground, of which the autopilot knows nothing."""
+        z = reported.z if self.options.kind == "copter" else self.ground(reported.x, reported.y)
+        return Pose(reported.x, reported.y, z + RADIUS + CLEARANCE, reported.yaw, reported.pitch, reported.roll)
+
+    def _broadcast(self, messages: list, now: float, to_ground: bool = True) -> None:
+        links = [self.conn, *self.gcs] if to_ground else [self.conn]
+        for message in messages:
+            packet = pack(message, self.conn.mav)
+            for link in links:
+                try:
+                    link.write(packet)
+                except OSError:
+                    continue
+            if self.log is not None:
+                self.log.write(packet, now)
+
+    def _record(self, messages: list, now: float) -> None:
+        if self.log is not None:
+            for message in messages:
+                self.log.write(message.get_msgbuf(), now)
+
+    def result(self, outcome: str, reason: str, begun: float, wall: float) -> dict:
+        agent = self.agent
+        return {"mission": self.options.mission, "vehicle": self.options.kind, "sensors": self.options.sensors,
+                "outcome": outcome, "reason": reason, "version": __version__,
+                "detections": agent.map.detections if agent else 0,
+                "cells_ever_hit": agent.map.cells_ever_hit if agent else 0,
+                "resolution": self.options.settings.resolution, "sim_time_s": round(self.fc.time - begun, 3),
+                "distance_m": round(self.distance or (agent.monitor.distance_travelled if agent else 0.0), 2),
+                "flight_controller_problems": self.fc.problems, "wall_time_s": round(wall, 3),
+                "messages": list(agent.messages)[-20:] if agent else []}
+
+    def close(self) -> None:
+        for link in (self.conn, *self.gcs):
+            link.close()
+        if self.log is not None:
+            self.log.close()
+
+
+def run_agent(options: AgentOptions, duration: float | None = None, say=print) -> dict:
+    """One flight of the onboard agent; a flight controller that cannot be flown is an ``error`` outcome."""
+    try:
+        agent = OnboardAgent(options)
+    except (OSError, ValueError) as error:
+        return {"mission": options.mission, "outcome": "error", "reason": str(error)}
+    try:
+        return agent.run(duration, say)
+    except FlightControllerError as error:
+        agent.close()
+        return {"mission": options.mission, "outcome": "error", "reason": str(error)}
