@@ -13,6 +13,7 @@ import io
 import json
 import logging
 import secrets
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
@@ -107,8 +108,13 @@ def create_app(station: GroundStation) -> FastAPI:
     @app.get("/api/health", tags=["status"])
     def health():
         scene = station.scene
-        return {"status": "ok", "version": __version__, "mode": station.mode, "vehicles": len(station.fleet.ids()),
-                "links": station.link_urls,
+        link = station.link.health() if station.link is not None else None
+        troubled = link is not None and (link["thread"] != "ok" or link["recording_error"]
+                                         or not all(port["up"] for port in link["links"]))
+        return {"status": "degraded" if troubled else "ok", "version": __version__, "mode": station.mode,
+                "vehicles": len(station.fleet.ids()), "links": station.link_urls, "link": link,
+                "recording": None if station.recorder is None else {
+                    "file": station.recorder.path.name, "error": link["recording_error"] if link else None},
                 "scene": None if scene is None else {"name": scene.path.name if scene.path else None,
                                                      "triangles": len(scene.faces)}}
 
@@ -167,7 +173,7 @@ def create_app(station: GroundStation) -> FastAPI:
         live_only()
         v = vehicle_or_404(sysid)
         try:
-            result = await asyncio.to_thread(execute, station.link, v, body, station.fleet.datum)
+            result = await asyncio.to_thread(execute, station.link, v, body, station.fleet.datum, time.time())
         except LinkError as error:
             raise HTTPException(504, str(error)) from None
         log.info("vehicle %s: %s -> %s", sysid, body.action, result)

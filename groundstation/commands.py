@@ -18,6 +18,7 @@ from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import mavlink, mavutil
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE
 
+COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed"]
 
 
@@ -51,7 +52,8 @@ def mode_number(vehicle: VehicleState, name: str) -> int | None:
     return None
 
 
-def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | None) -> str:
+def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | None, now: float) -> str:
+    """``now``: the receiver's clock, to tell whether the vehicle's companion is still heard."""
     sysid = vehicle.sysid
     action = command.action
 
@@ -76,6 +78,8 @@ def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | 
     if action == "takeoff":
         return link.command(sysid, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, command.altitude)
     if action == "resume":
+        if vehicle.has_companion(now):  # its agent on a companion computer: to the autopilot this would start AUTO
+            return link.command(sysid, mavlink.MAV_CMD_MISSION_START, component=COMPANION)
         result = set_mode("AUTO")
         return result if result != "accepted" else link.command(sysid, mavlink.MAV_CMD_MISSION_START)
     if action == "speed":

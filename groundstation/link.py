@@ -1,32 +1,53 @@
-"""The ground station's MAVLink side: connections, GCS heartbeats, commands with ACKs, the mission protocol.
+"""The ground station's MAVLink side: links, GCS heartbeats, telemetry requests, commands with ACKs, missions.
 
-One thread reads every connection (pymavlink's ``mavlink_connection``, any
-transport), feeds each message to the Fleet and to whoever waits for it, sends
-a GCS heartbeat every second and writes everything, both directions, to the
-session recording. Commands are retried (confirmation += 1) until the vehicle
-answers with COMMAND_ACK or the retries run out, as MAVLink asks of a sender.
+One thread reads every link (``vehicle.protocol.links``: any transport, UDP
+parsed per datagram and per sender, TCP and serial reopened whenever they
+drop), feeds each message to the Fleet and to whoever waits for it, sends a
+GCS heartbeat every second and writes everything, both directions, to the
+session recording. Like QGroundControl and Mission Planner it asks each
+vehicle for the telemetry it shows (SET_MESSAGE_INTERVAL, and the older
+REQUEST_DATA_STREAM for autopilots without it), again when the vehicle
+reboots or comes back after its link was lost: ArduPilot sends position and
+attitude only on links where someone asked. Commands are retried
+(confirmation += 1) until the vehicle answers with COMMAND_ACK or the retries
+run out, as MAVLink asks of a sender. Nothing a peer sends or the disk does
+stops the thread: a failure is counted, kept for the health report, and the
+loop goes on.
 """
 
 from __future__ import annotations
 
+import logging
 import queue
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from groundstation.state import Fleet
-from vehicle.protocol import mission
-from vehicle.protocol.mav import mavlink, mavutil, pack
+from groundstation.state import LINK_LOST_AFTER, Fleet
+from vehicle.protocol import links, mission
+from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.mission import MissionItem
+
+log = logging.getLogger("groundstation.link")
 
 GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER
+AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 RESULTS = {
     mavlink.MAV_RESULT_ACCEPTED: "accepted", mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily rejected",
     mavlink.MAV_RESULT_DENIED: "denied", mavlink.MAV_RESULT_UNSUPPORTED: "unsupported",
     mavlink.MAV_RESULT_FAILED: "failed", mavlink.MAV_RESULT_IN_PROGRESS: "in progress",
 }
+TELEMETRY = {  # message -> Hz asked of every vehicle
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 20, mavlink.MAVLINK_MSG_ID_ATTITUDE: 20,
+    mavlink.MAVLINK_MSG_ID_VFR_HUD: 4, mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1, mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 1,
+    mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: 1, mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR: 10,
+}
+DATA_STREAMS = {mavlink.MAV_DATA_STREAM_POSITION: 10, mavlink.MAV_DATA_STREAM_EXTRA1: 10,
+                mavlink.MAV_DATA_STREAM_EXTRA2: 4, mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: 2}
+STALLED_AFTER = 5.0  # s without a turn of the loop: the health report says the link thread is stuck
 
 
 class LinkError(Exception):
@@ -45,15 +66,18 @@ class Link:
         self.fleet = fleet
         self.recorder = recorder
         self.urls = urls
-        self.connections = [mavutil.mavlink_connection(url, source_system=sysid, source_component=GCS_COMPID,
-                                                       autoreconnect=True) for url in urls]
+        self.ports = [links.connect(url, sysid, GCS_COMPID) for url in urls]
         self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=GCS_COMPID)
-        self.route: dict[int, object] = {}  # sysid -> the connection it was last heard on
+        self.route: dict[int, tuple] = {}  # sysid -> (the port it was last heard on, its address there)
+        self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
         self._waiters: list[_Waiter] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="mavlink", daemon=True)
-        self.stats = {"received": 0, "sent": 0, "bad": 0}
+        self.stats: Counter[str] = Counter()
+        self.last_error = ""
+        self.recording_error = ""
+        self.turned = time.monotonic()  # when the loop last went round
 
     def start(self) -> Link:
         self._thread.start()
@@ -62,43 +86,70 @@ class Link:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2)
-        for connection in self.connections:
-            connection.close()
+        for port in self.ports:
+            port.close()
+
+    def health(self) -> dict:
+        """How the link side is doing, for /api/health: the thread, each link, and the recording."""
+        stalled = not self._thread.is_alive() or time.monotonic() - self.turned > STALLED_AFTER
+        return {"thread": "stalled" if stalled else "ok", "errors": self.stats["errors"],
+                "last_error": self.last_error or None, "recording_error": self.recording_error or None,
+                "links": [{"url": port.url, "up": port.up, "error": port.error or None} for port in self.ports]}
 
     # ---- the loop ---------------------------------------------------------------------------------
     def _run(self) -> None:
         next_beat = 0.0
         while not self._stop.is_set():
-            now = time.time()
-            if now >= next_beat:
-                self.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID,
-                                                            0, 0, mavlink.MAV_STATE_ACTIVE, 3))
-                next_beat = now + 1.0
-            busy = False
-            for connection in self.connections:
-                while True:
-                    try:
-                        message = connection.recv_msg()
-                    except (OSError, ConnectionError):
-                        break
-                    if message is None:
-                        break
-                    busy = True
-                    self._receive(connection, message, time.time())
-            if self.recorder is not None:
-                self.recorder.tick(time.time())
+            self.turned = time.monotonic()
+            try:
+                now = time.time()
+                if now >= next_beat:
+                    self.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID,
+                                                                0, 0, mavlink.MAV_STATE_ACTIVE, 3))
+                    next_beat = now + 1.0
+                busy = self._read()
+                self._record_tick()
+            except Exception as error:  # noqa: BLE001 - nothing may stop reception; counted and reported
+                self._failed(error)
+                busy = False
             if not busy:
                 time.sleep(0.002)
 
-    def _receive(self, connection, message, now: float) -> None:
+    def _read(self) -> bool:
+        busy = False
+        for port in self.ports:
+            for _ in range(links.MAX_DATAGRAMS):
+                message = port.recv_msg()
+                if message is None:
+                    break
+                busy = True
+                try:
+                    self._receive(port, message, time.time())
+                except Exception as error:  # noqa: BLE001 - one bad message must not take the others down
+                    self._failed(error)
+        return busy
+
+    def _failed(self, error: BaseException) -> None:
+        self.stats["errors"] += 1
+        self.last_error = f"{type(error).__name__}: {error}"[:200]
+        log.warning("link: %s", self.last_error)
+
+    def _receive(self, port, message, now: float) -> None:
         if message.get_type() == "BAD_DATA":
             self.stats["bad"] += 1
             return
         self.stats["received"] += 1
-        if self.recorder is not None:
-            self.recorder.write(message.get_msgbuf(), now)
+        self._record(message.get_msgbuf(), now)
         sysid = message.get_srcSystem()
-        self.route[sysid] = connection
+        self.route[sysid] = (port, getattr(message, "_peer", None))
+        if message.get_type() == "HEARTBEAT" and message.get_srcComponent() == AUTOPILOT:
+            self._ask_for_telemetry(sysid, now)
+        if hasattr(message, "time_boot_ms") and sysid in self._asked:
+            heard, boot = self._asked[sysid]
+            if message.time_boot_ms / 1000.0 + 5.0 < boot:  # it rebooted: ask again at its next heartbeat
+                del self._asked[sysid]
+            else:
+                self._asked[sysid] = (heard, max(boot, message.time_boot_ms / 1000.0))
         self.fleet.apply(message, now)
         with self._lock:
             waiters = list(self._waiters)
@@ -106,20 +157,53 @@ class Link:
             if waiter.sysid == sysid and waiter.accepts(message):
                 waiter.replies.put(message)
 
+    def _ask_for_telemetry(self, sysid: int, now: float) -> None:
+        """Ask a vehicle heard for the first time, or again after its link was lost, for what the page shows."""
+        heard, boot = self._asked.get(sysid, (None, 0.0))
+        self._asked[sysid] = (now, boot)
+        if heard is not None and now - heard <= LINK_LOST_AFTER:
+            return
+        for message_id, rate in TELEMETRY.items():
+            self.send(mavlink.MAVLink_command_long_message(sysid, AUTOPILOT, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                                                           0, message_id, 1e6 / rate, 0, 0, 0, 0, 0), sysid)
+        self.send(mavlink.MAVLink_command_long_message(sysid, AUTOPILOT, mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
+                                                       mavlink.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0), sysid)
+        for stream, rate in DATA_STREAMS.items():
+            self.send(mavlink.MAVLink_request_data_stream_message(sysid, AUTOPILOT, stream, rate, 1), sysid)
+
+    # ---- recording ----------------------------------------------------------------------------------
+    def _record(self, packet: bytes, now: float) -> None:
+        if self.recorder is None:
+            return
+        try:
+            self.recorder.write(packet, now)
+            self.recording_error = ""
+        except OSError as error:  # a full or vanished disk: say so, go on tracking the vehicles
+            self.stats["recording errors"] += 1
+            self.recording_error = f"{type(error).__name__}: {error}"[:200]
+
+    def _record_tick(self) -> None:
+        if self.recorder is None:
+            return
+        try:
+            self.recorder.tick(time.time())
+        except OSError as error:
+            self.stats["recording errors"] += 1
+            self.recording_error = f"{type(error).__name__}: {error}"[:200]
+
     # ---- sending ------------------------------------------------------------------------------------
     def send(self, message, sysid: int | None = None) -> None:
-        """Send to the connection the vehicle was heard on (all connections if unknown or None)."""
+        """Send to where the vehicle was heard (to every link and peer if it is unknown or None)."""
         with self._lock:
             packet = pack(message, self.packer)
-        targets = [self.route[sysid]] if sysid in self.route else self.connections
-        for connection in targets:
-            try:
-                connection.write(packet)
-            except OSError:
-                continue
+        if sysid in self.route:
+            port, peer = self.route[sysid]
+            port.write(packet, peer)
+        else:
+            for port in self.ports:
+                port.write(packet)
         self.stats["sent"] += 1
-        if self.recorder is not None:
-            self.recorder.write(packet, time.time())
+        self._record(packet, time.time())
 
     def request(self, sysid: int, message, accepts: Callable[[object], bool], timeout: float = 1.0,
                 retries: int = 3, resend: Callable[[int], object] | None = None):
@@ -139,12 +223,14 @@ class Link:
             with self._lock:
                 self._waiters.remove(waiter)
 
-    def command(self, sysid: int, command: int, *params: float, timeout: float = 1.0, retries: int = 3) -> str:
-        """COMMAND_LONG, retried with confirmation += 1; the COMMAND_ACK result as a word."""
+    def command(self, sysid: int, command: int, *params: float, timeout: float = 1.0, retries: int = 3,
+                component: int = AUTOPILOT) -> str:
+        """COMMAND_LONG to a component of a vehicle (its autopilot unless told), retried with confirmation += 1;
+        the COMMAND_ACK result as a word."""
         values = (list(params) + [0.0] * 7)[:7]
 
         def build(confirmation: int):
-            return mavlink.MAVLink_command_long_message(sysid, 1, command, confirmation, *values)
+            return mavlink.MAVLink_command_long_message(sysid, component, command, confirmation, *values)
 
         ack = self.request(sysid, build(0), lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
                            timeout, retries, build)

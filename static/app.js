@@ -477,9 +477,29 @@ function renderMessages(ul, messages) {
   }
 }
 
+/** The onboard agent's own state beside the autopilot's mode: a mission running, paused (and why), ended. */
+function renderAgent(card, agent) {
+  const badge = card.querySelector(".agent-state");
+  const line = card.querySelector(".agent");
+  if (!agent || typeof agent !== "object") {
+    badge.hidden = true;
+    setText(line, "no onboard agent heard");
+    return;
+  }
+  const state = String(agent.state ?? "");
+  const reason = agent.reason ? String(agent.reason) : "";
+  badge.hidden = false;
+  setText(badge, state ? state.toUpperCase() : "–");
+  badge.className = `agent-state ${state}`;
+  badge.title = reason ? `onboard mission ${state}: ${reason}` : `onboard mission ${state}`;
+  const where = agent.companion ? "companion" : "onboard";
+  setText(line, `${agent.mission ?? "?"} ${state}${reason ? ` (${reason})` : ""} · ${agent.phase ?? "?"} · ${where}`);
+}
+
 function renderCard(card, v) {
   setText(card.querySelector(".vehicle-title"), vehicleName(v));
   setText(card.querySelector(".mode"), v.mode ? String(v.mode) : "–");
+  renderAgent(card, v.agent);
   const armed = card.querySelector(".armed");
   setText(armed, v.armed == null ? "–" : v.armed ? "ARMED" : "disarmed");
   armed.classList.toggle("is-armed", v.armed === true);

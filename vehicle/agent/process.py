@@ -28,12 +28,13 @@ import numpy as np
 
 from vehicle import __version__
 from vehicle.agent.agent import Agent
-from vehicle.agent.companion import Companion
+from vehicle.agent.companion import COMPONENT, Companion
 from vehicle.agent.mavlink_controller import FlightControllerError, MavlinkController
 from vehicle.agent.settings import Settings
+from vehicle.protocol import links
 from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.mav import mavlink, mavutil, pack
+from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.rangefinder import distance_sensor
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.world.scene import Scene
@@ -66,11 +67,8 @@ class OnboardAgent:
     def __init__(self, options: AgentOptions):
         self.options = options
         self.log = TlogWriter(options.log) if options.log else None
-        self.conn = mavutil.mavlink_connection(options.connect, source_system=1, source_component=191,
-                                               autoreconnect=True, retries=60)
-        self.gcs = [mavutil.mavlink_connection(url, source_system=1, source_component=191) for url in options.gcs]
-        for link in (self.conn, *self.gcs):
-            link.mav.robust_parsing = True
+        self.conn = links.connect(options.connect, 1, COMPONENT)  # the system id is the autopilot's, once heard
+        self.gcs = [links.connect(url, 1, COMPONENT) for url in options.gcs]
         self.sonars = self.collider = None
         ground = None
         servo = None

@@ -21,7 +21,8 @@ import math
 from collections import Counter
 from typing import Protocol
 
-from vehicle.protocol.mav import mavlink, mavutil, pack
+from vehicle.protocol import links
+from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, Kind, mode_name
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
@@ -86,11 +87,7 @@ class Endpoint:
         self.sysid = sysid
         self.failsafe_timeout = failsafe_timeout
         self.log = log
-        self.links = [mavutil.mavlink_connection(url, source_system=sysid,
-                                                 source_component=mavlink.MAV_COMP_ID_AUTOPILOT1)
-                      for url in urls]
-        for link in self.links:
-            link.mav.robust_parsing = True
+        self.links = [links.connect(url, sysid, AUTOPILOT) for url in urls]
         self.packers = {component: mavlink.MAVLink(None, srcSystem=sysid, srcComponent=component)
                         for component in {AUTOPILOT, onboard.component if onboard else AUTOPILOT}}
         self.missions = MissionServer(self.autopilot)
@@ -121,12 +118,8 @@ class Endpoint:
     def poll(self, now: float) -> None:
         """Handle everything waiting on every link, then the timers (mission retries, failsafe)."""
         for link in self.links:
-            while True:
-                try:
-                    message = link.recv_msg()
-                except (OSError, ConnectionError):
-                    self.stats["link errors"] += 1
-                    break
+            for _ in range(links.MAX_DATAGRAMS):
+                message = link.recv_msg()
                 if message is None:
                     break
                 self._receive(message, now)

@@ -1,0 +1,205 @@
+"""MAVLink links that hold against broken and hostile peers: one factory for every transport.
+
+``connect(url)`` gives a link with pymavlink's face (``recv_msg()``,
+``write(bytes)``, ``mav.send(message)``, ``close()``) for the URLs of
+``mavutil.mavlink_connection``, with two differences that matter when peers
+cannot be trusted:
+
+- UDP (``udpin:`` listens, ``udpout:`` sends to one address; ``udp:`` is
+  ``udpin:``) parses every datagram on its own and keeps one parser per sender.
+  pymavlink feeds all senders' datagrams into one byte stream, so a stray
+  two-byte datagram from anyone desynchronises everyone; here it spoils only
+  itself. Each message carries ``_peer``, the address it came from, so a reply
+  goes back there; senders are forgotten when idle (and the oldest when there
+  are too many), so a flood of one-packet senders neither grows without bound
+  nor is sent our traffic.
+- Streams (``tcp:``, serial ports) never block and never give up: a peer that
+  is not up yet, or that drops, is retried with a growing pause while the link
+  reports itself down (``up``, ``error``).
+
+No maintained library does either (pymavlink's own UDP links are shared-stream
+by design), hence this module.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections import OrderedDict, deque
+
+from vehicle.protocol.mav import mavlink, mavutil
+
+MAX_SENDERS = 64  # UDP peers remembered (parsers, and where broadcasts go)
+SENDER_IDLE = 30.0  # s after which a silent UDP peer gets no more broadcasts and is forgotten
+MAX_DATAGRAMS = 2000  # read at most this many per call, so one flood cannot stall the caller's loop
+RETRY = (0.5, 10.0)  # s: first and longest pause between attempts to open a stream
+
+
+def connect(url: str, source_system: int = 255, source_component: int = 0) -> UdpLink | StreamLink:
+    """A link for a pymavlink-style URL (see the module's docstring)."""
+    kind, _, rest = url.partition(":")
+    if kind in ("udpin", "udp", "udpout"):
+        host, _, port = rest.rpartition(":")
+        if not host or not port.isdigit():
+            raise ValueError(f"a UDP link is {kind}:HOST:PORT, not {url!r}")
+        return UdpLink(url, host, int(port), listen=kind != "udpout", source_system=source_system,
+                       source_component=source_component)
+    return StreamLink(url, source_system, source_component)
+
+
+def _parser() -> mavlink.MAVLink:
+    parser = mavlink.MAVLink(None)
+    parser.robust_parsing = True
+    return parser
+
+
+def _restart(parser: mavlink.MAVLink) -> None:
+    """Forget any partial packet: a datagram holds whole packets, never the rest of an earlier one."""
+    parser.buf = bytearray()
+    parser.buf_index = 0
+    parser.expected_length = mavlink.HEADER_LEN_V1 + 2
+    parser.have_prefix_error = False
+
+
+class UdpLink:
+    """A UDP socket, parsed per datagram and per sender (see the module's docstring)."""
+
+    def __init__(self, url: str, host: str, port: int, listen: bool, source_system: int = 255,
+                 source_component: int = 0):
+        self.url = url
+        self.listen = listen
+        self.port = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.port.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if listen:
+            self.port.bind((host, port))
+            self.destination = None
+        else:
+            self.port.bind(("0.0.0.0" if host not in ("127.0.0.1", "localhost") else "127.0.0.1", 0))
+            self.destination = (host, port)
+        self.port.setblocking(False)
+        self.mav = mavlink.MAVLink(self, srcSystem=source_system, srcComponent=source_component)  # writes here
+        self.senders: OrderedDict[tuple, list] = OrderedDict()  # address -> [parser, last heard (monotonic)]
+        self.stats = {"datagrams": 0, "bad": 0, "senders forgotten": 0}
+        self._ready: deque = deque()
+        self.up = True
+        self.error = ""
+
+    def recv_msg(self):
+        """The next message from any sender (``_peer`` set to its address), or None if none is waiting."""
+        if not self._ready:
+            self._read()
+        return self._ready.popleft() if self._ready else None
+
+    def _read(self) -> None:
+        now = time.monotonic()
+        for _ in range(MAX_DATAGRAMS):
+            try:
+                data, address = self.port.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as error:  # e.g. an ICMP port-unreachable for an earlier send
+                self.error = str(error)
+                return
+            self.stats["datagrams"] += 1
+            entry = self.senders.pop(address, None) or [_parser(), now]
+            entry[1] = now
+            self.senders[address] = entry  # most recently heard last
+            parser = entry[0]
+            _restart(parser)
+            try:
+                messages = parser.parse_buffer(data) or []
+            except Exception:  # noqa: BLE001 - pymavlink raises many kinds on hostile bytes
+                messages = []
+                self.stats["bad"] += 1
+            for message in messages:
+                if message.get_type() == "BAD_DATA":
+                    self.stats["bad"] += 1
+                message._peer = address
+                self._ready.append(message)
+            self._forget(now)
+
+    def _forget(self, now: float) -> None:
+        while self.senders:
+            address, (_, heard) = next(iter(self.senders.items()))
+            if len(self.senders) <= MAX_SENDERS and now - heard <= SENDER_IDLE:
+                return
+            del self.senders[address]
+            self.stats["senders forgotten"] += 1
+
+    def peers(self) -> list[tuple]:
+        """Where a message for everyone goes: the one address of ``udpout``, or every sender heard lately."""
+        if self.destination is not None:
+            return [self.destination]
+        now = time.monotonic()
+        return [address for address, (_, heard) in self.senders.items() if now - heard <= SENDER_IDLE]
+
+    def write(self, buf: bytes, peer: tuple | None = None) -> None:
+        for address in [peer] if peer is not None else self.peers():
+            try:
+                self.port.sendto(bytes(buf), address)
+            except OSError as error:
+                self.error = str(error)
+
+    def close(self) -> None:
+        self.port.close()
+
+
+class StreamLink:
+    """pymavlink's TCP or serial link, opened without blocking and reopened whenever it drops."""
+
+    def __init__(self, url: str, source_system: int = 255, source_component: int = 0):
+        self.url = url
+        self.source = (source_system, source_component)
+        self.mav = mavlink.MAVLink(self, srcSystem=source_system, srcComponent=source_component)  # writes here
+        self.connection = None
+        self.up = False
+        self.error = "not connected yet"
+        self.failures = 0
+        self._retry_at = 0.0
+        self._open()
+
+    def _open(self) -> None:
+        if time.monotonic() < self._retry_at:
+            return
+        try:
+            self.connection = mavutil.mavlink_connection(self.url, source_system=self.source[0],
+                                                         source_component=self.source[1], autoreconnect=True,
+                                                         retries=0)
+        except (OSError, ValueError) as error:
+            self._down(error)
+            return
+        self.connection.mav.robust_parsing = True
+        self.up, self.error, self.failures = True, "", 0
+
+    def _down(self, error: BaseException) -> None:
+        if self.connection is not None:
+            try:
+                self.connection.close()
+            except OSError:
+                pass
+        self.connection, self.up, self.error = None, False, f"{type(error).__name__}: {error}"
+        self.failures += 1
+        self._retry_at = time.monotonic() + min(RETRY[1], RETRY[0] * 2 ** min(self.failures - 1, 8))
+
+    def recv_msg(self):
+        if self.connection is None:
+            self._open()
+            if self.connection is None:
+                return None
+        try:
+            return self.connection.recv_msg()
+        except Exception as error:  # noqa: BLE001 - a dropped peer shows as many kinds; retry it later
+            self._down(error)
+            return None
+
+    def write(self, buf: bytes, peer=None) -> None:
+        if self.connection is None:
+            return
+        try:
+            self.connection.write(bytes(buf))
+        except Exception as error:  # noqa: BLE001 - as above
+            self._down(error)
+
+    def close(self) -> None:
+        if self.connection is not None:
+            self.connection.close()
