@@ -344,6 +344,7 @@ class Fleet:
             "time_boot_s": v.time_boot_s,
             "messages": list(v.messages)[-20:],
             "map": {"occupied": self.occupied(v), "source": v.map_source},
+            "path": [[_round(x), _round(y)] for x, y in v.planned_path()],
         }
 
     @staticmethod

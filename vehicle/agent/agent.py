@@ -63,6 +63,7 @@ class Agent:
         self._travel: Travel | None = None
         self._settling = False
         self._blocked_since: float | None = None
+        self._relaunch: Phase | None = None  # the phase to go back to after taking off again on a resume
 
     @property
     def done(self) -> bool:
@@ -95,6 +96,10 @@ class Agent:
         self.pause_reason = ""
         self.fc.took_over()  # the operator's own switch back is the hand-back, not a takeover
         self.say("Agent: resuming mission")
+        if self._landed_meanwhile():  # an operator's RTL or LAND brought it down: up again first
+            self._relaunch = self.phase
+            self.phase = Phase.PREFLIGHT
+            return True
         if self.phase is Phase.HOMING or (self.phase is Phase.MISSION and self.mission.mode == "GUIDED"):
             self._set_mode("GUIDED")
         if self.phase is Phase.MISSION:
@@ -102,6 +107,10 @@ class Agent:
         if self._travel is not None:
             self._travel.resume()
         return True
+
+    def _landed_meanwhile(self) -> bool:
+        return (self.fc.kind is Kind.COPTER and self.phase in (Phase.MISSION, Phase.HOMING)
+                and not (self.fc.flying and self.fc.armed))
 
     def pause(self, reason: str) -> None:
         """Stop commanding until resumed: someone took over, or the flight controller refused or went silent."""
@@ -141,7 +150,8 @@ class Agent:
 
     def _preflight(self, now: float) -> None:
         fc = self.fc
-        if self.mission.mode == "AUTO":
+        if self.mission.mode == "AUTO":  # the autopilot takes off by itself, where its mission starts
+            self._relaunch = None
             self.mission.begin()
             self._set_mode("AUTO")
             fc.arm()
@@ -158,8 +168,17 @@ class Agent:
         self.phase = Phase.TAKEOFF
 
     def _takeoff(self, now: float) -> None:
-        if self.fc.flying and not self.fc.taking_off:
+        if not (self.fc.flying and not self.fc.taking_off):
+            return
+        relaunched, self._relaunch = self._relaunch, None
+        if relaunched is None:
             self._start_mission()
+            return
+        self.phase = relaunched  # back to where the operator interrupted it
+        if relaunched is Phase.MISSION:
+            self.mission.resume()
+        if self._travel is not None:
+            self._travel.resume()
 
     def _start_mission(self) -> None:
         self.phase = Phase.MISSION

@@ -122,9 +122,24 @@ class Endpoint:
                 message = link.recv_msg()
                 if message is None:
                     break
+                self._route(message, link)
                 self._receive(message, now)
         self.send(self.missions.poll(now), now)
         self._check_failsafe(now)
+
+    def _route(self, message, source) -> None:
+        """Pass on what is not for the autopilot alone to the other links, as ArduPilot routes: a companion's map
+        reaches the ground stations, a ground station's command for the companion reaches it."""
+        if len(self.links) < 2 or message.get_type() == "BAD_DATA" or message.get_srcSystem() == self.sysid and \
+                message.get_srcComponent() == AUTOPILOT:
+            return
+        if (getattr(message, "target_system", 0), getattr(message, "target_component", 0)) == (self.sysid, AUTOPILOT):
+            return
+        packet = message.get_msgbuf()
+        for link in self.links:
+            if link is not source:
+                link.write(packet)
+        self.stats["routed"] += 1
 
     def _receive(self, message, now: float) -> None:
         kind = message.get_type()

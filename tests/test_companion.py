@@ -1,0 +1,269 @@
+"""The onboard agent as a companion computer (``vehicle agent``), flying an autopilot over MAVLink.
+
+Against ``vehicle sim --role autopilot`` (our simulator as a plain ArduPilot-like
+flight controller), both as separate processes talking UDP: the agent flies the
+same missions as in-process, an operator's RTL through the ground station
+pauses it and Resume (MISSION_START to component 191) hands control back. And
+``MavlinkController`` alone against a scripted autopilot that misbehaves:
+refuses, never answers, disappears, is the wrong vehicle, sends NaN.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from harness import SCENE_TEXT, RunningStation, command_ok, free_udp_port, small_scene, wait_wall
+
+from vehicle.agent.mavlink_controller import NO_ANSWER, FlightControllerError, MavlinkController
+from vehicle.agent.settings import Settings
+from vehicle.lab.experiment import Experiment, run_experiment
+from vehicle.protocol import links
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mav import mavlink
+
+VEHICLE = [sys.executable, "-m", "vehicle.cli"]
+SPEEDUP = 20.0
+CASTLE_START = (-40.0, 0.0)
+
+
+@contextmanager
+def autopilot(scene: Path, urls: list[str], start=(0.0, 0.0), kind: str = "copter", speedup: float = SPEEDUP):
+    """``vehicle sim --role autopilot`` in a process of its own, sending to ``urls``."""
+    command = [*VEHICLE, "sim", "--role", "autopilot", "--scene", str(scene), f"--start={start[0]},{start[1]}",
+               "--vehicle", kind, "--speedup", str(speedup)]
+    for url in urls:
+        command += ["--mavlink", url]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        yield process
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+
+
+def agent_command(port: int, mission: str, scene: Path, kind: str = "copter", *extra: str) -> list[str]:
+    return [*VEHICLE, "agent", "--connect", f"udpin:127.0.0.1:{port}", "--mission", mission, "--vehicle", kind,
+            "--scene", str(scene), "--json", *extra]
+
+
+def result_of(done) -> dict:
+    lines = done.stdout.strip().splitlines()
+    assert lines, done.stderr
+    return json.loads(lines[-1])
+
+
+def over_mavlink(scene: Path, mission: str, start=CASTLE_START, *extra: str) -> dict:
+    port = free_udp_port()
+    with autopilot(scene, [f"udpout:127.0.0.1:{port}"], start):
+        done = subprocess.run(agent_command(port, mission, scene, "copter", *extra), capture_output=True, text=True,
+                              timeout=300)
+    return result_of(done)
+
+
+def in_process(scene: Path, mission: str, start=CASTLE_START) -> dict:
+    return run_experiment(Experiment(str(scene), mission, start=start, settings=Settings()))
+
+
+# ---- the same missions, over MAVLink ---------------------------------------------------------------------
+@pytest.mark.parametrize("mission", ["browse", "square", "pathfind"])
+def test_the_agent_over_mavlink_flies_each_mission_as_it_does_in_process(castle_path, mission):
+    here, there = in_process(castle_path, mission), over_mavlink(castle_path, mission)
+    assert there["outcome"] == here["outcome"] != "collision", (there, here["outcome"])
+    assert there["reason"] == here["reason"]
+    assert abs(there["detections"] - here["detections"]) <= 0.2 * here["detections"], (there, here["detections"])
+    assert there["flight_controller_problems"] == 0
+
+
+def test_search_over_mavlink_finds_what_searches_in_process_find(castle_path):
+    """Search chooses each goal from the last scan, so a few centimetres change where it goes: in-process runs
+    from starts 5 cm apart find between 1,000 and 1,900 cells. Over MAVLink (commands and readings a few
+    milliseconds late) it must land within that spread, give or take 20 %."""
+    spread = [in_process(castle_path, "search", (CASTLE_START[0] + dx, dy))["detections"]
+              for dx, dy in ((0, 0), (0.05, 0), (-0.05, 0), (0, 0.05), (0, -0.05))]
+    there = over_mavlink(castle_path, "search")
+    assert there["outcome"] == "finished", there
+    assert 0.8 * min(spread) <= there["detections"] <= 1.2 * max(spread), (there["detections"], spread)
+
+
+def test_an_agent_told_the_wrong_vehicle_refuses_to_fly_it(tmp_path):
+    scene = tmp_path / "yard.wrl"
+    scene.write_text(SCENE_TEXT)
+    port = free_udp_port()
+    with autopilot(scene, [f"udpout:127.0.0.1:{port}"]):
+        done = subprocess.run(agent_command(port, "browse", scene, "rover"), capture_output=True, text=True,
+                              timeout=120)
+    assert done.returncode == 1
+    result = result_of(done)
+    assert result["outcome"] == "error"
+    assert result["reason"] == "the flight controller is a quadrotor, not a rover (--vehicle)"
+
+
+# ---- taking over ----------------------------------------------------------------------------------------------
+def test_an_operators_rtl_pauses_the_agent_and_resume_hands_control_back(tmp_path):
+    """The station hears the autopilot and, routed through it, the agent (component 191): one vehicle."""
+    scene_file = tmp_path / "yard.wrl"
+    scene_file.write_text(SCENE_TEXT)
+    agent_port = free_udp_port()
+    with RunningStation(small_scene(), tmp_path / "recordings") as station, station.api() as api, \
+            autopilot(scene_file, [f"udpout:127.0.0.1:{agent_port}", station.vehicle_url()], speedup=10):
+        agent = subprocess.Popen(agent_command(agent_port, "pathfind", scene_file, "copter", "--set",
+                                               "space_size=20"), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                 text=True)
+        try:
+            def away(v):
+                agent_state = v["agent"] or {}
+                return agent_state.get("phase") == "mission" and v["position"] and \
+                    math.hypot(v["position"]["x"], v["position"]["y"]) > 3.0
+
+            flying = api.wait_vehicle(1, lambda v: away(v) and v["path"] and v["map"]["occupied"], sim_timeout=120,
+                                      what="the agent flies its mission, its map and path shown")
+            assert flying["agent"]["state"] == "running" and flying["agent"]["companion"]
+            assert flying["map"]["source"] == "vehicle"  # the agent's own map, not one the station built
+            assert flying["mode"] == "GUIDED"
+
+            command_ok(api, 1, action="rtl")
+            paused = api.wait_vehicle(1, lambda v: v["agent"]["state"] == "paused", sim_timeout=30,
+                                      what="the agent pauses")
+            assert paused["agent"]["reason"] == "operator switched to RTL"
+            home = api.wait_vehicle(1, lambda v: math.hypot(v["position"]["x"], v["position"]["y"]) < 1.0,
+                                    sim_timeout=60, what="the vehicle flies home")
+            assert home["mode"] == "RTL" and home["agent"]["state"] == "paused"
+
+            command_ok(api, 1, action="resume")  # MISSION_START to component 191, through the autopilot
+            resumed = api.wait_vehicle(1, lambda v: v["agent"]["state"] == "running" and v["mode"] == "GUIDED",
+                                       sim_timeout=30, what="the agent resumes")
+            assert resumed["agent"]["phase"] in ("preflight", "takeoff", "mission")
+            out, err = agent.communicate(timeout=180)
+        finally:
+            agent.kill()
+    result = json.loads(out.strip().splitlines()[-1])
+    assert result["outcome"] == "finished", (result, err[-2000:])
+    assert "Agent: paused, operator switched to RTL" in result["messages"]
+    assert "Agent: resuming mission" in result["messages"]
+
+
+# ---- a flight controller that misbehaves ---------------------------------------------------------------------
+class ScriptedAutopilot:
+    """A copter's autopilot on a UDP link, answering as told: ``answer`` maps a command to its MAV_RESULT
+    (None: never answers). It sends heartbeats, home and a position until ``stop()``."""
+
+    def __init__(self, port: int, mav_type=mavlink.MAV_TYPE_QUADROTOR):
+        self.link = links.connect(f"udpout:127.0.0.1:{port}", 1, 1)
+        self.mav_type = mav_type
+        self.answer: dict[int, int | None] = {}
+        self.received: list = []
+        self.attitude = (0.0, 0.0, 0.5)
+        self.beating = True
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> ScriptedAutopilot:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.link.close()
+
+    def _run(self) -> None:
+        lat, lon = Datum().to_global(0.0, 0.0)
+        started = time.monotonic()
+        while not self._stop.wait(0.02):
+            ms = int((time.monotonic() - started) * 1000)
+            mav = self.link.mav
+            if self.beating:
+                mav.heartbeat_send(self.mav_type, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 217, 4,
+                                   mavlink.MAV_STATE_ACTIVE)
+                mav.global_position_int_send(ms, int(lat * 1e7), int(lon * 1e7), 584000, 4000, 0, 0, 0, 0)
+                mav.attitude_send(ms, *self.attitude, 0, 0, 0)
+                mav.home_position_send(int(lat * 1e7), int(lon * 1e7), 584000, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0)
+            while (message := self.link.recv_msg()) is not None:
+                self.received.append(message)
+                if message.get_type() == "COMMAND_LONG" or message.get_type() == "COMMAND_INT":
+                    result = self.answer.get(message.command, mavlink.MAV_RESULT_ACCEPTED)
+                    if result is not None:
+                        mav.command_ack_send(message.command, result, 0, 0, message.get_srcSystem(),
+                                             message.get_srcComponent())
+
+    def sent(self, command: int) -> list:
+        return [m for m in list(self.received) if m.get_type() in ("COMMAND_LONG", "COMMAND_INT")
+                and m.command == command]
+
+
+@contextmanager
+def controller(mav_type=mavlink.MAV_TYPE_QUADROTOR, kind="copter"):
+    port = free_udp_port()
+    link = links.connect(f"udpin:127.0.0.1:{port}", 1, 191)
+    with ScriptedAutopilot(port, mav_type) as fake:
+        fc = MavlinkController(link, kind, Datum(), timeout=0.3)
+        try:
+            yield fc, fake
+        finally:
+            link.close()
+
+
+def pumped(fc) -> bool:
+    """Let the controller take in what came (for waits on what it then knows)."""
+    fc.pump()
+    return True
+
+
+def test_a_refused_command_is_reported_and_the_vehicle_told_to_hold():
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.answer[mavlink.MAV_CMD_COMPONENT_ARM_DISARM] = mavlink.MAV_RESULT_DENIED
+        assert fc.arm() == mavlink.MAV_RESULT_DENIED
+        assert fc.took_over() == "flight controller: component_arm_disarm denied"
+        assert fc.problems == 1
+        wait_wall(lambda: any(m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.vx == 0
+                              and m.type_mask == 0x0DC7 for m in list(fake.received)), 5, "a zero-velocity hold")
+
+
+def test_a_command_never_answered_is_tried_three_times_then_reported():
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = None
+        assert fc.takeoff(4.0) == NO_ANSWER
+        tries = fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)
+        assert [m.confirmation for m in tries] == [0, 1, 2]
+        assert fc.took_over() == "flight controller: nav_takeoff no answer"
+        assert not fc.taking_off  # no take-off is believed under way
+
+
+def test_a_flight_controller_that_falls_silent_stops_the_agent_commanding():
+    with controller() as (fc, fake):
+        fc.connect(10)
+        assert not fc.lost and fc.took_over() is None
+        fake.beating = False
+        wait_wall(lambda: pumped(fc) and fc.lost, 5, "the heartbeat is missed")
+        assert fc.took_over() == "lost the flight controller's heartbeat for 2 s; not commanding"
+        assert fc.took_over() is None  # said once
+
+
+def test_the_wrong_kind_of_vehicle_is_refused_at_once():
+    with controller(mavlink.MAV_TYPE_GROUND_ROVER, "copter") as (fc, _), \
+            pytest.raises(FlightControllerError, match="is a ground_rover, not a copter"):
+        fc.connect(10)
+
+
+def test_nan_from_the_flight_controller_or_the_agent_never_moves_the_vehicle():
+    with controller() as (fc, fake):
+        fc.connect(10)
+        wait_wall(lambda: pumped(fc) and fc.pose.yaw == pytest.approx(0.5), 5, "the first attitude")
+        fake.attitude = (math.nan, 0.0, math.nan)
+        time.sleep(0.2)
+        fc.pump()
+        assert fc.pose.yaw == pytest.approx(0.5) and math.isfinite(fc.pose.roll)  # the last good attitude holds
+        before = len(fake.sent(mavlink.MAV_CMD_DO_REPOSITION))
+        assert fc.goto(math.nan, 3.0, 4.0) == mavlink.MAV_RESULT_DENIED
+        assert fc.took_over() == "refused a target that is not a number"
+        assert len(fake.sent(mavlink.MAV_CMD_DO_REPOSITION)) == before  # nothing was sent
