@@ -161,10 +161,12 @@ def start_sim(station: RunningStation, scene: Scene, sysid: int = 1, kind: str =
 class RunningStation:
     """GroundStation on ``udpin:127.0.0.1:<free port>`` with its app served by uvicorn on a thread."""
 
-    def __init__(self, scene: Scene | None, record_dir: str | Path | None, token: str = TOKEN, **station):
+    def __init__(self, scene: Scene | None, record_dir: str | Path | None, token: str = TOKEN,
+                 urls: list[str] | None = None, **station):
+        """``urls``: the MAVLink links (default: ``udpin`` on a free port, which ``vehicle_url`` sends to)."""
         self.mavlink_port = free_udp_port()
         self.url = f"udpin:127.0.0.1:{self.mavlink_port}"
-        self.station = GroundStation([self.url], scene, token, record_dir, **station)
+        self.station = GroundStation(urls or [self.url], scene, token, record_dir, **station)
         self.token = token
         self.http_port = free_tcp_port()
         self.base = f"http://127.0.0.1:{self.http_port}"

@@ -113,6 +113,7 @@ class MavlinkController:
         self._yaw_by_target = False  # this autopilot turns to heading targets (Rover), not CONDITION_YAW
         self._next_heading = 0.0
         self._speed_wanted: float | None = None
+        self._speed_applied = False
         self._reposition_ok = True
         self._lost_reported = False
 
@@ -447,9 +448,18 @@ class MavlinkController:
             return UNSUPPORTED
         self._wanted_mode = name.upper()
         result = self.command(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number)
-        if result == ACCEPTED and name.upper() == "GUIDED" and self._speed_wanted is not None:
-            self.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, self._speed_wanted, -1)  # a mode change reset it
+        if result == ACCEPTED:
+            self._speed_applied = False  # a mode change resets ArduPilot's speed
+            if name.upper() == "GUIDED":
+                self._apply_speed()
         return result
+
+    def _apply_speed(self) -> None:
+        """The wanted speed, once per GUIDED session. Rover takes it only once it has a target (before, it says
+        FAILED), so a refusal here is no problem: it is tried again after the next target."""
+        if self._speed_wanted is not None and not self._speed_applied:
+            result = self.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, self._speed_wanted, -1, report=False)
+            self._speed_applied = result == ACCEPTED
 
     def _mav_type(self) -> int:
         return mavlink.MAV_TYPE_GROUND_ROVER if self.kind is Kind.ROVER else mavlink.MAV_TYPE_QUADROTOR
@@ -462,6 +472,7 @@ class MavlinkController:
         height = altitude if altitude is not None else (self._pose.z - (self.home[2] if self.home else 0.0))
         result = UNSUPPORTED
         if self._reposition_ok:
+            # speed -1: the autopilot's own (Rover refuses a reposition with a speed before it has a target)
             result = self.command_int(mavlink.MAV_CMD_DO_REPOSITION, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
                                       [-1, 0, 0, math.nan], int(round(lat * 1e7)), int(round(lon * 1e7)), height)
             self._reposition_ok = result != UNSUPPORTED
@@ -473,6 +484,7 @@ class MavlinkController:
             result = ACCEPTED
         if result == ACCEPTED:
             self._target, self._yaw_target = (x, y), None
+            self._apply_speed()
         return result
 
     def set_yaw(self, heading: float, relative: bool = False) -> int:

@@ -1,0 +1,168 @@
+"""Against ArduPilot's own firmware (SITL): the ground station alone, and the agent on a companion computer.
+
+ArduCopter and ArduRover SITL (``../shared/sitl``) run at ``--speedup 10``,
+each in a temporary folder of its own, with home at the datum (the scene
+origin). SERIAL0 (TCP 5760 + 10 I) is the companion's port, SERIAL1 (5762 +
+10 I) the ground station's; SERIAL1 opens only once SERIAL0 has a client, so
+the station has to keep retrying. The Rover is ArduPilot's skid-steer model,
+which can turn in place as the agent's scans need. Waits are in the
+autopilot's time (``time_boot_s``), with the harness's wall-clock backstop.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from harness import RunningStation, command_ok, load_default_scene
+
+from vehicle.agent.mavlink_controller import MavlinkController
+from vehicle.protocol import links
+from vehicle.protocol.geodesy import Datum
+from vehicle.world.bundled import default_scene
+
+SITL = Path(__file__).resolve().parents[2] / "shared" / "sitl"
+if not (SITL / "arducopter").exists() or not (SITL / "ardurover").exists():
+    pytest.skip("needs ArduPilot SITL in ../shared/sitl (absent in a bare clone)", allow_module_level=True)
+
+SPEEDUP = 10.0
+HOME = ",".join(str(v) for v in (Datum().lat, Datum().lon, Datum().alt, 0))
+# ArduPilot autotest's skid steering; waypoints reached within half a metre (rover.parm says 3 m, and the agent
+# plans to the point); obstacle avoidance half a metre off (the agent plans twice that clear of echoes)
+ROVER_SKID = "SERVO1_FUNCTION 73\nSERVO3_FUNCTION 74\nATC_STR_RAT_FF 0.2\nCRUISE_SPEED 3\nCRUISE_THROTTLE 75\n" \
+             "WP_RADIUS 0.5\nAVOID_MARGIN 0.5\n"
+VEHICLE = [sys.executable, "-m", "vehicle.cli"]
+
+
+def listening(port: int) -> bool:
+    """Whether something listens on a TCP port (read from /proc: a probe would become SERIAL0's client)."""
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            rows = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        if any(int(row.split()[1].rsplit(":", 1)[1], 16) == port and row.split()[3] == "0A" for row in rows):
+            return True
+    return False
+
+
+@contextmanager
+def sitl(kind: str, instance: int, tmp_path: Path, proximity: bool = False):
+    """ArduCopter or ArduRover SITL; yields its SERIAL0 and SERIAL1 ports."""
+    folder = tmp_path / f"sitl-{kind}"
+    folder.mkdir()
+    defaults = [SITL / ("copter.parm" if kind == "copter" else "rover.parm")]
+    if proximity:
+        defaults.append(SITL / "proximity.parm")
+    if kind == "rover":
+        (folder / "skid.parm").write_text(ROVER_SKID)
+        defaults.append(folder / "skid.parm")
+    binary = SITL / ("arducopter" if kind == "copter" else "ardurover")
+    model = "+" if kind == "copter" else "rover-skid"
+    process = subprocess.Popen([str(binary), "--model", model, "--speedup", str(SPEEDUP), "-I", str(instance), "-w",
+                                "--defaults", ",".join(str(d) for d in defaults), "--home", HOME], cwd=folder,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, start_new_session=True)
+    ports = (5760 + 10 * instance, 5762 + 10 * instance)
+    try:
+        deadline = time.monotonic() + 30
+        while not listening(ports[0]):
+            assert process.poll() is None and time.monotonic() < deadline, "SITL did not start"
+            time.sleep(0.05)
+        yield ports
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+
+
+def distance_from_home(v: dict) -> float:
+    return math.hypot(v["position"]["x"] - v["home"]["x"], v["position"]["y"] - v["home"]["y"])
+
+
+@pytest.mark.parametrize(("kind", "instance"), [("copter", 4), ("rover", 5)])
+def test_the_station_alone_shows_ardupilot_as_it_reports_itself_and_brings_it_home(kind, instance, tmp_path):
+    """The station asks for its telemetry (ArduPilot sends none unasked on the station's port). Another client
+    holds SERIAL0 and flies the vehicle out; the station's RTL brings it back."""
+    with sitl(kind, instance, tmp_path) as (first, second):
+        link = links.connect(f"tcp:127.0.0.1:{first}", 255, 190)
+        pilot = MavlinkController(link, kind, Datum(), timeout=1.0)
+        with RunningStation(load_default_scene(), tmp_path / "recordings", urls=[f"tcp:127.0.0.1:{second}"]) \
+                as station, station.api() as api:
+            pilot.connect(60)
+            api.wait_vehicle(1, lambda v: v["position"] is not None, 60, SPEEDUP, "the station sees the position")
+            assert pilot.set_mode("GUIDED") == 0
+            deadline = time.monotonic() + 60
+            while not pilot.ready() and time.monotonic() < deadline:
+                pilot.pump()
+            assert pilot.arm() == 0
+            if kind == "copter":
+                assert pilot.takeoff(5.0) == 0
+                while pilot.taking_off and time.monotonic() < deadline:
+                    pilot.pump()
+            assert pilot.goto(12.0, 9.0, 5.0 if kind == "copter" else None) == 0
+            while (pilot.navigation.reach > 0.8 or pilot.speed > 0.2) and time.monotonic() < deadline:
+                pilot.pump()
+            pilot.hold()
+            settled = time.monotonic() + 2.0
+            while time.monotonic() < settled:
+                pilot.pump()
+            shown = api.wait_vehicle(1, lambda v: distance_from_home(v) > 10, 30, SPEEDUP, "out there")
+            pilot.pump()
+            assert shown["position"]["x"] == pytest.approx(pilot.pose.x, abs=0.5)
+            assert shown["position"]["y"] == pytest.approx(pilot.pose.y, abs=0.5)
+            assert shown["position"]["alt"] == pytest.approx(pilot.pose.z, abs=0.3)
+            assert shown["speed"] == pytest.approx(pilot.speed, abs=0.3)
+            assert abs((shown["heading"] - math.degrees(pilot.pose.yaw) + 180) % 360 - 180) < 3
+            assert shown["attitude"]["roll"] == pytest.approx(math.degrees(pilot.pose.roll), abs=2)
+            assert shown["mode"] == "GUIDED" and shown["armed"]
+
+            command_ok(api, 1, action="rtl")
+            home = api.wait_vehicle(1, lambda v: v["mode"] == "RTL" and distance_from_home(v) < 1.5
+                                    and v["speed"] < 0.3, 120, SPEEDUP, "back home")
+            if kind == "copter":  # ArduPilot's copter lands where it left and disarms
+                api.wait_vehicle(1, lambda v: not v["armed"], 120, SPEEDUP, "landed")
+            assert home["link"]["state"] == "ok"
+        link.close()
+
+
+@pytest.mark.parametrize(("kind", "instance"), [("copter", 6), ("rover", 7)])
+def test_the_agent_flies_ardupilot_in_our_scene_and_hands_over_to_the_operator(kind, instance, tmp_path):
+    """The agent on SERIAL0 casts its sonar in default.wrl at the pose ArduPilot reports and feeds it back as a
+    proximity sensor; the station on SERIAL1 shows the vehicle, the agent's state, map and path."""
+    with sitl(kind, instance, tmp_path, proximity=True) as (first, second), \
+            RunningStation(load_default_scene(), tmp_path / "recordings", urls=[f"tcp:127.0.0.1:{second}"]) \
+            as station, station.api() as api:
+        agent = subprocess.Popen([*VEHICLE, "agent", "--connect", f"tcp:127.0.0.1:{first}", "--vehicle", kind,
+                                  "--mission", "pathfind", "--scene", str(default_scene()), "--sensors", "scene",
+                                  "--set", "space_size=20", "--json"], stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        try:
+            flying = api.wait_vehicle(1, lambda v: (v["agent"] or {}).get("phase") == "mission"
+                                      and v["position"] and distance_from_home(v) > 2 and v["path"]
+                                      and v["map"]["occupied"], 180, SPEEDUP, "the agent flies its mission")
+            assert flying["agent"]["state"] == "running" and flying["agent"]["companion"]
+            assert flying["map"]["source"] == "vehicle" and flying["mode"] == "GUIDED"
+
+            command_ok(api, 1, action="rtl")
+            paused = api.wait_vehicle(1, lambda v: v["agent"]["state"] == "paused", 30, SPEEDUP, "paused")
+            assert paused["agent"]["reason"] == "operator switched to RTL"
+            api.wait_vehicle(1, lambda v: distance_from_home(v) < 1.5 and v["speed"] < 0.3, 120, SPEEDUP,
+                             "back home")
+
+            command_ok(api, 1, action="resume")  # MISSION_START to component 191, routed by ArduPilot
+            api.wait_vehicle(1, lambda v: v["agent"]["state"] == "running" and v["mode"] == "GUIDED", 60, SPEEDUP,
+                             "the agent has control again")
+            out, err = agent.communicate(timeout=300)
+        finally:
+            agent.kill()
+    result = json.loads(out.strip().splitlines()[-1])
+    assert result["outcome"] in ("finished", "stopped"), (result, err[-3000:])
+    assert result["outcome"] != "collision"
+    assert "Agent: resuming mission" in result["messages"]
+    assert result["detections"] > 50
