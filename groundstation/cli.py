@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import atexit
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -53,23 +54,31 @@ def demo_starts(count: int) -> list[tuple[float, float]]:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    """The station and, per vehicle, the two processes a user deploys: a flight controller (our simulator as a
+    plain autopilot, in the scene) and the onboard agent beside it, speaking MAVLink as a companion computer."""
     from groundstation.server import serve
 
     port = args.mavlink_port
     station = _station(args, [f"udpin:127.0.0.1:{port}"], args.scene)
-    vehicles = []
+    vehicle = [sys.executable, "-m", "vehicle.cli"]
+    datum = [f"--datum={args.datum.lat},{args.datum.lon},{args.datum.alt}"] if args.datum is not None else []
+    output = subprocess.DEVNULL if args.quiet else None
+    processes = []
     for index, (x, y) in enumerate(demo_starts(args.vehicles)):
-        command = [sys.executable, "-m", "vehicle.cli", "sim", "--scene", args.scene, "--mission", args.mission,
-                   "--vehicle", args.vehicle, f"--start={x},{y}", "--sysid", str(index + 1), "--autostart",
-                   "--speedup", str(args.speedup), "--mavlink", f"udpout:127.0.0.1:{port}"]
-        if args.datum is not None:
-            command.append(f"--datum={args.datum.lat},{args.datum.lon},{args.datum.alt}")
-        vehicles.append(subprocess.Popen(command, stdout=subprocess.DEVNULL if args.quiet else None))
+        agent_port = _free_udp_port()
+        sysid = str(index + 1)
+        processes.append(_child([*vehicle, "sim", "--role", "autopilot", "--scene", args.scene, "--vehicle",
+                                 args.vehicle, f"--start={x},{y}", "--sysid", sysid, "--speedup", str(args.speedup),
+                                 "--mavlink", f"udpout:127.0.0.1:{port}", "--mavlink",
+                                 f"udpout:127.0.0.1:{agent_port}", *datum], output))
+        processes.append(_child([*vehicle, "agent", "--connect", f"udpin:127.0.0.1:{agent_port}", "--mission",
+                                 args.mission, "--vehicle", args.vehicle, "--scene", args.scene, "--stay", *datum],
+                                output))
 
     def stop_vehicles() -> None:
-        for process in vehicles:
+        for process in processes:
             process.terminate()
-        for process in vehicles:
+        for process in processes:
             try:
                 process.wait(timeout=5)
             except subprocess.TimeoutExpired:
@@ -78,13 +87,34 @@ def cmd_demo(args: argparse.Namespace) -> int:
     atexit.register(stop_vehicles)
     for number in (signal.SIGTERM, signal.SIGHUP):  # as Ctrl-C does: the vehicles go down with the station
         signal.signal(number, _exit_quietly)
-    print(f"demo: {args.vehicles} simulated {args.vehicle}(s) flying '{args.mission}' in {Path(args.scene).name}",
-          flush=True)
+    print(f"demo: {args.vehicles} simulated {args.vehicle}(s) in {Path(args.scene).name}, each a flight controller "
+          f"and an onboard agent flying '{args.mission}'", flush=True)
     try:
         serve(station, args.host, args.port, args.tls_cert, args.tls_key)
     finally:
         stop_vehicles()
     return 0
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def _child(command: list[str], output) -> subprocess.Popen:
+    """A process that dies with the station, even when the station is killed outright (Linux's parent-death
+    signal; elsewhere the station's exit handlers stop it)."""
+    return subprocess.Popen(command, stdout=output, preexec_fn=_die_with_parent)
+
+
+def _die_with_parent() -> None:
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
 
 
 def _exit_quietly(number, frame) -> None:

@@ -193,7 +193,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
     waypoints = load_positions(args.waypoints, datum) if args.waypoints else (
         parse_points(hints["waypoints"]) if "waypoints" in hints else None)
     options = AgentOptions(args.connect, args.mission, args.vehicle, settings, waypoints, scene, args.sensors,
-                           args.suite, args.gcs, datum, args.log, args.wait, args.connect_timeout)
+                           args.suite, args.gcs, datum, args.log, args.wait, args.stay, args.connect_timeout)
     result = run_agent(options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps(result))
@@ -293,6 +293,9 @@ def main(argv: list[str] | None = None) -> int:
     agent.add_argument("--log", metavar="FILE.tlog", help="record the agent's MAVLink traffic, both ways")
     agent.add_argument("--wait", action="store_true",
                        help="wait for a ground station's MISSION_START (to component 191) before starting")
+    agent.add_argument("--stay", action="store_true",
+                       help="after the mission, stay on (as a companion computer does: MISSION_START flies it again); "
+                            "without it the agent prints its result and exits")
     agent.add_argument("--connect-timeout", type=float, default=60.0,
                        help="wall seconds to wait for the autopilot's heartbeat, home and position (default 60)")
     agent.add_argument("--duration", type=float, help="stop after this many wall seconds")

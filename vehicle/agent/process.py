@@ -60,6 +60,7 @@ class AgentOptions:
     datum: Datum = field(default_factory=Datum)
     log: str | None = None
     wait: bool = False  # wait for a ground station's MISSION_START before starting
+    stay: bool = False  # after the mission, stay (a ground station's MISSION_START flies it again)
     connect_timeout: float = 60.0
 
 
@@ -132,12 +133,12 @@ class OnboardAgent:
             if fc.time >= next_step:
                 next_step = max(next_step + period, fc.time)
                 agent.step()
-                if agent.done:
+                if agent.done and not options.stay:
                     outcome, reason = agent.outcome, agent.reason
             if fc.lost and not agent.paused and agent.phase.value not in ("waiting", "done"):
                 agent.step()  # it reads the loss from took_over() and pauses, saying so
             self._broadcast(self.companion.tick(now), now)
-            if fc.time - begun > options.settings.time_limit + 120:
+            if fc.time - begun > options.settings.time_limit + 120 and not options.stay:
                 outcome, reason = "timeout", f"time limit of {options.settings.time_limit:g} s reached"
             if duration is not None and time.monotonic() - started > duration:
                 outcome, reason = outcome or "stopped", reason or "stopped after the given duration"
