@@ -28,6 +28,7 @@ from vehicle.lab.experiment import Experiment, run_experiment
 from vehicle.protocol import links
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import mavlink
+from vehicle.world.scene import load_scene
 
 VEHICLE = [sys.executable, "-m", "vehicle.cli"]
 SPEEDUP = 20.0
@@ -84,13 +85,20 @@ def test_the_agent_over_mavlink_flies_each_mission_as_it_does_in_process(castle_
 
 def test_search_over_mavlink_finds_what_searches_in_process_find(castle_path):
     """Search chooses each goal from the last scan, so a few centimetres change where it goes: in-process runs
-    from starts 5 cm apart find between 1,000 and 1,900 cells. Over MAVLink (commands and readings a few
-    milliseconds late) it must land within that spread, give or take 20 %."""
-    spread = [in_process(castle_path, "search", (CASTLE_START[0] + dx, dy))["detections"]
-              for dx, dy in ((0, 0), (0.05, 0), (-0.05, 0), (0, 0.05), (0, -0.05))]
+    from starts up to 20 cm apart find between 700 and 2,000 cells, flying 225 to 660 m, yet about three cells
+    per metre flown. Over MAVLink (commands and readings a few milliseconds late) it must land within that
+    spread, and find as many cells per metre, give or take 20 %."""
+    scene = load_scene(castle_path)
+    nudges = [(0, 0), (0.05, 0), (-0.05, 0), (0, 0.05), (0, -0.05), (0.1, 0), (-0.1, 0), (0, 0.1), (0, -0.1),
+              (0.05, 0.05), (-0.05, -0.05), (0.05, -0.05), (-0.05, 0.05), (0.2, 0), (0, 0.2), (-0.2, 0)]
+    runs = [run_experiment(Experiment(str(castle_path), "search", start=(CASTLE_START[0] + dx, dy)), scene=scene)
+            for dx, dy in nudges]
+    found = [r["detections"] for r in runs]
+    per_metre = [r["detections"] / r["distance_m"] for r in runs]
     there = over_mavlink(castle_path, "search")
     assert there["outcome"] == "finished", there
-    assert 0.8 * min(spread) <= there["detections"] <= 1.2 * max(spread), (there["detections"], spread)
+    assert 0.8 * min(found) <= there["detections"] <= 1.2 * max(found), (there["detections"], found)
+    assert 0.8 * min(per_metre) <= there["detections"] / there["distance_m"] <= 1.2 * max(per_metre)
 
 
 def test_an_agent_told_the_wrong_vehicle_refuses_to_fly_it(tmp_path):
