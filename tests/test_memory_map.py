@@ -71,14 +71,28 @@ def test_repeated_free_passes_fade_an_occupied_cell(grid):
     assert grid.states()[10, 15] == FREE
 
 
+def test_a_cell_hit_many_times_stays_occupied_at_the_saturation_limit(grid):
+    """Evidence saturates: an int8 cell that kept adding HIT would wrap past 127 to a negative value, and a
+    long-seen wall would vanish (after 15 hits it read -121)."""
+    for hits in range(1, 101):
+        grid.add_reading(ORIGIN, EAST, 5.0, 40.0)
+        assert grid.occupied[10, 15], f"the wall vanished after {hits} hits"
+        assert 0 < grid.grid[10, 15] <= MemoryMap.LIMIT
+    assert grid.grid[10, 15] == MemoryMap.LIMIT
+    assert grid.detections == 1
+
+
 def test_a_long_seen_wall_still_fades_within_a_bounded_number_of_passes(grid):
+    """Saturation is what keeps fading bounded: from LIMIT, ceil((LIMIT - OCCUPIED_AT + 1) / MISS) passes."""
     for _ in range(50):  # saturates
         grid.add_reading(ORIGIN, EAST, 5.0, 40.0)
+    assert grid.occupied[10, 15] and grid.grid[10, 15] == MemoryMap.LIMIT
     passes = 0
     while grid.occupied[10, 15]:
         grid.add_reading(ORIGIN, EAST, 8.0, 40.0)
         passes += 1
         assert passes <= 10
+    assert passes == math.ceil((MemoryMap.LIMIT - MemoryMap.OCCUPIED_AT + 1) / MemoryMap.MISS)
 
 
 def test_a_reading_without_echo_clears_free_space_only(grid):
@@ -241,9 +255,13 @@ def test_occupied_version_changes_only_when_the_occupied_set_changes(grid):
     assert grid.occupied_version == version
     grid.add_reading(ORIGIN, NORTH, None, 40.0)
     assert grid.occupied_version == version
+    assert grid.occupied[10, 15]
+    passes = 0
     while grid.occupied[10, 15]:
         grid.add_reading(ORIGIN, EAST, 8.0, 40.0)  # fades (and marks the cell at 8 m)
-    assert grid.occupied_version > version
+        passes += 1
+        assert passes <= 10
+    assert passes >= 1 and grid.occupied_version > version
     version = grid.occupied_version
     grid.mark_body(-5.0, -5.0, radius=1.0)  # frees unknown cells only
     assert grid.occupied_version == version
