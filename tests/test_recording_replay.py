@@ -9,6 +9,7 @@ replay of the recording can be held against it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import random
 import shutil
@@ -16,7 +17,7 @@ import struct
 import subprocess
 import sys
 import time
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,6 +36,7 @@ from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
 from groundstation.replay import Replay, ReplayError, index_tlog
 from groundstation.state import Fleet
+from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mapstream import MAP_SNAPSHOT, MapReceiver
 from vehicle.protocol.mav import mavlink, mavutil
@@ -688,6 +690,52 @@ def test_an_experiment_log_replays(experiment_run):
     replay.seek(replay.duration / 2)
     middle = replay.fleet.get(1)
     assert middle.alt > 3.0 and middle.armed  # mid-scan, in the air
+
+
+def assert_same_state(got, expected, where: str = "vehicle") -> int:
+    """Field by field (dataclasses, deques, dicts, maps cell by cell); returns how many leaves were compared."""
+    if dataclasses.is_dataclass(got) and not isinstance(got, type):
+        assert type(got) is type(expected), where
+        return sum(assert_same_state(getattr(got, f.name), getattr(expected, f.name), f"{where}.{f.name}")
+                   for f in dataclasses.fields(got))
+    if isinstance(got, np.ndarray) or isinstance(expected, np.ndarray):
+        assert np.array_equal(got, expected), f"{where}: {np.count_nonzero(got != expected)} cells differ"
+        return 1
+    if isinstance(got, (deque, list, tuple)) and not isinstance(got, str):
+        assert len(got) == len(expected), f"{where}: {len(got)} items, not {len(expected)}"
+        return sum(assert_same_state(a, b, f"{where}[{i}]") for i, (a, b) in enumerate(zip(got, expected,
+                                                                                          strict=True))) or 1
+    if isinstance(got, dict):
+        assert got.keys() == expected.keys(), where
+        return sum(assert_same_state(got[k], expected[k], f"{where}[{k!r}]") for k in got) or 1
+    if isinstance(got, MemoryMap):
+        assert np.array_equal(got.grid, expected.grid), where
+        return 1
+    assert got == expected, f"{where}: {got!r} != {expected!r}"
+    return 1
+
+
+def test_seeking_backwards_gives_the_state_a_direct_seek_gives(experiment_run):
+    """A seek rebuilds the fleet from nothing: going back from late in the log leaves nothing of the later
+    state (a seek that kept the fleet left 350 trail points where a direct seek gives 50)."""
+    log = experiment_run.log
+    back = Replay.open(log, Fleet(Datum()))
+    late, early = back.duration * 0.9, back.duration * 0.2
+    back.seek(late)
+    later = back.fleet.get(1)
+    trail_late, hits_late, map_late = len(later.trail), len(later.hits), later.map_stream.grid.copy()
+    back.seek(early)
+    direct = Replay.open(log, Fleet(Datum()))
+    direct.seek(early)
+    assert back.fleet.ids() == direct.fleet.ids() == [1]
+    got, expected = back.fleet.get(1), direct.fleet.get(1)
+    assert expected.map_stream.synced and expected.map_stream.grid.any()  # there is a map to compare
+    # what a seek that kept the later state would show differs from the state early on
+    assert len(expected.trail) < trail_late and len(expected.hits) < hits_late
+    assert not np.array_equal(expected.map_stream.grid, map_late)
+    compared = assert_same_state(got, expected)
+    assert compared > 100  # the trail, the hits and the map were compared, not just a few fields
+    assert (back.position, back.clock) == (direct.position, direct.clock)
 
 
 def test_after_a_seek_a_vehicle_was_last_heard_at_its_last_record(tmp_path):
