@@ -29,7 +29,8 @@ What pyastar2d does, and what we add:
   cut (cheap, vectorised); only if there is one, it closes every such pinch in
   the grid by blocking the two free cells of the 2x2 block and searches again.
   That is conservative: it can only remove free cells, so a path through a
-  one-cell pinch may be lost, never a blocked cell gained.
+  one-cell pinch may be lost, never a blocked cell gained; if it lost every
+  path, a four-connected search (which never cuts a corner) finds one.
 * It can start from a blocked cell (the start is never entered), but every
   free neighbour must be reachable. A vehicle that stopped within the
   inflation radius of a wall is in that situation: :func:`plan` then first
@@ -167,19 +168,27 @@ def astar(blocked_inflated: np.ndarray, start, goal, doubtful: bool = False) -> 
         return np.array([start], dtype=np.int64)
     if doubtful and not _connected(grid, start, goal):
         raise NoPath(UNREACHABLE)
-    search = grid
-    for _attempt in range(2):
-        weights = np.ones(grid.shape, dtype=np.float32)
-        np.copyto(weights, np.inf, where=search)
-        path = pyastar2d.astar_path(weights, start, goal, allow_diagonal=True)
-        if path is None:
-            raise NoPath(UNREACHABLE)
-        if not len(corner_cuts(path, grid)):
-            return path.astype(np.int64)
-        search = _close_pinches(grid, keep=goal)
-    # Only left when start and goal are the free pair of one pinch: the direct
-    # diagonal move is the only thing pyastar2d can do and we cannot forbid it.
-    raise NoPath(UNREACHABLE, "start and goal are only connected through a corner")
+    path = _search(grid, start, goal, diagonal=True)
+    if path is None:
+        raise NoPath(UNREACHABLE)
+    if not len(corner_cuts(path, grid)):
+        return path
+    path = _search(_close_pinches(grid, keep=goal), start, goal, diagonal=True)
+    if path is not None and not len(corner_cuts(path, grid)):
+        return path
+    # Closing the pinches closed every way (a corridor turning at a pinch, or start and goal the
+    # free pair of one): four-connected steps never cut a corner and find a way whenever one exists.
+    path = _search(grid, start, goal, diagonal=False)
+    if path is None:
+        raise NoPath(UNREACHABLE, "start and goal are only connected through a corner")
+    return path
+
+
+def _search(blocked: np.ndarray, start: tuple[int, int], goal: tuple[int, int], diagonal: bool) -> np.ndarray | None:
+    weights = np.ones(blocked.shape, dtype=np.float32)
+    np.copyto(weights, np.inf, where=blocked)
+    path = pyastar2d.astar_path(weights, start, goal, allow_diagonal=diagonal)
+    return None if path is None else path.astype(np.int64)
 
 
 def _connected(blocked: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> bool:
