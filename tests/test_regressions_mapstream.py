@@ -9,15 +9,26 @@ from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol.mapstream import MAP_DELTA, MAP_SNAPSHOT, PATH, MapReceiver, MapStreamer
 
 
-def test_bug4_a_path_chunk_with_an_index_past_its_count_raises_keyerror():
-    # MapReceiver._path_chunk: parts = {5: []}; len(parts) == count == 1 -> parts[0] -> KeyError,
-    # which feed() does not catch (it catches struct.error, zlib.error, ValueError, IndexError)
-    MapReceiver().feed(PATH, struct.pack("<HBB", 1, 5, 1))
+def test_bug4_a_path_chunk_with_an_index_past_its_count_is_dropped_and_the_next_path_still_arrives():
+    """MapReceiver._path_chunk once stored {5: []}, saw len(parts) == count == 1 and read parts[0]: a KeyError
+    that feed() did not catch, so one hostile packet ended the link thread."""
+    receiver = MapReceiver()
+    assert receiver.feed(PATH, struct.pack("<HBB", 1, 5, 1))  # ours, but damaged: dropped
+    assert receiver.path == [] and receiver.payloads == 1
+    assert receiver.feed(PATH, struct.pack("<HBBff", 2, 0, 1, 1.5, -2.0))
+    assert receiver.path == [(1.5, -2.0)]
 
 
-def test_bug4_a_snapshot_chunk_with_an_index_past_its_count_raises_keyerror():
-    # MapReceiver._snapshot_chunk: same pattern, b"".join(parts[i] for i in range(count)) -> KeyError
-    MapReceiver().feed(MAP_SNAPSHOT, struct.pack("<HHH", 1, 3, 1) + b"x")
+def test_bug4_a_snapshot_chunk_with_an_index_past_its_count_is_dropped_and_the_next_snapshot_still_applies():
+    """MapReceiver._snapshot_chunk: the same pattern, b"".join(parts[i] for i in range(count)) -> KeyError."""
+    receiver = MapReceiver()
+    assert receiver.feed(MAP_SNAPSHOT, struct.pack("<HHH", 1, 3, 1) + b"x")
+    assert receiver.grid is None and not receiver.synced and receiver.snapshots == 0 and receiver.payloads == 1
+    memory = MemoryMap((0.0, 0.0), 5, 2)
+    memory.add_reading(np.array([0.0, 0.0, 4.0]), np.array([1.0, 0.0, 0.0]), 3.0, 40.0)
+    for kind, payload in MapStreamer(memory, (0.0, 0.0)).snapshot():
+        receiver.feed(kind, payload)
+    assert receiver.synced and receiver.snapshots == 1 and np.array_equal(receiver.grid, memory.grid)
 
 
 def _stream():
