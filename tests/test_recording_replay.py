@@ -364,10 +364,10 @@ def test_playing_forward_equals_seeking(flight, tmp_path):
     sought = Replay.open(path, Fleet(live.datum, live.ground_height))
     assert played.duration > 3.0
     played.seek(1.0)
-    for target in (2.0, played.duration / 2 + 0.5, played.duration - 0.3):
-        for _ in range(1000):
-            if played.clock >= target - 1e-9:
-                break
+    targets = (2.0, played.duration / 2 + 0.5, played.duration - 0.3)
+    maps_compared = 0
+    for target in targets:
+        while played.clock < target - 1e-9:
             played.advance(min(0.25, target - played.clock))
         assert played.clock == pytest.approx(target)
         sought.seek(target)
@@ -378,8 +378,10 @@ def test_playing_forward_equals_seeking(flight, tmp_path):
         if a.map_stream.synced and b.map_stream.synced:
             assert a.map_stream.applied == b.map_stream.applied
             assert np.array_equal(a.map_stream.grid, b.map_stream.grid)
-        if b.map_stream.synced:  # the vehicle's map applied before the readings: no map of the station's own
-            assert b.own_map is None
+            assert b.own_map is None  # the vehicle's map applied before the readings: no map of the station's own
+            maps_compared += 1
+    # UDP may drop part of the map stream on a loaded machine, but never so much that no map is compared
+    assert maps_compared == len(targets) if lossless else maps_compared >= 1
 
 
 # ---- replay through the API -------------------------------------------------------------------------------
