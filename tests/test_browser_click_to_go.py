@@ -8,7 +8,6 @@ import logging
 import math
 import re
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path("tests").resolve()))  # run from the repository's root
@@ -25,6 +24,7 @@ from test_browser import (  # noqa: E402, F401 - fixtures are used by name
     scene,
     station,
     wait_sim,
+    wait_wall,
 )
 
 
@@ -85,11 +85,14 @@ def test_closing_the_page_logs_no_server_error(browser_page, station, flyer, tmp
     errors = _Errors()
     logger = logging.getLogger("uvicorn.error")
     logger.addHandler(errors)
+    viser = station.station.view.server
     try:
         browser_page.open(view=True)
         browser_page.wait_for_view(tmp_path, FLYER)
+        assert viser.get_clients()  # the viewer is connected through the proxy
         browser_page.context.close()  # the viewer leaves
-        time.sleep(2)
+        # the proxy has closed its side when viser has no client left (any error is logged by then)
+        wait_wall(lambda: not viser.get_clients(), 10, "viser sees the viewer go")
     finally:
         logger.removeHandler(errors)
     messages = [r.getMessage() + (f" ({r.exc_info[1]!r})" if r.exc_info else "") for r in errors.records]

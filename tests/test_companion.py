@@ -268,8 +268,8 @@ def test_nan_from_the_flight_controller_or_the_agent_never_moves_the_vehicle():
         fc.connect(10)
         wait_wall(lambda: pumped(fc) and fc.pose.yaw == pytest.approx(0.5), 5, "the first attitude")
         fake.attitude = (math.nan, 0.0, math.nan)
-        time.sleep(0.2)
-        fc.pump()
+        since = fc.time  # the autopilot's clock: wait until it has sent NaN attitudes for 0.2 s of it
+        wait_wall(lambda: pumped(fc) and fc.time >= since + 0.2, 5, "0.2 s of NaN attitudes")
         assert fc.pose.yaw == pytest.approx(0.5) and math.isfinite(fc.pose.roll)  # the last good attitude holds
         before = len(fake.sent(mavlink.MAV_CMD_DO_REPOSITION))
         assert fc.goto(math.nan, 3.0, 4.0) == mavlink.MAV_RESULT_DENIED

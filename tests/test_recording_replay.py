@@ -34,7 +34,7 @@ from harness import (
 )
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
-from groundstation.replay import Replay, ReplayError, index_tlog
+from groundstation.replay import Player, Replay, ReplayError, index_tlog
 from groundstation.state import Fleet
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol.geodesy import Datum
@@ -551,8 +551,14 @@ def test_replay_through_the_api(flight, plane_in_record_dir):
         # pause: the time stays
         paused = api.post(control, json={"play": False}, headers=api.operator).json()
         assert paused["playing"] is False
-        time.sleep(0.3)
-        assert api.get("/api/replay").json()["replay"]["time"] == paused["time"]
+        # the player ticks on the wall clock: look at every tick for six of them, the time stays put at each
+        looks = 0
+        started = time.monotonic()
+        while time.monotonic() - started < 6 * Player.TICK:
+            assert api.get("/api/replay").json()["replay"]["time"] == paused["time"]
+            looks += 1
+            time.sleep(Player.TICK)
+        assert looks >= 3
         # seek
         sought = api.post(control, json={"seek": 10.0}, headers=api.operator).json()
         assert sought["time"] == pytest.approx(10.0) and sought["playing"] is False
