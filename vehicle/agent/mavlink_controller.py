@@ -58,7 +58,7 @@ NAMES = {v: k.removeprefix("MAV_CMD_").lower() for k, v in vars(mavlink).items()
          and isinstance(v, int)}
 RESULTS = {mavlink.MAV_RESULT_ACCEPTED: "accepted", mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily rejected",
            mavlink.MAV_RESULT_DENIED: "denied", mavlink.MAV_RESULT_UNSUPPORTED: "unsupported",
-           mavlink.MAV_RESULT_FAILED: "failed", NO_ANSWER: "no answer"}
+           mavlink.MAV_RESULT_FAILED: "failed", mavlink.MAV_RESULT_IN_PROGRESS: "in progress", NO_ANSWER: "no answer"}
 
 
 class FlightControllerError(Exception):
