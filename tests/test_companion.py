@@ -166,7 +166,7 @@ class ScriptedAutopilot:
     def __init__(self, port: int, mav_type=mavlink.MAV_TYPE_QUADROTOR):
         self.link = links.connect(f"udpout:127.0.0.1:{port}", 1, 1)
         self.mav_type = mav_type
-        self.answer: dict[int, int | None] = {}
+        self.answer: dict[int, int | None | list[int | None]] = {}
         self.received: list = []
         self.attitude = (0.0, 0.0, 0.5)
         self.beating = True
@@ -198,6 +198,8 @@ class ScriptedAutopilot:
                 self.received.append(message)
                 if message.get_type() == "COMMAND_LONG" or message.get_type() == "COMMAND_INT":
                     result = self.answer.get(message.command, mavlink.MAV_RESULT_ACCEPTED)
+                    if isinstance(result, list):  # one answer per try, the last one for every later try
+                        result = result.pop(0) if len(result) > 1 else result[0]
                     if result is not None:
                         mav.command_ack_send(message.command, result, 0, 0, message.get_srcSystem(),
                                              message.get_srcComponent())
@@ -245,6 +247,36 @@ def test_a_command_never_answered_is_tried_three_times_then_reported():
         assert [m.confirmation for m in tries] == [0, 1, 2]
         assert fc.took_over() == "flight controller: nav_takeoff no answer"
         assert not fc.taking_off  # no take-off is believed under way
+
+
+def test_a_command_in_progress_is_asked_again_until_it_is_answered():
+    """IN_PROGRESS is no answer yet: the agent tries again (confirmation + 1) and takes the final result."""
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = [mavlink.MAV_RESULT_IN_PROGRESS, None,
+                                                    mavlink.MAV_RESULT_ACCEPTED]
+        assert fc.takeoff(4.0) == mavlink.MAV_RESULT_ACCEPTED
+        assert [m.confirmation for m in fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)] == [0, 1, 2]
+        assert fc.took_over() is None and fc.problems == 0
+
+
+def test_a_command_still_in_progress_after_every_try_is_reported():
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = [mavlink.MAV_RESULT_IN_PROGRESS]
+        assert fc.takeoff(4.0) == mavlink.MAV_RESULT_IN_PROGRESS
+        assert len(fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)) == 3
+        assert fc.took_over() == "flight controller: nav_takeoff in progress" and fc.problems == 1
+
+
+def test_an_unsupported_command_is_no_problem_worth_stopping_for():
+    """UNSUPPORTED (an autopilot without the feature) is answered once and not reported as a problem."""
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = mavlink.MAV_RESULT_UNSUPPORTED
+        assert fc.takeoff(4.0) == mavlink.MAV_RESULT_UNSUPPORTED
+        assert len(fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)) == 1
+        assert fc.took_over() is None and fc.problems == 0
 
 
 def test_a_flight_controller_that_falls_silent_stops_the_agent_commanding():
