@@ -1,0 +1,163 @@
+"""The ground station's command path (groundstation.link: request, command, command_int) against a scripted
+vehicle on real UDP sockets: retries with confirmation + 1, which COMMAND_ACK counts, result words, giving up."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from contextlib import contextmanager
+
+import pytest
+from harness import free_udp_port, wait_wall
+
+from groundstation.link import Link, LinkError
+from groundstation.state import Fleet
+from vehicle.protocol.mav import mavlink
+
+TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
+TIMEOUT = 0.25  # s per try: short, as the scripted vehicle answers at once or never
+
+
+class ScriptedVehicle:
+    """Vehicle ``sysid`` heard by the link; answers each COMMAND_LONG/COMMAND_INT try with the next of
+    ``answers[command]`` (a result; None: silence; a callable: sends what it likes), the last one for later
+    tries; unscripted commands are accepted."""
+
+    def __init__(self, port: int, sysid: int = 1):
+        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.socket.bind(("127.0.0.1", 0))
+        self.socket.settimeout(0.02)
+        self.target = ("127.0.0.1", port)
+        self.mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1)
+        self.parser = mavlink.MAVLink(None)
+        self.answers: dict[int, list] = {}
+        self.received: list = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def send(self, message) -> None:
+        self.socket.sendto(message.pack(self.mav), self.target)
+
+    def ack(self, command: int, result: int) -> None:
+        self.send(self.mav.command_ack_encode(command, result, 0, 0, 255, 0))
+
+    def _run(self) -> None:
+        beat = 0.0
+        while not self._stop.is_set():
+            if time.monotonic() - beat > 0.2:
+                beat = time.monotonic()
+                self.send(self.mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                                    mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 4))
+            try:
+                data, _ = self.socket.recvfrom(65535)
+            except (TimeoutError, OSError):
+                continue
+            for message in self.parser.parse_buffer(data) or []:
+                if message.get_type() not in ("COMMAND_LONG", "COMMAND_INT"):
+                    continue
+                self.received.append(message)
+                script = self.answers.get(message.command, [mavlink.MAV_RESULT_ACCEPTED])
+                answer = script.pop(0) if len(script) > 1 else script[0]
+                if callable(answer):
+                    answer(self, message)
+                elif answer is not None:
+                    self.ack(message.command, answer)
+
+    def tries(self, command: int) -> list:
+        return [m for m in list(self.received) if m.command == command]
+
+
+@contextmanager
+def station_and_vehicle():
+    port = free_udp_port()
+    link = Link([f"udpin:127.0.0.1:{port}"], Fleet()).start()
+    vehicle = ScriptedVehicle(port)
+    vehicle._thread.start()
+    try:
+        wait_wall(lambda: link.fleet.get(1) is not None and 1 in link.route, 5, "the vehicle heard")
+        yield link, vehicle
+    finally:
+        vehicle._stop.set()
+        vehicle._thread.join(timeout=2)
+        vehicle.socket.close()
+        link.close()
+
+
+def test_an_answered_command_is_sent_once_and_its_result_named():
+    with station_and_vehicle() as (link, vehicle):
+        assert link.command(1, TAKEOFF, 0, 0, 0, 0, 0, 0, 4.0, timeout=TIMEOUT) == "accepted"
+        (sent,) = vehicle.tries(TAKEOFF)
+        assert sent.confirmation == 0 and sent.param7 == 4.0
+        assert (sent.target_system, sent.target_component) == (1, mavlink.MAV_COMP_ID_AUTOPILOT1)
+
+
+def test_unanswered_tries_are_repeated_with_confirmation_plus_one_until_answered():
+    with station_and_vehicle() as (link, vehicle):
+        vehicle.answers[TAKEOFF] = [None, None, mavlink.MAV_RESULT_DENIED]
+        assert link.command(1, TAKEOFF, timeout=TIMEOUT) == "denied"
+        assert [m.confirmation for m in vehicle.tries(TAKEOFF)] == [0, 1, 2]
+
+
+def test_a_command_never_answered_gives_up_after_its_tries():
+    with station_and_vehicle() as (link, vehicle):
+        vehicle.answers[TAKEOFF] = [None]
+        with pytest.raises(LinkError, match="vehicle 1 did not answer COMMAND_LONG after 4 tries"):
+            link.command(1, TAKEOFF, timeout=TIMEOUT, retries=4)
+        assert [m.confirmation for m in vehicle.tries(TAKEOFF)] == [0, 1, 2, 3]
+        assert not link._waiters  # nothing left waiting for a late answer
+
+
+def test_only_the_ack_of_this_command_from_this_vehicle_answers_it():
+    """An ACK of another command, or of this command by another vehicle, is no answer."""
+    def wrong_acks(vehicle, message):
+        vehicle.ack(mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_RESULT_ACCEPTED)  # another command
+        other = mavlink.MAVLink(None, srcSystem=2, srcComponent=1)
+        vehicle.socket.sendto(other.command_ack_encode(TAKEOFF, mavlink.MAV_RESULT_ACCEPTED, 0, 0, 255, 0)
+                              .pack(other), vehicle.target)  # another vehicle
+
+    with station_and_vehicle() as (link, vehicle):
+        vehicle.answers[TAKEOFF] = [wrong_acks, mavlink.MAV_RESULT_FAILED]
+        assert link.command(1, TAKEOFF, timeout=TIMEOUT) == "failed"
+        assert len(vehicle.tries(TAKEOFF)) == 2
+
+
+@pytest.mark.parametrize(("result", "word"), [
+    (mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "temporarily rejected"),
+    (mavlink.MAV_RESULT_UNSUPPORTED, "unsupported"),
+    (mavlink.MAV_RESULT_IN_PROGRESS, "in progress"),
+    (99, "result 99"),
+])
+def test_result_words(result, word):
+    with station_and_vehicle() as (link, vehicle):
+        vehicle.answers[TAKEOFF] = [result]
+        assert link.command(1, TAKEOFF, timeout=TIMEOUT) == word
+
+
+def test_command_int_repeats_the_same_message_and_names_the_result():
+    with station_and_vehicle() as (link, vehicle):
+        reposition = mavlink.MAV_CMD_DO_REPOSITION
+        vehicle.answers[reposition] = [None, mavlink.MAV_RESULT_ACCEPTED]
+        frame = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+        result = link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0,
+                                  timeout=TIMEOUT)
+        assert result == "accepted"
+        tries = vehicle.tries(reposition)
+        assert len(tries) == 2
+        assert all((m.frame, m.x, m.y, m.z, m.param1) == (frame, 123456789, 987654321, 5.0, -1.0) for m in tries)
+
+
+def test_a_request_waits_for_the_reply_it_accepts():
+    """``request`` is the path of every command and of the mission protocol: the first reply that ``accepts``."""
+    with station_and_vehicle() as (link, vehicle):
+        def answer(vehicle, message):
+            vehicle.send(vehicle.mav.statustext_encode(6, b"not this"))
+            vehicle.send(vehicle.mav.statustext_encode(6, b"this one"))
+
+        command = mavlink.MAV_CMD_PREFLIGHT_CALIBRATION  # one the station never sends by itself
+        vehicle.answers[command] = [answer]
+        message = mavlink.MAVLink_command_long_message(1, 1, command, 0, 0, 0, 0, 0, 0, 0, 0)
+        reply = link.request(1, message, lambda m: m.get_type() == "STATUSTEXT" and m.text == "this one",
+                             timeout=TIMEOUT)
+        assert reply.text == "this one"
+        assert len(vehicle.tries(command)) == 1
