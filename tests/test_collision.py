@@ -8,7 +8,7 @@ import pytest
 
 from vehicle.protocol.modes import Kind
 from vehicle.sim.simulation import PlacementError, Simulation
-from vehicle.world.collision import Collider, point_triangle_distance
+from vehicle.world.collision import Collider, point_triangle_distance, segment_triangle_distance
 from vehicle.world.sonar import Sonar
 
 RADIUS = 0.3
@@ -100,6 +100,108 @@ def test_point_triangle_distance_agrees_with_trimesh_in_all_seven_voronoi_region
         regions[voronoi_region(closest, triangle)] += 1
     assert set(regions) == {"a", "b", "c", "ab", "bc", "ac", "face"}
     assert min(regions.values()) >= 100, regions
+
+
+def segment_triangle_reference(p0: np.ndarray, p1: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Segment-to-triangle distance from trimesh's closest points alone: the distance of p0 + t (p1 - p0) to a
+    triangle is convex in t, so a ternary search on t finds its minimum."""
+    from trimesh.triangles import closest_point
+
+    def at(t):
+        points = p0 + t[:, None] * (p1 - p0)
+        return np.linalg.norm(points - closest_point(triangles, points), axis=1)
+
+    lo, hi = np.zeros(len(triangles)), np.ones(len(triangles))
+    for _ in range(60):
+        a, b = lo + (hi - lo) / 3, hi - (hi - lo) / 3
+        nearer_a = at(a) < at(b)
+        hi = np.where(nearer_a, b, hi)
+        lo = np.where(nearer_a, lo, a)
+    return np.minimum.reduce([at(lo), at(np.zeros(len(triangles))), at(np.ones(len(triangles)))])
+
+
+def test_segment_triangle_distance_agrees_with_trimesh_on_random_segments():
+    """The swept body's distance to each triangle: the segment's ends, its closest approach to the triangle's
+    edges, and zero where it passes through the face, all against an independent reference."""
+    rng = np.random.default_rng(7)
+    triangles = rng.normal(size=(400, 3, 3)) * 3
+    crossings = 0
+    for k in range(40):
+        p0, p1 = rng.normal(size=3) * 4, rng.normal(size=3) * 4
+        if k % 4 == 0:
+            p1 = p0 + rng.normal(size=3) * 0.05  # short steps, as a simulation takes
+        got = segment_triangle_distance(p0, p1, triangles)
+        expected = segment_triangle_reference(p0, p1, triangles)
+        np.testing.assert_allclose(got, expected, atol=1e-7)
+        crossings += int(np.count_nonzero(expected < 1e-9))
+    assert crossings > 50  # segments through faces were among them (distance zero)
+
+
+@pytest.mark.parametrize("axes", [(0, 1, 2), (1, 2, 0), (2, 0, 1)])
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_point_over_the_face_is_as_far_as_its_height_whichever_plane_the_triangle_lies_in(axes, sign):
+    """Triangles in the coordinate planes with edges (1, 1) and (1, -1): every part of the face normal counts
+    (a slip in one component of the cross product makes such a triangle look like one without area)."""
+    a, b, c = np.zeros(3), np.array([2.0, 2.0 * sign, 0.0]), np.array([2.0, -2.0 * sign, 0.0])
+    triangle = np.array([a, b, c])[:, axes]
+    above = np.array([1.2, 0.3, 0.7])[list(axes)]
+    assert point_triangle_distance(above, triangle[None])[0] == pytest.approx(0.7)
+
+
+@pytest.fixture
+def clutter():
+    """A field of 600 small triangles (foliage), a few big ones across it (ground, a slanted roof) and a wall
+    of 20 m along y = 5: small ones are binned by grid cell, big ones checked everywhere."""
+    import trimesh
+
+    rng = np.random.default_rng(11)
+    small = rng.uniform(-20, 20, size=(600, 1, 3)) + rng.normal(size=(600, 3, 3)) * 0.6
+    big = np.array([[[-30, -30, 0], [30, -30, 0], [30, 30, 0]], [[-30, -30, 0], [30, 30, 0], [-30, 30, 0]],
+                    [[-25, -25, 9], [25, -25, 14], [0, 25, 11]],
+                    [[-10, 5, 0], [10, 5, 0], [10, 5, 8]], [[-10, 5, 0], [10, 5, 8], [-10, 5, 8]]],
+                   dtype=float)
+    triangles = np.concatenate([small, big])
+    return trimesh.Trimesh(triangles.reshape(-1, 3), np.arange(len(triangles) * 3).reshape(-1, 3), process=False)
+
+
+def test_the_grid_finds_every_triangle_near_a_point_or_a_step(clutter):
+    """Clearance and contact through the grid equal a brute-force check of every triangle: binning must never
+    lose a triangle that is near (it may hand over ones that are not)."""
+    triangles = np.asarray(clutter.triangles)
+    collider = Collider(clutter, RADIUS)
+    rng = np.random.default_rng(12)
+    contacts = 0
+    for _ in range(300):
+        point = rng.uniform([-24, -24, -1], [24, 24, 15])
+        nearest = point_triangle_distance(point, triangles).min()
+        assert collider.clearance(point) == pytest.approx(min(collider.search, nearest), abs=1e-12)
+        end = point + rng.normal(size=3) * 1.5
+        touching = segment_triangle_distance(point, end, triangles).min() < RADIUS
+        fresh = Collider(collider.grid, RADIUS)  # no clear ball from an earlier step
+        contact = fresh.sweep(point, end)
+        assert (contact is not None) == touching, (point, end)
+        if contact is not None:
+            contacts += 1
+            assert point_triangle_distance(contact.point, triangles[[contact.face]])[0] <= RADIUS + 1e-4
+            if nearest >= RADIUS:  # first touch on the way: clear until there
+                before = point + (contact.point - point) * (1 - 1e-4)
+                assert segment_triangle_distance(point, before, triangles).min() >= RADIUS - 1e-4
+            else:  # it started touching
+                assert contact.fraction < 1e-5
+    assert 30 < contacts < 270  # both outcomes, many times
+
+
+def test_a_rover_ignores_only_the_faces_it_can_drive_on(clutter):
+    """ignore_walkable keeps the faces steeper than about 45 degrees and maps contacts back to the mesh's face
+    numbers."""
+    collider = Collider(clutter, RADIUS, ignore_walkable=True)
+    normals = np.asarray(clutter.face_normals)
+    kept = np.flatnonzero(normals[:, 2] <= 0.7)
+    assert np.array_equal(collider.grid.face_ids, kept)
+    assert 0 < len(kept) < len(normals)
+    contact = collider.sweep((0.0, 0.0, 4.0), (0.0, 10.0, 4.0))  # into the wall at y = 5, not the ground
+    assert contact is not None and contact.face in (len(normals) - 2, len(normals) - 1)
+    assert contact.point[1] == pytest.approx(5.0 - RADIUS, abs=1e-3)
 
 
 def test_a_triangle_without_area_is_as_near_as_its_edges():
