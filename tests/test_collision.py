@@ -124,9 +124,9 @@ def test_segment_triangle_distance_agrees_with_trimesh_on_random_segments():
     """The swept body's distance to each triangle: the segment's ends, its closest approach to the triangle's
     edges, and zero where it passes through the face, all against an independent reference."""
     rng = np.random.default_rng(7)
-    triangles = rng.normal(size=(400, 3, 3)) * 3
+    triangles = rng.normal(size=(150, 3, 3)) * 3
     crossings = 0
-    for k in range(40):
+    for k in range(30):
         p0, p1 = rng.normal(size=3) * 4, rng.normal(size=3) * 4
         if k % 4 == 0:
             p1 = p0 + rng.normal(size=3) * 0.05  # short steps, as a simulation takes
@@ -134,7 +134,7 @@ def test_segment_triangle_distance_agrees_with_trimesh_on_random_segments():
         expected = segment_triangle_reference(p0, p1, triangles)
         np.testing.assert_allclose(got, expected, atol=1e-7)
         crossings += int(np.count_nonzero(expected < 1e-9))
-    assert crossings > 50  # segments through faces were among them (distance zero)
+    assert crossings > 10  # segments through faces were among them (distance zero)
 
 
 @pytest.mark.parametrize("axes", [(0, 1, 2), (1, 2, 0), (2, 0, 1)])
@@ -150,12 +150,12 @@ def test_a_point_over_the_face_is_as_far_as_its_height_whichever_plane_the_trian
 
 @pytest.fixture
 def clutter():
-    """A field of 600 small triangles (foliage), a few big ones across it (ground, a slanted roof) and a wall
+    """A field of 300 small triangles (foliage), a few big ones across it (ground, a slanted roof) and a wall
     of 20 m along y = 5: small ones are binned by grid cell, big ones checked everywhere."""
     import trimesh
 
     rng = np.random.default_rng(11)
-    small = rng.uniform(-20, 20, size=(600, 1, 3)) + rng.normal(size=(600, 3, 3)) * 0.6
+    small = rng.uniform(-20, 20, size=(300, 1, 3)) + rng.normal(size=(300, 3, 3)) * 0.8
     big = np.array([[[-30, -30, 0], [30, -30, 0], [30, 30, 0]], [[-30, -30, 0], [30, 30, 0], [-30, 30, 0]],
                     [[-25, -25, 9], [25, -25, 14], [0, 25, 11]],
                     [[-10, 5, 0], [10, 5, 0], [10, 5, 8]], [[-10, 5, 0], [10, 5, 8], [-10, 5, 8]]],
@@ -171,7 +171,7 @@ def test_the_grid_finds_every_triangle_near_a_point_or_a_step(clutter):
     collider = Collider(clutter, RADIUS)
     rng = np.random.default_rng(12)
     contacts = 0
-    for _ in range(300):
+    for _ in range(120):
         point = rng.uniform([-24, -24, -1], [24, 24, 15])
         nearest = point_triangle_distance(point, triangles).min()
         assert collider.clearance(point) == pytest.approx(min(collider.search, nearest), abs=1e-12)
@@ -188,7 +188,7 @@ def test_the_grid_finds_every_triangle_near_a_point_or_a_step(clutter):
                 assert segment_triangle_distance(point, before, triangles).min() >= RADIUS - 1e-4
             else:  # it started touching
                 assert contact.fraction < 1e-5
-    assert 30 < contacts < 270  # both outcomes, many times
+    assert 15 < contacts < 105  # both outcomes, many times
 
 
 def test_a_rover_ignores_only_the_faces_it_can_drive_on(clutter):
