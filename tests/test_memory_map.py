@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from vehicle.mapping.memory_map import FREE, OCCUPIED, UNKNOWN, MemoryMap
+from vehicle.mapping.memory_map import FREE, FREE_SPREAD, NO_ECHO_CLEARS, OCCUPIED, SIDE_REACH, UNKNOWN, MemoryMap
 
 ORIGIN = np.array([0.5, 0.5, 4.0])  # the centre of cell (10, 10) in the maps below, at the operating height
 EAST = np.array([1.0, 0.0, 0.0])
@@ -276,3 +276,97 @@ def test_changes_nobody_takes_stay_bounded_and_complete(grid):
     assert len(grid._changed) <= 513
     changed = grid.take_changes()
     assert len(changed) == len(np.unique(changed)) > 0
+
+
+# ---- cones, batches and long lines -----------------------------------------------------------------------
+@pytest.fixture
+def fine() -> MemoryMap:
+    """20 m across at 10 cells/m around the origin: cell (row, col) spans x = col/10 - 10 .. (col + 1)/10 - 10."""
+    return MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0)
+
+
+def along(m: MemoryMap, angle: float, distance: float, origin=(0.05, 0.05)) -> tuple[int, int]:
+    """The cell ``distance`` metres from ``origin`` at ``angle`` radians left of east."""
+    return m.cell_of(origin[0] + distance * math.cos(angle), origin[1] + distance * math.sin(angle))
+
+
+def test_a_cone_marks_its_sides_free_up_to_the_echo_and_at_most_side_reach(fine):
+    """A sonar hears the nearest echo in its cone, so the cone is free up to it: lines at FREE_SPREAD of the
+    half-angle either side, as far as the centre line and SIDE_REACH at most; the echo on the centre line."""
+    origin = np.array([[0.05, 0.05, 4.0]])
+    half = 0.3
+    side = FREE_SPREAD * half
+    fine.add_readings(origin, np.array([EAST]), np.array([6.0]), np.array([40.0]), beams=np.array([half]))
+    assert fine.occupied[along(fine, 0.0, 6.0)] and fine.detections == 1
+    for angle in (side, -side):
+        assert fine.free[along(fine, angle, 3.0)] and fine.free[along(fine, angle, 5.9)]
+        assert not fine.free[along(fine, angle, 6.3)]  # not past the echo
+    long = MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0)
+    long.add_readings(origin, np.array([EAST]), np.array([9.5]), np.array([40.0]), beams=np.array([half]))
+    for angle in (side, -side):
+        assert long.free[along(long, angle, SIDE_REACH - 0.2)]
+        assert not long.free[along(long, angle, SIDE_REACH + 0.3)]  # the sides stop at SIDE_REACH
+    bare = MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0)
+    bare.add_readings(origin, np.array([EAST]), np.array([6.0]), np.array([40.0]))  # no beam: the centre only
+    assert not bare.free[along(bare, side, 3.0)] and bare.free[along(bare, 0.0, 3.0)]
+
+
+def test_a_reading_without_echo_clears_only_no_echo_clears_metres():
+    """No echo is weak evidence (a surface at a grazing angle returns none either): free up to
+    NO_ECHO_CLEARS, however far the sonar reaches."""
+    m = MemoryMap((0.0, 0.0), space_size=20.0, resolution=10.0)
+    m.add_reading(np.array([-9.95, 0.05, 4.0]), EAST, None, 40.0)
+    assert m.free[along(m, 0.0, NO_ECHO_CLEARS - 0.2, (-9.95, 0.05))]
+    assert not m.free[along(m, 0.0, NO_ECHO_CLEARS + 0.2, (-9.95, 0.05))]
+    short = MemoryMap((0.0, 0.0), space_size=20.0, resolution=10.0)
+    short.add_reading(np.array([-9.95, 0.05, 4.0]), EAST, None, 4.0)  # a shorter sonar clears its own range
+    assert short.free[along(short, 0.0, 3.8, (-9.95, 0.05))] and not short.free[along(short, 0.0, 4.3, (-9.95, 0.05))]
+
+
+def test_readings_left_out_of_the_free_mask_mark_their_echo_only(fine):
+    origins = np.tile([0.05, 0.05, 4.0], (2, 1))
+    marked = fine.add_readings(origins, np.array([EAST, NORTH]), np.array([5.0, 5.0]), np.full(2, 40.0),
+                               free=np.array([True, False]))
+    assert marked == 2 and fine.occupied[along(fine, 0.0, 5.0)] and fine.occupied[along(fine, math.pi / 2, 5.0)]
+    assert fine.free[along(fine, 0.0, 2.5)] and not fine.free[along(fine, math.pi / 2, 2.5)]
+
+
+def test_one_batch_is_one_piece_of_evidence_per_cell(grid):
+    """Readings of one monitor period see the same thing: a cell that several lines pass loses MISS once."""
+    grid.add_reading(ORIGIN, EAST, 5.0, 40.0)
+    assert grid.grid[10, 15] == MemoryMap.HIT
+    three = np.tile(ORIGIN, (3, 1))
+    grid.add_readings(three, np.tile(EAST, (3, 1)), np.full(3, 8.0), np.full(3, 40.0))  # all three pass it
+    assert grid.grid[10, 15] == MemoryMap.HIT - MemoryMap.MISS and grid.occupied[10, 15]
+    assert grid.grid[10, 18] == MemoryMap.HIT  # one hit, however many echoes ended there
+
+
+def test_misses_come_before_hits_in_a_batch(grid):
+    """A saturated wall that one reading of a batch ends in and another passes stays saturated (misses first,
+    then hits; the other order would leave it at LIMIT - MISS)."""
+    for _ in range(10):
+        grid.add_reading(ORIGIN, EAST, 5.0, 40.0)
+    assert grid.grid[10, 15] == MemoryMap.LIMIT
+    grid.add_readings(np.tile(ORIGIN, (2, 1)), np.tile(EAST, (2, 1)), np.array([5.0, 8.0]), np.full(2, 40.0))
+    assert grid.grid[10, 15] == MemoryMap.LIMIT
+
+
+@pytest.mark.parametrize(("start", "direction"), [
+    ((1e9, 0.55), (-1.0, 0.0)),  # from far east, going west
+    ((0.55, 1e9), (0.0, -1.0)),  # from far north, going south
+    ((0.55, -1e9), (0.0, 1.0)),  # from far south
+    ((-1e9, -1e9 + 0.05), (1.0, 1.0)),  # from far south-west, diagonally
+    ((1e9, 1e9), (1.0, 1.0)),  # beyond the north-east corner, going away: never over the map
+])
+def test_an_absurdly_long_line_from_any_side_is_traced_over_the_map_only(grid, start, direction):
+    d = np.array([*direction, 0.0]) / math.hypot(*direction)
+    crossing = grid.add_readings(np.array([[*start, 4.0]]), d[None], np.array([4e9]), np.array([8e9]),
+                                 free=np.array([True]))
+    assert crossing == 0 and grid.detections == 0  # the echo lies far off the map
+    free = np.argwhere(grid.free)
+    if start == (1e9, 1e9):
+        assert len(free) == 0
+    elif direction[0] == 0 or direction[1] == 0:  # a whole row or column of the map
+        assert len(free) == 20 and len({tuple(c) for c in free[:, [0 if direction[0] else 1]]}) == 1
+    else:  # the diagonal, corner to corner
+        assert len(free) >= 20 and {(0, 0), (19, 19)} <= {tuple(c) for c in free}
