@@ -246,7 +246,8 @@ def _segment_segment_distance(p1, q1, p2, q2):
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(denom > 1e-12, np.clip((b * f - c * e) / denom, 0, 1), 0.0)
         s = np.where(a > 1e-12, s, 0.0)
-        t = np.where(e > 1e-12, (b * s + f) / e, 0.0)
+        # a second segment without length is a point: t < 0 takes the point of the first nearest to it
+        t = np.where(e > 1e-12, (b * s + f) / e, -1.0)
         s_low = np.where(a > 1e-12, np.clip(-c / a, 0, 1), 0.0)
         s_high = np.where(a > 1e-12, np.clip((b - c) / a, 0, 1), 0.0)
     s = np.where(t < 0, s_low, np.where(t > 1, s_high, s))
