@@ -171,7 +171,7 @@ def test_the_grid_finds_every_triangle_near_a_point_or_a_step(clutter):
     collider = Collider(clutter, RADIUS)
     rng = np.random.default_rng(12)
     contacts = 0
-    for _ in range(120):
+    for _ in range(60):
         point = rng.uniform([-24, -24, -1], [24, 24, 15])
         nearest = point_triangle_distance(point, triangles).min()
         assert collider.clearance(point) == pytest.approx(min(collider.search, nearest), abs=1e-12)
@@ -188,7 +188,7 @@ def test_the_grid_finds_every_triangle_near_a_point_or_a_step(clutter):
                 assert segment_triangle_distance(point, before, triangles).min() >= RADIUS - 1e-4
             else:  # it started touching
                 assert contact.fraction < 1e-5
-    assert 15 < contacts < 105  # both outcomes, many times
+    assert 8 < contacts < 52  # both outcomes, many times
 
 
 def test_a_rover_ignores_only_the_faces_it_can_drive_on(clutter):
@@ -202,6 +202,119 @@ def test_a_rover_ignores_only_the_faces_it_can_drive_on(clutter):
     contact = collider.sweep((0.0, 0.0, 4.0), (0.0, 10.0, 4.0))  # into the wall at y = 5, not the ground
     assert contact is not None and contact.face in (len(normals) - 2, len(normals) - 1)
     assert contact.point[1] == pytest.approx(5.0 - RADIUS, abs=1e-3)
+
+
+def test_the_distance_between_two_segments_is_exact_on_its_own():
+    """The segment-to-segment helper against a reference (the distance of a point moving along one segment to
+    the other is convex), on its own: inside the segment-to-triangle distance each corner of a triangle is
+    reached through two edges, which hides an error in one of them, but not from a step along an edge."""
+    from vehicle.world.collision import _segment_segment_distance
+
+    def point_to_segment(points, a, b):
+        ab = b - a
+        t = np.clip(((points - a) @ ab) / max(ab @ ab, 1e-300), 0, 1)
+        return np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
+
+    rng = np.random.default_rng(21)
+    checked = 0
+    for k in range(300):
+        p1, q1, p2, q2 = rng.normal(size=(4, 3)) * rng.choice([0.05, 1.0, 5.0], size=(4, 1))
+        if k % 10 == 0:
+            q2 = p2 + (q1 - p1) * rng.uniform(-2, 2)  # parallel
+        if k % 10 == 1:
+            q1 = p1.copy()  # a point, not a segment
+        if k % 10 == 2:
+            q2 = p2.copy()
+        s = np.linspace(0, 1, 2001)
+        expected = point_to_segment(p1 + s[:, None] * (q1 - p1), p2, q2).min()
+        got = _segment_segment_distance(p1, q1, p2[None], q2[None])[0]
+        assert got <= expected + 1e-9 and got == pytest.approx(expected, abs=2e-3 * np.linalg.norm(q1 - p1) + 1e-9)
+        checked += 1
+    assert checked == 300
+
+
+def test_a_step_past_a_triangle_shrunk_to_a_point_is_as_near_as_its_closest_approach():
+    """A triangle whose corners are all in one place is that point, for a step as for a body at rest: a step
+    passing it mid-way was measured from its ends only (the edges, of no length, came out too far)."""
+    point_like = np.full((1, 3, 3), 2.0)
+    assert segment_triangle_distance(np.array([0.0, 2.1, 2.0]), np.array([4.0, 2.1, 2.0]), point_like)[0] == \
+        pytest.approx(0.1)
+
+
+def test_a_short_step_through_a_small_triangle_touches_it():
+    """A 5 cm step through the middle of a 10 cm triangle: the crossing test alone finds it (both ends and
+    every edge are further away than zero)."""
+    triangle = np.array([[[0.0, -0.05, -0.05], [0.0, 0.05, -0.05], [0.0, 0.0, 0.05]]])
+    assert segment_triangle_distance(np.array([-0.025, 0.0, 0.0]), np.array([0.025, 0.0, 0.0]), triangle)[0] == 0.0
+
+
+def test_touching_at_exactly_the_radius_is_no_contact(make_scene, box):
+    """Contact means closer than the radius: a body whose path keeps exactly the radius away does not touch."""
+    scene = make_scene(box(0, 10.25, 2, 20, 0.5, 4))  # south face at y = 10 exactly
+    collider = Collider(scene.mesh, 0.5)
+    assert collider.sweep((-5.0, 9.5, 2.0), (5.0, 9.5, 2.0)) is None
+    assert collider.sweep((-5.0, 9.5, 2.0), (5.0, 9.5 + 2**-10, 2.0)) is not None
+
+
+def test_a_rover_on_flat_ground_has_nothing_to_hit():
+    """Every face is walkable: the rover's collider holds no triangle at all, and answers anywhere."""
+    import trimesh
+
+    ground = trimesh.Trimesh([[-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]], [[0, 1, 2], [0, 2, 3]],
+                             process=False)
+    collider = Collider(ground, RADIUS, ignore_walkable=True)
+    assert len(collider.grid.triangles) == 0
+    for start, end in [((0.0, 0.0, 0.3), (1.0, 0.0, 0.3)), ((-5.0, -5.0, 0.0), (5.0, 5.0, 0.0))]:
+        assert collider.sweep(start, end) is None
+    assert collider.clearance(np.zeros(3)) == collider.search
+
+
+def test_a_lone_triangle_in_the_first_cell_of_the_grid_is_found():
+    """The grid files triangles by cell, the first cell too (the south-west-most), even with one triangle."""
+    import trimesh
+
+    triangles = np.array([[[-9.9, -9.9, 0.0], [-9.5, -9.9, 0.0], [-9.9, -9.5, 0.0]],
+                          [[9.5, 9.5, 0.0], [9.9, 9.5, 0.0], [9.5, 9.9, 0.0]],
+                          [[9.5, -9.5, 0.0], [9.9, -9.5, 0.0], [9.5, -9.1, 0.0]]])
+    mesh = trimesh.Trimesh(triangles.reshape(-1, 3), np.arange(9).reshape(-1, 3), process=False)
+    collider = Collider(mesh, RADIUS)
+    assert collider.clearance(np.array([-9.8, -9.8, 0.2])) == pytest.approx(0.2)
+    assert collider.clearance(np.array([9.6, 9.6, 0.2])) == pytest.approx(0.2)
+    assert collider.touches(np.array([-9.8, -9.8, 0.2]))
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_a_triangle_with_a_repeated_corner_is_the_segment_between_its_corners(axis):
+    """Two corners in one place (a degenerate face some exporters write): the segment between the corners, along
+    any axis, with the edge of no length handled."""
+    def along(*values):
+        point = np.zeros(3)
+        point[axis] = values[0]
+        point[(axis + 1) % 3] = values[1]
+        return point
+
+    for corners in ([along(0, 0), along(1, 0), along(0, 0)], [along(0, 0), along(0, 0), along(3, 0)],
+                    [along(3, 0), along(0, 0), along(0, 0)]):
+        triangle = np.array([corners])
+        assert point_triangle_distance(along(0.5, 1.0), triangle)[0] == pytest.approx(1.0)
+        assert point_triangle_distance(along(-3.0, 4.0), triangle)[0] == pytest.approx(5.0)
+    spread = np.array([[along(0, 0), along(3, 0), along(6, 0)]])  # three corners 3 m apart on a line
+    assert point_triangle_distance(along(1.5, 1.0), spread)[0] == pytest.approx(1.0)
+    assert point_triangle_distance(along(7.0, 0.0), spread)[0] == pytest.approx(1.0)
+
+
+def test_a_millimetre_triangle_is_measured_as_a_face_not_as_its_edges():
+    """A tiny triangle still has area: a point just over its middle is as far as its height."""
+    triangle = np.array([[[0.0, 0.0, 0.0], [1e-3, 0.0, 0.0], [0.0, 1e-3, 0.0]]])
+    assert point_triangle_distance(np.array([2.5e-4, 2.5e-4, 0.01]), triangle)[0] == pytest.approx(0.01, rel=1e-9)
+
+
+def test_triangles_in_single_precision_are_measured_in_double():
+    rng = np.random.default_rng(5)
+    triangles = rng.normal(size=(50, 3, 3)).astype(np.float32)
+    point = rng.normal(size=3).astype(np.float32)
+    np.testing.assert_array_equal(point_triangle_distance(point, triangles),
+                                  point_triangle_distance(point.astype(np.float64), triangles.astype(np.float64)))
 
 
 def test_a_triangle_without_area_is_as_near_as_its_edges():
