@@ -145,12 +145,16 @@ def test_absurdly_long_readings_are_cut_at_the_map_edge(grid):
 def test_readings_whose_arrays_disagree_in_length_are_refused(grid):
     origins = np.tile(ORIGIN, (3, 1))
     directions = np.array([EAST, NORTH, -EAST])
-    with pytest.raises(ValueError, match="distances"):
+    with pytest.raises(ValueError, match=r"^distances: expected one per reading, \(3,\), not shape \(2,\)$"):
         grid.add_readings(origins, directions, np.array([5.0, 6.0]), np.full(3, 40.0))
-    with pytest.raises(ValueError, match="free"):
+    with pytest.raises(ValueError, match=r"^free: expected one per reading, \(3,\), not shape \(2,\)$"):
         grid.add_readings(origins, directions, np.full(3, 5.0), np.full(3, 40.0), free=np.array([True, False]))
-    with pytest.raises(ValueError, match="directions"):
+    with pytest.raises(ValueError, match=r"^directions: expected one per reading, \(3, 3\), not shape \(2, 3\)$"):
         grid.add_readings(origins, directions[:2], np.full(3, 5.0), np.full(3, 40.0))
+    with pytest.raises(ValueError, match=r"^max_ranges: expected one per reading"):
+        grid.add_readings(origins, directions, np.full(3, 5.0), np.full(2, 40.0))
+    with pytest.raises(ValueError, match=r"^beams: expected one per reading"):
+        grid.add_readings(origins, directions, np.full(3, 5.0), 40.0, beams=np.full(2, 0.1))
     assert grid.version == 0 and not grid.grid.any()  # nothing was marked
     assert grid.add_readings(origins, directions, np.full(3, 5.0), 40.0) == 3  # one max range for all
 
@@ -370,3 +374,216 @@ def test_an_absurdly_long_line_from_any_side_is_traced_over_the_map_only(grid, s
         assert len(free) == 20 and len({tuple(c) for c in free[:, [0 if direction[0] else 1]]}) == 1
     else:  # the diagonal, corner to corner
         assert len(free) >= 20 and {(0, 0), (19, 19)} <= {tuple(c) for c in free}
+
+
+# ---- against the surviving mutants of issue 14 ------------------------------------------------------------
+def test_the_defaults_are_the_readmes_and_a_map_smaller_than_a_cell_has_one():
+    m = MemoryMap((0.0, 0.0))
+    assert (m.space_size, m.resolution, m.size) == (100.0, 10.0, 2000)
+    assert MemoryMap((0.0, 0.0), space_size=0.5, resolution=1.0).size == 1  # half a cell across: one cell
+    assert MemoryMap((0.0, 0.0), space_size=0.2, resolution=1.0).size == 1
+    for size, resolution in [(0.0, 1.0), (-1.0, 1.0), (1.0, 0.0), (1.0, -2.0)]:
+        with pytest.raises(ValueError, match="^space_size and resolution must be positive$"):
+            MemoryMap((0.0, 0.0), space_size=size, resolution=resolution)
+
+
+def test_a_map_centred_away_from_the_origin_at_ten_cells_a_metre_puts_echoes_where_they_are():
+    """x and y, columns and rows, metres and cells are not interchangeable: a centre of (3, -2) and 10 cells
+    a metre tell them apart."""
+    m = MemoryMap((3.0, -2.0), space_size=5.0, resolution=10.0)
+    assert m.origin == (-2.0, -7.0)
+    assert m.cell_of(-1.95, -6.95) == (0, 0) and m.cell_of(0.05, -6.95) == (0, 20)
+    assert m.cell_of(-1.95, -4.95) == (20, 0)
+    assert m.center_of(20, 0) == pytest.approx((-1.95, -4.95))
+    m.add_reading(np.array([3.05, -1.95, 4.0]), EAST, 2.0, 40.0)  # the echo at x = 5.05, y = -1.95
+    np.testing.assert_allclose(m.occupied_points(), [[5.05, -1.95]])
+    assert m.occupied[m.cell_of(5.05, -1.95)]
+
+
+def test_cells_at_exactly_the_thresholds_are_occupied_or_free():
+    grid = np.array([[MemoryMap.OCCUPIED_AT, MemoryMap.OCCUPIED_AT - 1, MemoryMap.FREE_AT, MemoryMap.FREE_AT + 1]],
+                    dtype=np.int8)
+    from vehicle.mapping.memory_map import states_of
+
+    assert states_of(grid).tolist() == [[OCCUPIED, UNKNOWN, FREE, UNKNOWN]]
+    m = MemoryMap((0.0, 0.0), space_size=1.0, resolution=2.0)
+    m.grid[:] = np.resize(grid, (4, 4))
+    assert np.array_equal(m.occupied_in(slice(1, 3), slice(0, 4)), m.occupied[1:3, :])
+    assert np.array_equal(m.free_in(slice(0, 4), slice(2, 3)), m.free[:, 2:3])
+    assert m.occupied_in(slice(0, 1), slice(0, 1))[0, 0] and m.free_in(slice(0, 1), slice(2, 3))[0, 0]
+
+
+def test_version_counts_every_update_and_occupied_version_every_change_of_the_occupied_set(grid):
+    """A cell at exactly OCCUPIED_AT is occupied: reaching it, or leaving it, changes the occupied set; going
+    from above it to it, or from it upwards, does not."""
+    assert grid.version == 0
+    for expected in (1, 2, 3):
+        grid.add_reading(ORIGIN, NORTH, None, 40.0)
+        assert grid.version == expected
+    grid.mark_body(-5.0, -5.0, 1.0)
+    assert grid.version == 3  # marking the body is no update of the evidence
+
+    def step(reading, changes: bool, value: int):
+        before = grid.occupied_version
+        reading()
+        assert grid.grid[10, 15] == value
+        assert (grid.occupied_version != before) is changes, (value, grid.occupied_version, before)
+
+    hit = lambda: grid.add_reading(ORIGIN, EAST, 5.0, 40.0)  # noqa: E731
+    passed = lambda: grid.add_reading(ORIGIN, EAST, None, 40.0)  # noqa: E731 - free up to the map's edge
+    step(hit, True, 9)  # unknown to occupied
+    step(passed, False, 6)  # still occupied, at the threshold
+    step(hit, False, 15)  # from the threshold upwards
+    step(passed, False, 12)
+    step(passed, False, 9)
+    step(passed, False, 6)
+    step(passed, True, 3)  # from the threshold down: no longer occupied
+    step(passed, False, 0)
+    step(passed, False, -3)  # free
+    step(hit, True, 6)  # from free straight to the threshold
+    step(lambda: grid.mark_body(5.5, 0.5, 0.3), True, MemoryMap.FREE_AT)  # the body frees a cell at the threshold
+
+
+def test_a_direction_that_is_no_unit_vector_is_scaled_in_every_component(grid):
+    """Directions of length 2 (close to unit length, and exactly 2) are normalised, x, y and z alike."""
+    m = MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0, band=1.0)
+    d = np.array([1.6, 1.2, 0.0])  # length 2, north-east
+    assert m.add_reading(np.array([0.05, 0.05, 4.0]), d, 5.0, 40.0)
+    assert m.occupied[m.cell_of(0.05 + 4.0, 0.05 + 3.0)]
+    tilted = np.array([2.0 * math.sqrt(1 - 0.15**2), 0.0, 2.0 * 0.15])  # length 2, 0.15 up: 0.75 m at 5 m
+    assert m.add_reading(np.array([0.05, 0.05, 4.0]), tilted, 5.0, 40.0)  # within the 1 m band
+    assert grid.add_reading(ORIGIN, np.array([0.0, 2.0, 0.0]), 5.0, 40.0) and grid.occupied[15, 10]
+
+
+def test_a_narrower_band_cuts_a_tilted_beam_where_it_leaves_it():
+    """A beam tilted up leaves a 0.5 m band after band / its vertical share of the distance."""
+    m = MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0, band=0.5)
+    up = np.array([math.cos(0.2), 0.0, math.sin(0.2)])  # leaves the band at 0.5 / sin(0.2) = 2.52 m
+    assert not m.add_reading(np.array([0.05, 0.05, 4.0]), up, 3.0, 40.0)  # the echo is above the band
+    free_x = (np.flatnonzero(m.free[m.cell_of(0.05, 0.05)[0]]).max() + 0.5) / 10 - 10
+    assert free_x == pytest.approx(0.05 + 0.5 / math.tan(0.2), abs=0.1)
+
+
+def test_a_reading_without_direction_or_left_out_of_the_free_mask_stops_nothing_after_it(grid):
+    origins = np.tile(ORIGIN, (3, 1))
+    directions = np.array([[0.0, 0.0, 0.0], EAST, NORTH])
+    assert grid.add_readings(origins, directions, np.array([2.0, 5.0, 3.0]), 40.0) == 2
+    assert grid.occupied[10, 15] and grid.occupied[13, 10]
+    other = MemoryMap((0.0, 0.0), space_size=10.0, resolution=1.0)
+    assert other.add_readings(origins[:2], directions[1:], np.array([5.0, 3.0]), 40.0,
+                              free=np.array([False, True])) == 2
+    assert not other.free[10, 12] and other.free[12, 10]  # the second reading marked its free cells
+
+
+def test_echoes_and_lines_in_the_first_cells_and_on_the_map_edge(grid):
+    """Cell 0 is a cell like any other; a point exactly on the west or south edge is inside the map."""
+    assert not grid.add_reading(np.array([-9.5, -5.5, 4.0]), -NORTH, 5.0, 40.0)  # echo at y = -10.5: off the map
+    m = MemoryMap((0.0, 0.0), space_size=10.0, resolution=1.0)
+    assert m.add_reading(np.array([-9.5, -5.5, 4.0]), -NORTH, 4.0, 40.0) and m.occupied[0, 0]  # cell 0
+    edge = MemoryMap((0.0, 0.0), space_size=10.0, resolution=1.0)
+    edge.add_reading(np.array([-10.0, -10.0, 4.0]), EAST, 2.5, 40.0)  # from the south-west corner exactly
+    assert edge.free[0, 0] and edge.free[0, 1] and edge.occupied[0, 2]
+    start2 = MemoryMap((0.0, 0.0), space_size=10.0, resolution=1.0)
+    start2.add_reading(np.array([-7.5, -9.5, 4.0]), EAST, 3.0, 40.0)  # starts in cell 2
+    assert start2.free[0, 2] and start2.free[0, 4] and start2.occupied[0, 5]
+
+
+def test_the_body_frees_cells_up_to_the_map_edges_and_never_wraps_round(grid):
+    """At the west edge no cell of the row below (at the east edge) is touched, and the edge rows and columns
+    themselves are freed."""
+    grid.mark_body(-9.5, 0.5, radius=1.0)  # cell (10, 0)
+    freed = {tuple(c) for c in np.argwhere(grid.free)}
+    assert freed == {(10, 0), (9, 0), (11, 0), (10, 1)}
+    assert np.array_equal(np.sort(grid.take_changes()), [9 * 20, 10 * 20, 10 * 20 + 1, 11 * 20])
+    other = MemoryMap((0.0, 0.0), space_size=10.0, resolution=1.0)
+    other.mark_body(9.5, -9.5, radius=1.0)  # cell (0, 19): the south-east corner
+    assert {tuple(c) for c in np.argwhere(other.free)} == {(0, 19), (1, 19), (0, 18)}
+    assert np.array_equal(np.sort(other.take_changes()), [18, 19, 20 + 19])
+    assert other.take_changes().dtype.kind == "i" and grid.take_changes().dtype.kind == "i"
+
+
+def test_changes_folded_while_nobody_takes_them_are_all_returned():
+    """Over 512 updates nobody took, the changes fold into a mask: taking them then gives every cell that
+    changed, the same cells a taker after every update saw."""
+    eager, lazy = (MemoryMap((0.0, 0.0), space_size=10.0, resolution=1.0) for _ in range(2))
+    seen = set()
+    rng = np.random.default_rng(3)
+    for _ in range(700):
+        origin = np.array([rng.uniform(-9, 9), rng.uniform(-9, 9), 4.0])
+        angle = rng.uniform(0, 2 * math.pi)
+        direction = np.array([math.cos(angle), math.sin(angle), 0.0])
+        distance = rng.uniform(0.5, 6)
+        for m in (eager, lazy):
+            m.add_reading(origin, direction, distance, 40.0)
+        seen.update(eager.take_changes().tolist())
+        if rng.random() < 0.05:
+            for m in (eager, lazy):
+                m.mark_body(*origin[:2], 0.6)
+    assert len(lazy._changed) <= 513
+    got = lazy.take_changes()
+    assert got.dtype.kind == "i" and sorted(got.tolist()) == sorted(seen)
+    assert lazy.take_changes().size == 0
+    lazy.add_reading(ORIGIN, EAST, 3.0, 40.0)  # after a take, changes are listed again, not folded
+    assert lazy.take_changes().size == 4
+
+
+def test_a_cone_pointing_north_east_marks_both_sides(fine):
+    """The sides of a cone pointing anywhere but along an axis (rotations mixing x and y)."""
+    origin = np.array([[0.05, 0.05, 4.0]])
+    half = 0.4
+    side = FREE_SPREAD * half
+    heading = math.radians(40)
+    d = np.array([[math.cos(heading), math.sin(heading), 0.0]])
+    fine.add_readings(origin, d, np.array([6.0]), np.array([40.0]), beams=np.array([half]))
+    for angle in (heading + side, heading - side):
+        assert fine.free[along(fine, angle, 4.0)] and fine.free[along(fine, angle, 5.5)]
+    assert not fine.free[along(fine, heading + 2 * side, 4.0)] and not fine.free[along(fine, heading - 2 * side, 4.0)]
+
+
+def test_a_cone_wider_than_a_small_map_is_cut_to_it():
+    """Side lines longer than the map is wide are clipped to it like the centre line."""
+    m = MemoryMap((0.0, 0.0), space_size=1.0, resolution=1.0)  # 2 x 2 cells
+    m.add_readings(np.array([[-0.5, -0.5, 4.0]]), np.array([[1.0, 0.0, 0.0]]), np.array([np.nan]),
+                   np.array([40.0]), beams=np.array([1.0]))
+    assert m.free[0, 0] and m.free[0, 1] and m.free[1, 1]  # the left side crosses into the row above
+
+
+@pytest.mark.parametrize(("start", "direction", "cells"), [
+    ((-1e6, 5.05), (1.0, 0.0), "row"),  # a long line at 10 cells a metre
+    ((-1e6, 5.05), (1.0, 1e-7), "row"),  # nearly parallel to x: it climbs 0.1 m over its million metres
+    ((-1e6, 50.0), (1.0, 0.0), "none"),  # parallel to the map's north edge, beyond it
+    ((50.0, -1e6), (0.0, 1.0), "none"),  # parallel to its east edge, beyond it
+])
+def test_long_lines_at_ten_cells_a_metre_are_cut_to_the_map(start, direction, cells):
+    m = MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0)
+    d = np.array([*direction, 0.0]) / math.hypot(*direction)
+    m.add_readings(np.array([[*start, 4.0]]), d[None], np.array([np.nan]), np.array([4e6]),
+                   free=np.array([True]))
+    m.NO_ECHO_CLEARS = math.inf
+    m.add_readings(np.array([[*start, 4.0]]), d[None], np.array([np.nan]), np.array([4e6]))
+    free = np.argwhere(m.free)
+    if cells == "none":
+        assert len(free) == 0
+    else:
+        assert set(free[:, 0].tolist()) <= {150, 151} and len(set(free[:, 1].tolist())) == 200
+
+
+def test_a_long_line_that_ends_inside_the_map_stops_at_its_end():
+    m = MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0)
+    m.NO_ECHO_CLEARS = math.inf
+    m.add_readings(np.array([[-1e6, 5.05, 4.0]]), np.array([EAST]), np.array([1e6]), np.array([2e6]))
+    assert m.occupied[m.cell_of(0.0, 5.05)] and m.detections == 1
+    row = m.cell_of(0.0, 5.05)[0]
+    assert np.flatnonzero(m.free[row]).max() == m.cell_of(0.0, 5.05)[1] - 1  # free up to the echo, not past
+
+
+def test_a_picture_of_the_map_blends_free_cells_pale_over_the_background(grid, tmp_path):
+    grid.add_reading(ORIGIN, NORTH, 8.0, 40.0)
+    grid.save_png(tmp_path / "map.png")
+    with Image.open(tmp_path / "map.png") as image:
+        pixels = np.asarray(image.convert("RGBA")).astype(int)
+    alpha = 110 / 255
+    expected = [int(235 * alpha + 60 * (1 - alpha)), int(240 * alpha + 60 * (1 - alpha)),
+                int(245 * alpha + 66 * (1 - alpha)), 255]
+    assert pixels[20 - 1 - 12, 10].tolist() == expected
+    assert pixels[20 - 1 - 18, 10].tolist() == [200, 30, 40, 255] and pixels[0, 0].tolist() == [60, 60, 66, 255]
