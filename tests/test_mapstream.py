@@ -251,3 +251,157 @@ def test_an_empty_map_streams_and_is_received_as_empty():
     feed(receiver, MapStreamer(memory, HOME).tick(0.0))
     assert_equal_maps(receiver, memory)
     assert not receiver.grid.any()
+
+
+# ---- against the surviving mutants of issue 14 ------------------------------------------------------------
+def synced_receiver(stream: Stream) -> MapReceiver:
+    receiver = MapReceiver()
+    feed(receiver, stream.run(1) + stream.streamer.snapshot())
+    assert receiver.synced
+    return receiver
+
+
+def test_deltas_go_out_every_delta_period_and_snapshots_keep_within_their_budget():
+    """Deltas every half second (not at every tick); a big map's snapshots are spaced so that they use at most
+    snapshot_budget bytes a second on average."""
+    stream = Stream(seed=8, snapshot_period=1.0, snapshot_budget=2000.0)
+    times = {MAP_DELTA: [], MAP_SNAPSHOT: []}
+    sizes = []
+    for _ in range(round(30 / STEP)):
+        out = stream.tick(scans=3)
+        snapshot = [p for k, p in out if k == MAP_SNAPSHOT]
+        if snapshot:  # a snapshot sends the changes pending before it as deltas too
+            times[MAP_SNAPSHOT].append(stream.time)
+            sizes.append(len(snapshot) * PAYLOAD)
+        elif any(k == MAP_DELTA for k, _ in out):
+            times[MAP_DELTA].append(stream.time)
+    assert len(times[MAP_DELTA]) > 30 and np.diff(times[MAP_DELTA]).min() == pytest.approx(0.5)
+    gaps = np.diff(times[MAP_SNAPSHOT])
+    assert len(gaps) >= 3 and max(sizes) > 2000  # bigger than a second of the budget: spaced further apart
+    for gap, size in zip(gaps, sizes[:-1], strict=False):
+        assert gap >= max(1.0, size / 2000.0) - 1e-9
+
+
+def test_deltas_pack_dozens_of_cells_into_each_payload():
+    """Changed cells lie along beams: a payload carries some 60 to 100 of them (at least 40 here), which keeps
+    the stream small."""
+    stream = Stream(seed=9)
+    deltas = [p for k, p in stream.run(10) if k == MAP_DELTA]
+    cells = [struct.unpack_from("<IH", p)[1] for p in deltas]
+    assert sum(cells) / len(deltas) >= 40, cells
+    assert all(len(p) <= PAYLOAD for p in deltas)
+
+
+def test_cells_far_apart_on_a_full_size_map_travel_in_one_delta():
+    """Index gaps of millions of cells (a 2000 x 2000 map) take 4-byte varints, which the receiver reads."""
+    memory = MemoryMap((0.0, 0.0), 100.0, 10.0)
+    streamer = MapStreamer(memory, (0.0, 0.0))
+    receiver = MapReceiver()
+    feed(receiver, streamer.snapshot())
+    memory.grid[0, 0] = 9
+    memory.grid[1999, 1999] = -3
+    memory._note_changes(np.array([0, 1999 * 2000 + 1999]))
+    payloads = streamer.deltas()
+    assert len(payloads) == 1
+    feed(receiver, payloads)
+    assert receiver.synced and receiver.applied == 1 and np.array_equal(receiver.grid, memory.grid)
+    assert receiver.grid.dtype == np.int8  # the copy holds int8 log-odds like the onboard map
+
+
+def test_the_path_goes_out_to_the_centimetre_and_its_id_wraps_round():
+    streamer = MapStreamer(MemoryMap((0.0, 0.0), 10.0, 1.0), (1.0, 2.0))
+    streamer.path_id = 65535
+    ((kind, payload),) = streamer.path([(4.123456, 5.987654)])
+    ident, index, count = struct.unpack_from("<HBB", payload)
+    assert (kind, ident, index, count) == (PATH, 0, 0, 1)
+    x, y = struct.unpack_from("<ff", payload, 4)
+    assert (x, y) == (pytest.approx(3.12, abs=1e-6), pytest.approx(3.99, abs=1e-6))
+
+
+def test_an_empty_delta_advances_the_sequence():
+    """A delta of no cells is still a step in the sequence: the one after it is no gap."""
+    stream = Stream(seed=10)
+    receiver = synced_receiver(stream)
+    first = receiver.applied + 1
+    feed(receiver, [(MAP_DELTA, struct.pack("<IH", first, 0) + zlib_raw(b""))])
+    assert receiver.synced and receiver.applied == first and receiver.gaps == 0
+    stream.streamer.delta_seq = first
+    feed(receiver, stream.run(2) + stream.streamer.deltas())
+    assert_equal_maps(receiver, stream.map)
+    assert receiver.gaps == 0
+
+
+def zlib_raw(data: bytes) -> bytes:
+    import zlib
+
+    packer = zlib.compressobj(9, zlib.DEFLATED, -15)
+    return packer.compress(data) + packer.flush()
+
+
+def test_a_delta_with_bytes_after_its_values_applies_its_count_of_cells():
+    stream = Stream(seed=11)
+    receiver = synced_receiver(stream)
+    seq = receiver.applied + 1
+    body = bytes([5, 1]) + bytes([7, 8]) + b"\x09\x09\x09"  # cells 5 and 6 get 7 and 8; three bytes too many
+    feed(receiver, [(MAP_DELTA, struct.pack("<IH", seq, 2) + zlib_raw(body))])
+    assert receiver.applied == seq and receiver.grid.reshape(-1)[5:7].tolist() == [7, 8]
+
+
+def test_the_receiver_counts_payloads_snapshots_gaps_and_versions():
+    stream = Stream(seed=12)
+    receiver = MapReceiver()
+    payloads = stream.run(6)
+    feed(receiver, payloads)
+    assert receiver.payloads == len(payloads)
+    assert receiver.snapshots == sum(struct.unpack_from("<HHH", p)[1] == 0 for k, p in payloads if k == MAP_SNAPSHOT)
+    assert receiver.snapshots >= 2
+    version = receiver.version
+    deltas = [(k, p) for k, p in stream.run(2) if k == MAP_DELTA]
+    assert len(deltas) >= 3
+    feed(receiver, deltas[:1])
+    assert receiver.version == version + 1  # each change shows as a new version (the views redraw on it)
+    feed(receiver, deltas[2:])  # the second one lost
+    assert receiver.gaps == 1 and not receiver.synced  # a gap: no longer in sync
+    assert receiver.version == version + 1  # nothing applied after the gap
+    feed(receiver, stream.streamer.snapshot())
+    assert receiver.synced and receiver.version > version + 1 and receiver.gaps == 1
+
+
+def test_a_receiver_without_a_snapshot_keeps_only_the_latest_4096_deltas():
+    receiver = MapReceiver()
+    for seq in range(1, 5001):
+        receiver.feed(MAP_DELTA, struct.pack("<IH", seq, 0) + zlib_raw(b""))
+    assert len(receiver._pending) == 4096 and min(receiver._pending) == 5001 - 4096
+
+
+def test_a_stray_chunk_numbered_past_its_count_spoils_no_snapshot_or_path():
+    """A chunk whose index equals its count is refused, so the snapshot or path it claims to belong to still
+    completes from its real chunks."""
+    stream = Stream(seed=13, space_size=40.0)
+    stream.run(10)
+    chunks = stream.streamer.snapshot()
+    snapshot = [(k, p) for k, p in chunks if k == MAP_SNAPSHOT]
+    ident, _, count = struct.unpack_from("<HHH", snapshot[0][1])
+    assert count >= 2
+    receiver = MapReceiver()
+    stray = (MAP_SNAPSHOT, struct.pack("<HHH", ident, count, count) + b"\x00" * 20)
+    feed(receiver, [(k, p) for k, p in chunks if k == MAP_DELTA] + snapshot[:1] + [stray] + snapshot[1:])
+    assert receiver.synced and receiver.snapshots == 1 and np.array_equal(receiver.grid, stream.map.grid)
+    path = stream.streamer.path([(float(i), 0.0) for i in range(20)])  # two chunks
+    assert len(path) == 2
+    path_id = struct.unpack_from("<HBB", path[0][1])[0]
+    feed(receiver, path[:1] + [(PATH, struct.pack("<HBB", path_id, 2, 2) + b"\x00" * 8)] + path[1:])
+    assert len(receiver.path) == 20
+
+
+def test_snapshots_that_lost_a_chunk_are_dropped_once_a_newer_one_gets_further():
+    """Parts of snapshots that will never complete are kept only until a newer snapshot gets further."""
+    stream = Stream(seed=14, space_size=40.0)
+    stream.run(10)
+    receiver = MapReceiver()
+    for _ in range(5):
+        snapshot = [(k, p) for k, p in stream.streamer.snapshot() if k == MAP_SNAPSHOT]
+        feed(receiver, snapshot[:-1])  # the last chunk of each is lost
+    assert len(receiver._parts) == 5 and not receiver.synced
+    feed(receiver, [(k, p) for k, p in stream.streamer.snapshot() if k == MAP_SNAPSHOT])
+    assert receiver._parts == {} and receiver.synced
