@@ -1,0 +1,180 @@
+"""Planning on the memory map (vehicle.mapping.planner.MapPlanner) and the escape from inside the clearance
+(planning._escape), each against a brute-force reference on random maps."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+import pytest
+
+from vehicle.mapping import planning
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.mapping.planner import MapPlanner
+
+RADIUS = 0.3
+
+
+def random_map(seed: int, fraction: float = 0.03) -> MemoryMap:
+    """20 x 20 m at 5 cells/m, centred away from the origin, with scattered occupied and free cells."""
+    m = MemoryMap((3.0, -2.0), space_size=10.0, resolution=5.0)
+    rng = np.random.default_rng(seed)
+    m.grid[rng.random(m.grid.shape) < fraction] = MemoryMap.OCCUPIED_AT
+    m.grid[rng.random(m.grid.shape) < 0.3] = MemoryMap.FREE_AT
+    return m
+
+
+def test_a_spot_is_clear_exactly_when_no_obstacle_lies_within_the_body_and_padding():
+    """Against every occupied cell: none within (radius + padding) of the spot's cell, in cells, counting one
+    exactly that far; spots near the map's edges and outside it too."""
+    checked = {True: 0, False: 0}
+    for seed in range(4):
+        m = random_map(seed)
+        planner = MapPlanner(m, RADIUS)
+        occupied = np.argwhere(m.occupied)
+        rng = np.random.default_rng(100 + seed)
+        for _ in range(150):
+            x, y = rng.uniform(m.origin[0] - 0.5, m.origin[0] + 20.5), rng.uniform(m.origin[1] - 0.5,
+                                                                                  m.origin[1] + 20.5)
+            padding = float(rng.choice([0.0, 0.2, 0.5, 0.9]))
+            cell = m.cell_of(x, y)
+            if cell is None:
+                assert not planner.is_clear((x, y), padding)
+                continue
+            reach = planner.margin_cells(padding)
+            near = ((occupied - cell) ** 2).sum(axis=1) <= reach * reach + 1e-9
+            assert planner.is_clear((x, y), padding) is (not near.any()), (x, y, padding)
+            checked[not near.any()] += 1
+    assert min(checked.values()) > 50
+
+
+def test_a_spot_exactly_the_margin_away_from_an_obstacle_is_not_clear():
+    m = MemoryMap((0.0, 0.0), space_size=5.0, resolution=10.0)
+    planner = MapPlanner(m, 0.3)
+    row, col = m.cell_of(0.05, 0.05)
+    m.grid[row, col + 5] = MemoryMap.OCCUPIED_AT  # 5 cells east: the 0.3 m body and 0.2 m padding exactly
+    m.grid[row + 6, col] = MemoryMap.OCCUPIED_AT  # 6 cells north: beyond it
+    assert not planner.is_clear((0.05, 0.05), 0.2)
+    assert planner.is_clear((0.05, 0.05), 0.1)
+    corner = MapPlanner(m, 0.3)
+    m.grid[0, 0] = MemoryMap.OCCUPIED_AT
+    assert not corner.is_clear(m.center_of(0, 3), 0.0) and corner.is_clear(m.center_of(0, 4), 0.0)
+    assert not corner.is_clear(m.center_of(3, 0), 0.0) and corner.is_clear(m.center_of(4, 0), 0.0)
+    last = m.size - 1
+    m.grid[last, last] = MemoryMap.OCCUPIED_AT
+    assert not corner.is_clear(m.center_of(last, last - 3), 0.0) and corner.is_clear(m.center_of(last - 4, last), 0.0)
+
+
+@pytest.fixture
+def by_a_wall():
+    """A wall along y = 2 (cells occupied from x = -3 to 3); a vehicle stopped 0.4 m south of it, inside the
+    0.3 m body + 0.5 m padding."""
+    m = MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0)
+    row = m.cell_of(0.0, 2.05)[0]
+    m.grid[row, m.cell_of(-3.0, 0.0)[1]:m.cell_of(3.0, 0.0)[1] + 1] = MemoryMap.OCCUPIED_AT
+    m.grid[m.free] = 0
+    m.grid[:row - 1] = MemoryMap.FREE_AT  # the sonar saw the space south of it free
+    return m, MapPlanner(m, RADIUS)
+
+
+@pytest.mark.parametrize(("goal", "clear"), [
+    ((0.05, -5.0), True),  # straight away from the wall
+    ((4.0, -3.0), True),  # away and to the side
+    ((6.0, 1.65), True),  # along the wall, never closer, and out of the margin past its end
+    ((0.05, 5.0), False),  # through it
+    ((-2.0, 1.95), False),  # closer to it
+    ((-1.0, 1.8), False),  # a little closer to it, sideways
+])
+def test_a_vehicle_stopped_near_a_wall_may_leave_it_only_by_getting_further_away(by_a_wall, goal, clear):
+    m, planner = by_a_wall
+    start = (0.05, 1.65)
+    assert not planner.is_clear(start, 0.5)
+    assert planner.path_clear(start, [goal], horizon=math.inf, padding=0.5) is clear
+
+
+def test_leaving_the_margin_takes_the_first_cell_outside_it(by_a_wall):
+    m, planner = by_a_wall
+    from vehicle.mapping.planner import _leave_margin
+
+    obstacles = planner.blocked_in(slice(0, m.size), slice(0, m.size))
+    blocked = planning.inflate(obstacles, planner.margin_cells(0.5))
+    a, b = m.cell_of(0.05, 1.65), m.cell_of(0.05, -5.0)
+    exit_cell = _leave_margin(a, b, blocked, obstacles)
+    assert exit_cell[1] == a[1] and not blocked[exit_cell] and blocked[exit_cell[0] + 1, exit_cell[1]]
+    diagonal = m.cell_of(3.05, -1.35)  # away at 45 degrees
+    exit_cell = _leave_margin(a, diagonal, blocked, obstacles)
+    assert not blocked[exit_cell] and exit_cell[0] - a[0] == -(exit_cell[1] - a[1])
+    inside = (a[0] - 1, a[1])  # a goal still inside the margin: the way ends there
+    assert _leave_margin(a, inside, blocked, obstacles) == inside
+
+
+def reference_escape_length(blocked: np.ndarray, inflated: np.ndarray, start: tuple[int, int]) -> int | None:
+    """Steps of the shortest 8-connected walk over free cells (no squeezing between two blocked corners) from
+    start to a cell outside the inflated obstacles."""
+    seen = {start: 0}
+    queue = deque([start])
+    while queue:
+        r, c = queue.popleft()
+        if not inflated[r, c]:
+            return seen[(r, c)]
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                nr, nc = r + dr, c + dc
+                if not (0 <= nr < blocked.shape[0] and 0 <= nc < blocked.shape[1]) or (nr, nc) in seen:
+                    continue
+                if blocked[nr, nc] or (dr and dc and blocked[r + dr, c] and blocked[r, c + dc]):
+                    continue
+                seen[(nr, nc)] = seen[(r, c)] + 1
+                queue.append((nr, nc))
+    return None
+
+
+def test_the_escape_from_inside_the_clearance_is_a_shortest_walk_over_free_cells():
+    """From random starts inside the inflated obstacles (near the grid's edges too): the walk steps to
+    neighbouring free cells, never squeezes between corners, ends at the first cell outside the inflation,
+    and is as short as any such walk; a start with no way out has no path."""
+    found = boxed = 0
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        blocked = rng.random((14, 14)) < 0.3
+        inflated = planning.inflate(blocked, 1.5)
+        candidates = np.argwhere(inflated & ~blocked)
+        start = tuple(int(v) for v in candidates[rng.integers(len(candidates))])
+        expected = reference_escape_length(blocked, inflated, start)
+        if expected is None:
+            with pytest.raises(planning.NoPath, match="the start is boxed in by obstacles"):
+                planning._escape(blocked, inflated, start)
+            boxed += 1
+            continue
+        walk = planning._escape(blocked, inflated, start)
+        assert walk.dtype == np.int64 and tuple(walk[0]) == start and len(walk) - 1 == expected
+        assert not inflated[tuple(walk[-1])] and inflated[walk[:-1, 0], walk[:-1, 1]].all()
+        assert not blocked[walk[:, 0], walk[:, 1]].any()
+        steps = np.diff(walk, axis=0)
+        assert (np.abs(steps).max(axis=1) == 1).all()
+        for (r, c), (dr, dc) in zip(walk[:-1], steps, strict=True):
+            assert not (dr and dc and blocked[r + dr, c] and blocked[r, c + dc])
+        found += 1
+    assert found >= 15 and boxed >= 1
+
+
+@pytest.mark.parametrize(("dr", "dc"), [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)])
+def test_the_escape_goes_whichever_way_the_only_gap_is(dr, dc):
+    """A start in a ring of obstacles with one gap, in each of the eight directions, at the grid's edge too."""
+    for centre in ((3, 3), (1, 1), (5, 5)):
+        blocked = np.zeros((7, 7), bool)
+        r, c = centre
+        for er in (-1, 0, 1):
+            for ec in (-1, 0, 1):
+                if (er or ec) and (er, ec) != (dr, dc) and 0 <= r + er < 7 and 0 <= c + ec < 7:
+                    blocked[r + er, c + ec] = True
+        if dr and dc:  # a diagonal gap needs one side open, or it is a squeeze between corners
+            blocked[r + dr, c] = False
+        inflated = np.ones((7, 7), bool)
+        target = (r + 2 * dr, c + 2 * dc)
+        if not (0 <= target[0] < 7 and 0 <= target[1] < 7):
+            continue
+        inflated[target] = False
+        walk = planning._escape(blocked, inflated, centre)
+        assert tuple(walk[-1]) == target and not blocked[walk[:, 0], walk[:, 1]].any()
