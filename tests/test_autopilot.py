@@ -607,3 +607,180 @@ def test_a_copter_flown_diagonally_at_a_wall_stops_short_of_it(wall_scene):
     world.run_for(30.0)
     assert world.collision is None
     assert world.pose.y < 9.9 - world.limits.radius
+
+
+# ---- against the surviving mutants of issue 14 ------------------------------------------------------------
+def said(world: Simulation) -> list[tuple[str, int]]:
+    return [(event.text, event.severity) for event in world.autopilot.events if event.kind == "text"]
+
+
+def test_the_operator_hears_what_arming_disarming_and_missions_do_with_their_severity(flat_scene):
+    """The texts a ground station shows (STATUSTEXT) are part of the behaviour: wording and severity."""
+    info, warning, critical = 6, 4, 2
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    assert autopilot.disarm() == FAILED
+    assert autopilot.start_mission() == DENIED  # not in AUTO: refused quietly
+    autopilot.set_mode("AUTO")
+    assert autopilot.start_mission() == FAILED  # no items
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
+    assert autopilot.start_mission() == ACCEPTED
+    assert autopilot.disarm(force=True) == ACCEPTED
+    ground = Simulation(flat_scene, Kind.ROVER)
+    ground.autopilot.arm()
+    assert ground.autopilot.disarm() == ACCEPTED
+    assert said(world) == [
+        ("Arming motors", info),
+        ("Takeoff to 4.0 m", info),
+        ("Disarm: vehicle is flying", critical),
+        ("Mission: no items", warning),
+        ("Mission: 1 started", info),
+        ("Disarming motors (forced)", info),
+    ]
+    assert said(ground)[-1] == ("Disarming motors", info)
+
+
+def test_disarming_ends_the_mission_and_the_take_off_it_was_in(flat_scene):
+    world = Simulation(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.arm()
+    autopilot.takeoff(4.0)
+    world.run_for(0.5)  # climbing
+    autopilot.set_mode("AUTO")
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
+    autopilot.start_mission()
+    assert autopilot.disarm(force=True) == ACCEPTED
+    assert autopilot.armed is False and autopilot.mission_running is False
+    world.run_for(3.0)  # falls to the ground
+    autopilot.set_mode("GUIDED")
+    assert autopilot.arm() == ACCEPTED
+    world.run_for(5.0)
+    assert world.pose.z == pytest.approx(REST_Z, abs=0.01)  # armed again, it does not resume the old take-off
+
+
+@pytest.mark.parametrize(
+    ("channel", "pwm", "result"),
+    [
+        (1, 500, ACCEPTED),
+        (32, 2500, ACCEPTED),
+        (9, 1500, ACCEPTED),
+        (0, 1500, DENIED),
+        (33, 1500, DENIED),
+        (1, 499, DENIED),
+        (1, 2501, DENIED),
+    ],
+)
+def test_a_servo_takes_channels_1_to_32_and_pulses_of_500_to_2500_microseconds(flat_scene, channel, pwm, result):
+    autopilot = Simulation(flat_scene, Kind.ROVER).autopilot
+    assert autopilot.set_servo(channel, pwm) == result
+    assert autopilot.servos.get(channel) == (pwm if result == ACCEPTED else None)
+    assert type(autopilot.servos.get(channel)) is (int if result == ACCEPTED else type(None))
+
+
+def test_direct_steering_by_a_ground_station_is_counted(flat_scene):
+    autopilot = Simulation(flat_scene, Kind.ROVER).autopilot
+    assert (autopilot.overrides, autopilot.override) == (0, "")
+    autopilot.overridden("goto")
+    autopilot.overridden("yaw")
+    assert (autopilot.overrides, autopilot.override) == (2, "yaw")
+    autopilot.clear_targets()
+    assert (autopilot._target, autopilot._velocity, autopilot._yaw) == (None, None, None)
+
+
+def test_a_yaw_is_a_compass_heading_unless_relative_and_never_cancels_a_target(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    assert autopilot.set_yaw(math.radians(90)) == ACCEPTED  # absolute by default
+    world.run_for(5.0)
+    assert world.pose.yaw == pytest.approx(math.radians(90), abs=0.02)
+    assert autopilot.set_yaw(math.radians(300), relative=True) == ACCEPTED  # 90 + 300 = 390: 30 degrees
+    world.run_for(6.0)
+    assert world.pose.yaw == pytest.approx(math.radians(30), abs=0.02)
+    assert autopilot.goto(8.0, 0.0) == ACCEPTED
+    world.run_for(0.2)
+    assert autopilot.set_yaw(math.radians(90)) == ACCEPTED  # while going there
+    world.run_for(15.0)
+    assert (world.pose.x, world.pose.y) == pytest.approx((8.0, 0.0), abs=0.15)
+
+
+def test_a_velocity_without_a_vertical_part_keeps_the_height(flat_scene):
+    world = armed_copter(flat_scene)
+    assert world.autopilot.set_velocity(1.0, 0.0) == ACCEPTED
+    world.run_for(2.0)
+    assert world.pose.x > 0.5 and world.autopilot.altitude == pytest.approx(ALTITUDE, abs=0.1)
+
+
+def test_a_new_mission_waits_to_be_started_at_its_first_item(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    autopilot.set_mode("AUTO")
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
+    assert autopilot.mission_running is False and autopilot.current == 1
+    autopilot.set_mission([])  # cleared: home only
+    assert len(autopilot.mission) == 1 and autopilot.current == 1 and autopilot.mission_running is False
+
+
+def test_mission_start_resumes_restarts_or_jumps_to_an_item(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    items = [position_item(world, NAV_WAYPOINT, 2.0 * k, 0.0) for k in range(1, 5)]
+    autopilot.set_mission([autopilot.home_item(), *items])
+    autopilot.set_mode("AUTO")
+    assert autopilot.set_current(3) is True
+    assert autopilot.start_mission() == ACCEPTED and autopilot.current == 3  # 0: resume at the current item
+    assert autopilot.start_mission(1) == ACCEPTED and autopilot.current == 1  # from the first
+    assert autopilot.start_mission(2) == ACCEPTED and autopilot.current == 2
+    autopilot.current = len(autopilot.mission)  # finished
+    assert autopilot.start_mission() == ACCEPTED and autopilot.current == 1  # starts over
+    one = Simulation(flat_scene, Kind.ROVER).autopilot
+    one.arm()
+    one.set_mode("AUTO")
+    one.set_mission([one.home_item(), MissionItem(NAV_WAYPOINT, *one.datum.to_global(3.0, 0.0), 0.0)])
+    assert one.start_mission() == ACCEPTED  # a mission of one item
+
+
+def test_set_current_takes_only_the_items_after_home_and_says_so(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    autopilot.set_mission([autopilot.home_item(), *[position_item(world, NAV_WAYPOINT, k, 0.0) for k in (2, 4)]])
+    before = list(autopilot.events)
+    assert autopilot.set_current(0) is False and autopilot.set_current(3) is False
+    assert list(autopilot.events) == before and autopilot.current == 1
+    assert autopilot.set_current(2) is True and autopilot.current == 2
+    assert autopilot.set_current(1) is True and autopilot.current == 1
+    assert [(e.kind, e.seq) for e in list(autopilot.events)[len(before) :]] == [("current", 2), ("current", 1)]
+
+
+@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
+def test_rtl_goes_home_when_home_is_not_the_scene_origin(flat_scene, kind):
+    """Home at (-6, 5): RTL flies there, says so once, and (copter) lands or (rover) holds there."""
+    world = vehicle(kind, flat_scene, start=(-6.0, 5.0))
+    autopilot = world.autopilot
+    assert autopilot.goto(4.0, -3.0) == ACCEPTED
+    world.run_for(20.0)
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    world.run_for(40.0)
+    assert (world.pose.x, world.pose.y) == pytest.approx((-6.0, 5.0), abs=0.3)
+    assert texts(world).count("Reached home") == 1
+    if kind is Kind.COPTER:
+        assert not autopilot.armed and texts(world)[-1] == "Landed; disarming"
+    else:
+        assert autopilot.armed and world.body.speed < 0.01
+
+
+def test_a_copter_landing_at_the_end_of_its_mission_disarms_with_the_mission_over(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    autopilot.set_mission(
+        [
+            autopilot.home_item(),
+            position_item(world, NAV_WAYPOINT, 4.0, 0.0),
+            position_item(world, NAV_LAND, 4.0, 0.0, alt=0.0),
+        ]
+    )
+    autopilot.set_mode("AUTO")
+    assert autopilot.start_mission() == ACCEPTED
+    step_until(world, lambda: not autopilot.armed, 60.0)
+    assert autopilot.mission_running is False and reached(world) == [1, 2]
+    assert autopilot.current == len(autopilot.mission)
+    assert texts(world)[-2:] == ["Mission complete", "Landed; disarming"]
