@@ -141,9 +141,9 @@ class MemoryMap:
             self._folded = None
         if not self._changed:
             return np.zeros(0, dtype=np.int64)
-        changed = np.unique(np.concatenate(self._changed))
+        changed = np.sort(np.concatenate(self._changed))  # then without repeats (np.unique, several times faster)
         self._changed.clear()
-        return changed
+        return changed[np.concatenate(([True], changed[1:] != changed[:-1]))]
 
     # ---- views -------------------------------------------------------------------------------
     @property
