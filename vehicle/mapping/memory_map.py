@@ -168,7 +168,7 @@ class MemoryMap:
     @property
     def detections(self) -> int:
         """Cells occupied now (the thesis's memory-map count)."""
-        return int(np.count_nonzero(self.occupied))
+        return int(_loops().count_occupied(self.grid.reshape(-1)))
 
     @property
     def cells_ever_hit(self) -> int:

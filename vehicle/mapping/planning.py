@@ -238,8 +238,8 @@ def _astar_cells(blocked, start, goal, heap):
     False if ``heap`` was too small to finish."""
     h, w = blocked.shape
     flat = blocked.reshape(-1)
-    costs = np.full(h * w, np.int64(1) << 40)
-    parents = np.empty(h * w, dtype=np.int64)
+    costs = np.full(h * w, np.int32(1 << 30))  # 32 bits: less memory to fill and to read
+    parents = np.empty(h * w, dtype=np.int32)
     costs[start] = 0
     heap[0] = start  # priority << 32 | cell: the heap compares priorities only
     size = 1
@@ -262,7 +262,7 @@ def _astar_cells(blocked, start, goal, heap):
                 return np.empty((0, 2), dtype=np.int64), False
             costs[nb] = cost
             parents[nb] = cell
-            priority = cost + max(abs(r - goal_row), abs(c - goal_col))
+            priority = np.int64(cost + max(abs(r - goal_row), abs(c - goal_col)))
             size = _push(heap, size, (priority << 32) | nb)
     return np.empty((0, 2), dtype=np.int64), True
 

@@ -178,3 +178,14 @@ def free_cells(grid, size, row, col, rows, cols):
             changed[used] = r * size + c
             used += 1
     return changed[:used], crossed
+
+
+@numba.njit(cache=True)
+def count_occupied(grid):
+    """How many cells are occupied: ``np.count_nonzero(grid >= OCCUPIED_AT)`` without its 4 MB temporary (at
+    the end of every run, a tenth of a short one's time)."""
+    count = 0
+    for value in grid:
+        if value >= OCCUPIED_AT:
+            count += 1
+    return count
