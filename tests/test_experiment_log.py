@@ -242,3 +242,14 @@ def test_positions_hud_and_readings_carry_the_values_telemetry_builds(tmp_path):
         checked[kind] = checked.get(kind, 0) + 1
     reader.close()
     assert checked["GLOBAL_POSITION_INT"] > 400 and checked["VFR_HUD"] > 90 and checked["DISTANCE_SENSOR"] > 600
+
+
+def test_a_writer_in_the_same_process_writes_the_same_log(logged, monkeypatch, tmp_path):
+    """Where no process can be forked, the log is written in the run's own process: byte for byte the same."""
+    from vehicle.lab import log
+
+    monkeypatch.setattr(log.multiprocessing, "get_all_start_methods", lambda: ["spawn"])
+    code = main(["experiment", "--scene", str(logged / "yard.wrl"), "--mission", "pathfind", "--time-limit", "150",
+                 "--json", "--log", str(tmp_path / "same.tlog")])
+    assert code == 0
+    assert (tmp_path / "same.tlog").read_bytes() == (logged / "a.tlog").read_bytes()
