@@ -90,7 +90,6 @@ class ExperimentLog:
 
     def __init__(self, path: str | Path, sysid: int = 1):
         self.file = TlogWriter(path)
-        _frame_nothing()  # loads the compiled framing now, before the run and before a writer is forked
         self.sysid = sysid
         self.telemetry: Telemetry | None = None
         self.companion: Companion | None = None
@@ -101,6 +100,7 @@ class ExperimentLog:
         self._scratch = mavlink.MAVLink(None)  # packs a rare message; its payload is framed with the rest
         self._pose_due = self._hud_due = self._telemetry_due = self._agent_due = self._delta_due = 0.0
         self._pose_interval = self._hud_interval = self._delta_period = 0.0
+        self._agent_status: agent_status.AgentStatus | None = None  # the last the companion was asked about
         self._steps = 0
 
     def _start(self, stepper: Stepper) -> None:
@@ -119,6 +119,7 @@ class ExperimentLog:
             memory = stepper.agent.map
             geometry = (memory.size, memory.resolution, memory.origin, companion.agent.ctx.home)
         writer = _Writer(self.file, self.sysid, simulation.home, simulation.datum, geometry)
+        _frame_nothing()  # loads the compiled framing once, not in every writer forked from here
         self._writer = _Forked(writer) if "fork" in multiprocessing.get_all_start_methods() else writer
 
     def __call__(self, stepper: Stepper, readings: list[Reading]) -> None:
@@ -151,9 +152,10 @@ class ExperimentLog:
             batch.key += 1
         companion = self.companion
         if companion is not None:
-            if stepper.monitor_due or now >= self._agent_due:  # only the agent's steps and its clock change it
+            if now >= self._agent_due or companion.agent.outbox or (  # only its clock and the agent's news
+                    stepper.monitor_due and companion.status() != self._agent_status):
                 self._add(companion.tick(now), stamp, 1)
-                self._agent_due = companion.next_due()
+                self._agent_due, self._agent_status = companion.next_due(), companion.status()
             if now >= self._delta_due:  # the map stream's schedule
                 self._delta_due = now + self._delta_period
                 self._map(stamp, now)
