@@ -33,7 +33,9 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import queue
 import struct
+import threading
 import zlib
 from array import array
 from pathlib import Path
@@ -54,7 +56,7 @@ from vehicle.sim.telemetry import Telemetry
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 COMPONENTS = (AUTOPILOT, COMPONENT)  # each has its own sequence numbers
 SNAPSHOT_PERIOD = 10.0  # s of simulated time between map snapshots, at least
-SNAPSHOT_BUDGET = 30000.0  # bytes of map part compressed per simulated second, at most (a bigger map: less often)
+SNAPSHOT_BUDGET = 15000.0  # bytes of map part compressed per simulated second, at most (a bigger map: less often)
 BATCH_STEPS = 100  # steps noted before they go to the writer
 
 _GLOBAL_POSITION = mavlink.MAVLink_global_position_int_message
@@ -176,7 +178,7 @@ class ExperimentLog:
         """The cells changed since the last time and their values: the writer's copy of the map takes them and
         streams them (deltas, and a snapshot when one is due; ``final``: the last word, a snapshot)."""
         memory = self.companion.agent.map
-        touched = memory.take_changes()
+        touched = memory.take_changes(in_order=False)  # the writer sorts them
         self._batch.map_updates.append((self._batch.key, stamp, now, touched, memory.grid.reshape(-1)[touched],
                                         final))
         self._batch.key += 1
@@ -277,7 +279,7 @@ class _Writer:
             for index, (message, block) in enumerate(zip(messages, blocks, strict=True)):
                 for column, values in zip(columns, (numbers[:, 0] + index, stamps_us, 0, message.id,
                                                     message.crc_extra), strict=True):
-                    column.append(np.broadcast_to(values, count))
+                    column.append(np.full(count, values) if np.isscalar(values) else values)
                 lengths.append(np.full(count, block.shape[1]))
                 data.append(block.reshape(-1))
         keys, stamps, components, ids, extras = (np.concatenate(c).astype(np.float64 if c is columns[0] else np.int64)
@@ -369,8 +371,12 @@ class _MapCopy:
         self._changed = np.zeros(0, dtype=np.int64)
 
     def update(self, cells: np.ndarray, values: np.ndarray) -> None:
+        """Cells as the agent's map noted them (in no order, perhaps repeated) and their values now."""
         self.grid.reshape(-1)[cells] = values
-        self._changed = cells
+        cells = np.sort(cells)
+        first = np.ones(len(cells), dtype=bool)
+        first[1:] = cells[1:] != cells[:-1]
+        self._changed = cells[first]
 
     def take_changes(self) -> np.ndarray:
         changed, self._changed = self._changed, np.zeros(0, dtype=np.int64)
@@ -378,7 +384,8 @@ class _MapCopy:
 
 
 class _Forked:
-    """A writer in a forked process: batches go to it through a pipe, and it says how many messages it wrote."""
+    """A writer in a forked process: batches go to it through a pipe (sent by a thread, so that the run goes on
+    while the writer catches up), and at the end it says how many messages it wrote."""
 
     def __init__(self, writer: _Writer):
         context = multiprocessing.get_context("fork")
@@ -387,12 +394,23 @@ class _Forked:
         self.process.start()
         child.close()
         writer.file.close()  # this process's copy: the child writes the file
+        self.batches: queue.SimpleQueue[_Batch | None] = queue.SimpleQueue()
+        self.sender = threading.Thread(target=self._send, daemon=True, name="log-sender")
+        self.sender.start()
+
+    def _send(self) -> None:
+        while True:
+            batch = self.batches.get()
+            self.connection.send(batch)
+            if batch is None:
+                return
 
     def write(self, batch: _Batch) -> None:
-        self.connection.send(batch)
+        self.batches.put(batch)
 
     def close(self) -> int:
-        self.connection.send(None)
+        self.batches.put(None)
+        self.sender.join()
         messages = self.connection.recv()
         self.process.join()
         return messages
