@@ -60,6 +60,19 @@ def test_inflate_is_a_disc_dilation(radius):
     assert (inflate(g, radius) == expected).all()
 
 
+@pytest.mark.parametrize("radius", [63.0, 64.0, 64.7, 130.2])
+def test_inflate_is_a_disc_dilation_across_whole_words(radius):
+    """Radii of 64 cells and more shift rows by whole 64-cell words and more."""
+    g = np.zeros((300, 333), bool)
+    g[[5, 150, 290], [7, 200, 330]] = True
+    g[100, 60:70] = True
+    rows, cols = np.mgrid[:300, :333]
+    expected = np.zeros_like(g)
+    for r, c in zip(*np.nonzero(g), strict=True):  # a few cells: each one's disc directly
+        expected |= (rows - r) ** 2 + (cols - c) ** 2 <= radius**2
+    assert (inflate(g, radius) == expected).all()
+
+
 def test_path_around_a_wall():
     g = np.zeros((40, 40), bool)
     g[0:30, 20] = True  # wall from the south edge, open to the north

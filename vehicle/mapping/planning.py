@@ -120,8 +120,8 @@ def _half_widths(radius_cells: float) -> tuple[int, np.ndarray]:
 @numba.njit(cache=True)
 def _dilate_rows(words, reach, half):
     """``inflate`` on rows of bits: each row dilated horizontally by half[dy], ORed into the rows dy above
-    and below. Shifting a row by w columns moves every word's bits by w and carries the bits that fall off
-    into the neighbouring word."""
+    and below. Shifting a row by w columns moves every word's bits by w % 64 and the words by w // 64,
+    carrying the bits that fall off a word into its neighbour."""
     rows, count = words.shape
     wide = words.copy()  # the rows dilated horizontally by w
     out = np.zeros((rows, count), dtype=np.uint64)
@@ -129,16 +129,20 @@ def _dilate_rows(words, reach, half):
     for dy in range(reach, -1, -1):
         while w < half[dy]:
             w += 1
-            shift, carry = np.uint64(w), np.uint64(64 - w)
+            skip, bits = w // 64, np.uint64(w % 64)
+            carry = np.uint64(64) - bits  # used only when bits > 0: a shift by 64 is undefined
             for r in range(rows):
                 for j in range(count):
-                    up = words[r, j] << shift  # towards higher columns
-                    down = words[r, j] >> shift
-                    if j > 0:
-                        up |= words[r, j - 1] >> carry
-                    if j + 1 < count:
-                        down |= words[r, j + 1] << carry
-                    wide[r, j] |= up | down
+                    moved = np.uint64(0)
+                    if j - skip >= 0:  # towards higher columns
+                        moved |= words[r, j - skip] << bits
+                        if bits and j - skip - 1 >= 0:
+                            moved |= words[r, j - skip - 1] >> carry
+                    if j + skip < count:  # towards lower columns
+                        moved |= words[r, j + skip] >> bits
+                        if bits and j + skip + 1 < count:
+                            moved |= words[r, j + skip + 1] << carry
+                    wide[r, j] |= moved
         for r in range(rows):
             if r - dy >= 0:
                 for j in range(count):
