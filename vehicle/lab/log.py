@@ -120,9 +120,9 @@ class ExperimentLog:
             companion.streamer = _PathsOnly(companion.streamer)  # the writer streams the map
             memory = stepper.agent.map
             geometry = (memory.size, memory.resolution, memory.origin, companion.agent.ctx.home)
-        writer = _Writer(self.file, self.sysid, simulation.home, simulation.datum, geometry)
         _frame_nothing()  # loads the compiled framing once, not in every writer forked from here
-        self._writer = _Forked(writer) if "fork" in multiprocessing.get_all_start_methods() else writer
+        setup = (self.file, self.sysid, simulation.home, simulation.datum, geometry)
+        self._writer = _Forked(setup) if "fork" in multiprocessing.get_all_start_methods() else _Writer(*setup)
 
     def __call__(self, stepper: Stepper, readings: list[Reading]) -> None:
         if self.telemetry is None:
@@ -387,13 +387,14 @@ class _Forked:
     """A writer in a forked process: batches go to it through a pipe (sent by a thread, so that the run goes on
     while the writer catches up), and at the end it says how many messages it wrote."""
 
-    def __init__(self, writer: _Writer):
+    def __init__(self, setup: tuple):
+        """``setup``: the arguments of the ``_Writer``, made in the child (its copy of the map is the child's)."""
         context = multiprocessing.get_context("fork")
         self.connection, child = context.Pipe()
-        self.process = context.Process(target=_serve, args=(writer, child), daemon=True, name="log-writer")
+        self.process = context.Process(target=_serve, args=(setup, child), daemon=True, name="log-writer")
         self.process.start()
         child.close()
-        writer.file.close()  # this process's copy: the child writes the file
+        setup[0].close()  # this process's copy of the file: the child writes it
         self.batches: queue.SimpleQueue[_Batch | None] = queue.SimpleQueue()
         self.sender = threading.Thread(target=self._send, daemon=True, name="log-sender")
         self.sender.start()
@@ -416,7 +417,8 @@ class _Forked:
         return messages
 
 
-def _serve(writer: _Writer, connection) -> None:
+def _serve(setup: tuple, connection) -> None:
+    writer = _Writer(*setup)
     while (batch := connection.recv()) is not None:
         writer.write(batch)
     connection.send(writer.close())

@@ -75,7 +75,8 @@ class MapStreamer:
         self._next_snapshot = 0.0
         self._next_delta = 0.0
         self._last_path: list[tuple[float, float]] | None = None
-        self._sent = memory_map.grid.reshape(-1).copy()  # the values receivers have been told
+        grid = memory_map.grid.reshape(-1)  # the values receivers have been told: a new map's zeros
+        self._sent = grid.copy() if grid.any() else np.zeros_like(grid)  # (zeros cost no copy)
 
     def tick(self, now: float) -> list[tuple[int, bytes]]:
         """Payloads (type, bytes) due at ``now``."""
