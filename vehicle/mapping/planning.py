@@ -342,8 +342,7 @@ def line_is_clear(blocked: np.ndarray, p, q) -> bool:
     whose range meets it (at most three) are tested. Cells beyond the grid's
     edge (a line along it may touch them at a corner) count as clear.
     """
-    (r0, c0), (r1, c1) = (int(v) for v in p), (int(v) for v in q)
-    return _supercover_is_clear(blocked, r0, c0, r1, c1)
+    return _supercover_is_clear(blocked, int(p[0]), int(p[1]), int(q[0]), int(q[1]))
 
 
 @numba.njit(cache=True)
