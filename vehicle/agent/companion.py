@@ -71,9 +71,8 @@ class Companion:
 
     def final(self) -> list:
         """A heartbeat, the messages not sent yet, the status and a full map snapshot: the last word of a log."""
-        status = self.tunnel(agent_status.AGENT_STATUS, agent_status.encode(self.status()))
-        return [self.heartbeat(), *self.texts(), status,
-                *[self.tunnel(kind, payload) for kind, payload in self.streamer.snapshot()]]
+        return [self.heartbeat(), *self.texts(), tunnel(agent_status.AGENT_STATUS, agent_status.encode(self.status())),
+                *[tunnel(kind, payload) for kind, payload in self.streamer.snapshot()]]
 
     def heartbeat(self):
         agent = self.agent
