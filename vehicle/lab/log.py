@@ -10,21 +10,20 @@ hundred messages a simulated second, so a log made message by message with
 pymavlink would cost the run several times over. So the run only takes
 note, and a writer process (forked, on the other core) makes the messages:
 
-- the run keeps positions and attitude (20 Hz) as numbers, each reading's
-  DISTANCE_SENSOR payload (one ``struct`` call), the rarer messages
-  (heartbeats, status, events, the agent's; from the same ``Telemetry`` and
-  ``Companion`` as a live vehicle's, asked only when something is due) as
-  payloads, and the map cells that changed;
+- the run keeps positions, attitude, VFR_HUD (20 and 4 Hz) and the readings
+  as numbers, the rarer messages (heartbeats, status, events, the agent's;
+  from the same ``Telemetry`` and ``Companion`` as a live vehicle's, asked
+  only when something is due) as payloads, and the map cells that changed;
 - the writer keeps a copy of the map from those changes and streams it with
   the same ``MapStreamer`` (deltas every 0.5 s as live; snapshots every
   ``SNAPSHOT_PERIOD`` of simulated time or less often for a big map, rather
   than 5 s, compressed with zlib's run-length strategy: a log is read from a
   disk, not joined late over a radio link, and that is a tenth of the
   default level's time for the same decoded map), makes the other payloads
-  from the numbers with numpy, and frames
-  every message (MAVLink 2 header, sequence number, CRC) in one compiled
-  loop: no library frames many messages at once, and pymavlink's framing is
-  most of its cost.
+  from the numbers with numpy (the same values as ``Telemetry``'s), and
+  frames every message (MAVLink 2 header, sequence number, CRC) in one
+  compiled loop: no library frames many messages at once, and pymavlink's
+  framing is most of its cost.
 
 Where no process can be forked, the same writer works in the run's process.
 """
@@ -282,8 +281,8 @@ class _Writer:
                     column.append(np.full(count, values) if np.isscalar(values) else values)
                 lengths.append(np.full(count, block.shape[1]))
                 data.append(block.reshape(-1))
-        keys, stamps, components, ids, extras = (np.concatenate(c).astype(np.float64 if c is columns[0] else np.int64)
-                                                 for c in columns)
+        keys = np.concatenate(columns[0]).astype(np.float64)  # a map update's payloads: fractions of its key
+        stamps, components, ids, extras = (np.concatenate(column).astype(np.int64) for column in columns[1:])
         if len(keys):
             lengths = np.concatenate(lengths)
             self.file.write_records(_frame(np.concatenate(data), np.cumsum(lengths) - lengths, lengths,
