@@ -50,15 +50,24 @@ class Companion:
             self._next_heartbeat = now + HEARTBEAT_PERIOD
             out.append(self.heartbeat())
         out += self.texts()
-        out += [tunnel(kind, payload) for kind, payload in self.streamer.tick(now)]
+        out += [self.tunnel(kind, payload) for kind, payload in self.streamer.tick(now)]
         if now >= self._next_path:
             self._next_path = now + PATH_PERIOD
-            out += [tunnel(kind, payload) for kind, payload in self.streamer.path(self.agent.ctx.planned_path)]
+            out += [self.tunnel(kind, payload) for kind, payload in self.streamer.path(self.agent.ctx.planned_path)]
         status = self.status()
         if status != self._status or now >= self._next_status:
             self._status, self._next_status = status, now + STATUS_PERIOD
-            out.append(tunnel(agent_status.AGENT_STATUS, agent_status.encode(status)))
+            out.append(self.tunnel(agent_status.AGENT_STATUS, agent_status.encode(status)))
         return out
+
+    def tunnel(self, kind: int, payload: bytes):
+        """The TUNNEL message of one of the agent's payloads (a log may keep the payload as it is instead)."""
+        return tunnel(kind, payload)
+
+    def next_due(self) -> float:
+        """When ``tick`` next has something to send by the clock alone (a heartbeat, map, path or status repeat);
+        until then only a step of the agent gives it more."""
+        return min(self._next_heartbeat, self._next_path, self._next_status, self.streamer.next_due())
 
     def final(self) -> list:
         """A heartbeat, the messages not sent yet, the status and a full map snapshot: the last word of a log."""

@@ -34,6 +34,7 @@ DENIED = mav.MAV_RESULT_DENIED
 UNSUPPORTED = mav.MAV_RESULT_UNSUPPORTED
 FAILED = mav.MAV_RESULT_FAILED
 
+_PI, _TWO_PI = math.pi, 2 * math.pi
 TURN_FIRST = math.radians(12)  # heading error above which the vehicle turns in place before moving
 ARRIVED = 0.15  # m: a position target closer than this is reached
 VELOCITY_TIMEOUT = 3.0  # s: GUIDED velocity commands expire, as in ArduPilot
@@ -274,9 +275,10 @@ class Autopilot:
         self.wanted = (vx, vy)
         self.blocked = False
         if self.avoidance is not None and (vx or vy):
-            pose = self.body.pose
+            body = self.body
+            pose = body.pose
             limit = self.avoidance.speed_limit(pose.x, pose.y, vx, vy, self.time)
-            limit = max(0.0, limit - self.body.speed * dt)  # one step of reaction time
+            limit = max(0.0, limit - math.hypot(body.vx, body.vy) * dt)  # one step of reaction time
             wanted = math.hypot(vx, vy)
             if wanted > limit:
                 vx, vy = vx * limit / wanted, vy * limit / wanted
@@ -353,16 +355,23 @@ class Autopilot:
     def _fly_to(self, x: float, y: float, z: float, dt: float, speed: float | None = None,
                 turn_first: bool = True):
         """Velocity and heading that bring the body to (x, y, z): turn first, then move, braking to arrive."""
-        pose = self.body.pose
+        # run every step: _climb_towards, heading_of and wrap_pi inlined (the same operations)
+        body = self.body
+        pose = body.pose
         self.destination = (x, y)
         dx, dy = x - pose.x, y - pose.y
         distance = math.hypot(dx, dy)
-        vz = self._climb_towards(z)
-        arrived = distance < ARRIVED and abs(z - pose.z) < 0.2 if self.kind is Kind.COPTER else distance < ARRIVED
+        copter = self.kind is Kind.COPTER
+        if copter:
+            climb = body.limits.climb_rate
+            vz = max(-climb, min(climb, 2.0 * (z - pose.z)))
+        else:
+            vz = 0.0
+        arrived = distance < ARRIVED and abs(z - pose.z) < 0.2 if copter else distance < ARRIVED
         if distance < ARRIVED:
             return 0.0, 0.0, vz, None, arrived
-        heading = heading_of(dx, dy)
-        if turn_first and distance > 0.5 and abs(wrap_pi(heading - pose.yaw)) > TURN_FIRST:
+        heading = math.atan2(dx, dy) % _TWO_PI
+        if turn_first and distance > 0.5 and abs((heading - pose.yaw + _PI) % _TWO_PI - _PI) > TURN_FIRST:
             return 0.0, 0.0, vz, heading, False
         cruise = self.speed if speed is None else speed
         wanted = min(cruise, math.sqrt(2 * self.body.limits.accel * distance) * 0.9, distance / dt)
