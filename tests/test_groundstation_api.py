@@ -43,7 +43,7 @@ from harness import (
 from PIL import Image
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
-from groundstation.server import is_loopback
+from groundstation.security import is_loopback
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.waypoints import parse_mission
 
@@ -633,8 +633,9 @@ def test_serving_beyond_loopback_without_tls_warns(tmp_path):
     try:
         out, err = read_until(process, "ground station:", timeout=30)
         assert process.poll() is None, (out, err)
-        health = wait_wall(lambda: _health(port), 10, "the served app answers")
+        health = wait_wall(lambda: _health(port, TOKEN), 10, "the served app answers")
         assert health["status"] == "ok"
+        assert httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=5).status_code == 401  # watching needs it
     finally:
         process.terminate()
         try:
@@ -645,13 +646,15 @@ def test_serving_beyond_loopback_without_tls_warns(tmp_path):
     err += rest[1].decode(errors="replace")
     assert "WARNING: serving on 0.0.0.0 without TLS" in err
     assert "--tls-cert" in err or "127.0.0.1" in err  # it says what to do about it
+    assert "watching needs the operator token" in err and "--viewer-token" in err
     assert f"#token={TOKEN}" in out
     assert not list(tmp_path.iterdir())  # --record-dir '' records nothing
 
 
-def _health(port: int) -> dict | None:
+def _health(port: int, token: str | None = None) -> dict | None:
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
     try:
-        response = httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=2)
+        response = httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=2, headers=headers)
     except httpx.HTTPError:
         return None
     return response.json() if response.status_code == 200 else None
