@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
 
-from groundstation.link import Link
+from groundstation.link import AUTOPILOT, Link
 from groundstation.state import Fleet, VehicleState
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import mavlink, mavutil
@@ -114,11 +114,12 @@ def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | 
         return result if result != "accepted" else link.command(sysid, mavlink.MAV_CMD_MISSION_START)
     if action == "speed":
         return link.command(sysid, mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, command.speed, -1)
-    if action == "goto":
+    if action == "goto":  # to its agent when it has one (which plans round what its map knows), else the autopilot
         if datum is None:
             return "denied"
         lat, lon = datum.to_global(command.x, command.y)
         return link.command_int(sysid, mavlink.MAV_CMD_DO_REPOSITION, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
                                 [-1, mavlink.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 0, float("nan")],
-                                int(round(lat * 1e7)), int(round(lon * 1e7)), float("nan"))
+                                int(round(lat * 1e7)), int(round(lon * 1e7)), float("nan"),
+                                component=COMPANION if vehicle.has_companion(now) else AUTOPILOT)
     raise ValueError(f"unknown action {action}")
