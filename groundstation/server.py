@@ -48,7 +48,7 @@ class GroundStation:
         self.recorder = Recorder(record_dir) if record_dir and urls else None
         self.link_urls = list(urls)
         self.link = Link(urls, self.live, self.recorder) if urls else None
-        self.view = SceneView(self.live, scene, viser_port)
+        self.view = SceneView(self.live, scene, viser_port, clock=self.now)
         self.proxy = VizProxy(self.view.port)
         self.view.on_target(self._target)
         self.replay: Replay | None = None  # set while a recording is replayed

@@ -43,9 +43,12 @@ def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, fl
 
 
 class SceneView:
-    def __init__(self, fleet: Fleet, scene: Scene | None, port: int = 0):
+    def __init__(self, fleet: Fleet, scene: Scene | None, port: int = 0, clock: Callable[[], float] = time.time):
+        """``clock``: the time the fleet's messages are stamped in (the wall live, the log's own in a replay),
+        so that live and replay draw alike."""
         self.fleet = fleet
         self.scene = scene
+        self.clock = clock
         with contextlib.redirect_stdout(io.StringIO()):  # its banner names an internal port nobody should open
             self.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)  # loopback: proxied only
         self.server.request_share_url = _refuse_share  # never open a public tunnel, whoever asks
@@ -187,7 +190,7 @@ class SceneView:
         drawn["trail"] = len(v.trail)
 
     def _draw_sonar(self, v: VehicleState, root: str) -> None:
-        now = time.time()
+        now = self.clock()
         rays = []
         for sonar in v.sonar.values():
             if now - sonar.time > 2.0:
