@@ -36,7 +36,6 @@ from PIL import Image
 from pydantic import BaseModel, ConfigDict, Field
 
 from groundstation.commands import Command, execute, outside_space
-from groundstation.export import export_html
 from groundstation.link import LinkError
 from groundstation.proxy import VIEWER_ID
 from groundstation.replay import ReplayError
@@ -328,8 +327,7 @@ def create_app(station: GroundStation) -> FastAPI:
         replay = station.replay
         if replay is None:
             raise HTTPException(409, "nothing is being replayed")
-        html = await asyncio.to_thread(export_html, replay.index.path, station.scene, station.datum,
-                                       station.live.ground_height)
+        html = await asyncio.to_thread(station.export_replay, replay)
         name = Path(replay.name).stem + ".html"
         return Response(html, media_type="text/html",
                         headers={"Content-Disposition": f'attachment; filename="{name}"'})

@@ -38,7 +38,7 @@ DIGEST_LENGTH = 16  # hex digits of the SHA-256 kept: 64 bits, enough to tell ve
 SUFFIXES = (".wrl", ".wrl.gz", ".wrz", ".vrml", ".vrml.gz")
 MAX_NAME = 100
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")
-_NOTE = re.compile(r"scene (?P<name>\S+) sha256 (?P<digest>[0-9a-f]{%d})" % DIGEST_LENGTH)
+_NOTE = re.compile(rf"scene (?P<name>\S+) sha256 (?P<digest>[0-9a-f]{{{DIGEST_LENGTH}}})")
 
 
 def is_scene_name(name: str) -> bool:
