@@ -10,17 +10,22 @@ station looks in: the status says so and the view loads nothing.
 
 from __future__ import annotations
 
+import base64
 import hashlib
+import io
+import re
 import shutil
 import time
 from pathlib import Path
 
 import msgspec
+import numpy as np
 import pytest
 import viser
 import websockets.sync.client
 import zstandard
-from harness import RunningStation, load_default_scene, start_sim
+from harness import CHROMIUM, RunningStation, launch_chromium, load_default_scene, start_sim, wait_wall
+from PIL import Image
 
 from groundstation.recorder import Recorder
 from groundstation.replay import Replay
@@ -227,3 +232,94 @@ def test_the_stations_own_scene_of_that_name_is_shown_even_when_it_differs(tmp_p
     nothing = find_scene(None, own, own_digest, folders)
     assert nothing.scene is own and nothing.status["note"] == "the recording names no scene; shown in the " \
                                                               "station's scene, default.wrl"
+
+
+# ---- exports --------------------------------------------------------------------------------------------------
+def embedded_messages(html: str) -> list[dict]:
+    """The scene messages viser's serializer packed into an exported page (``__VISER_EMBED_DATA__``)."""
+    data = base64.b64decode(re.search(r'__VISER_EMBED_DATA__="([^"]*)"', html).group(1))
+    inner = zstandard.ZstdDecompressor().decompress(data[8:], max_output_size=int.from_bytes(data[:8], "little"))
+    length = int.from_bytes(inner[:8], "little")
+    return [message for _, message in msgspec.msgpack.decode(inner[8:8 + length])["messages"]]
+
+
+def texts_in(value) -> list[str]:
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, dict):
+        return [text for item in value.values() for text in texts_in(item)]
+    if isinstance(value, list | tuple):
+        return [text for item in value for text in texts_in(item)]
+    return []
+
+
+@pytest.fixture(scope="module")
+def exported(recorded, bare, tmp_path_factory) -> Path:
+    """The recording replayed in the station without a scene, exported as HTML (GET /api/replay/export)."""
+    running, api = bare
+    shutil.copy(recorded, running.station.record_dir / recorded.name)
+    replay(running, api, recorded.name)
+    try:
+        response = api.get("/api/replay/export", timeout=120)
+    finally:
+        stop(api)
+    assert response.status_code == 200
+    path = tmp_path_factory.mktemp("export") / "replay.html"
+    path.write_text(response.text)
+    return path
+
+
+def test_an_export_carries_the_recordings_scene_and_a_telemetry_label(exported):
+    messages = embedded_messages(exported.read_text())
+    assert any(m.get("name") == "/scene" and m.get("type") == "GlbMessage" for m in messages)  # the mesh
+    label = [text for m in messages if m.get("name") == "/telemetry/1" for text in texts_in(m)]
+    panels = [text for text in label if "battery" in text]
+    assert panels, label
+    lines = panels[-1].splitlines()
+    assert lines[0] == "1 copter  GUIDED  disarmed"  # the simulated copter waits on the ground
+    assert re.fullmatch(r"alt -?0\.\d m  0\.\d m/s  heading \d+°", lines[1]), lines
+    assert re.fullmatch(r"battery \d+\.\d V \d+%", lines[2]), lines
+    assert lines[3].startswith("agent WAITING browse"), lines
+    assert re.fullmatch(r"\d\d:\d\d:\d\d UTC, \+\d+\.\d s", lines[-1]), lines
+    clocks = [float(re.search(r"\+([\d.]+) s", text).group(1)) for text in panels]
+    assert clocks == sorted(clocks) and clocks[-1] > clocks[0]  # rewritten as the replay plays
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="needs Debian's chromium at /usr/bin/chromium")
+def test_an_export_plays_offline_in_chromium_and_draws_the_scene(exported, tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = launch_chromium(playwright)
+        try:
+            context = browser.new_context(viewport={"width": 1000, "height": 700}, offline=True)
+            page = context.new_page()
+            errors: list[str] = []
+            page.on("pageerror", lambda error: errors.append(str(error)))
+            requests: list[str] = []
+            page.on("request", lambda request: requests.append(request.url))
+            page.goto(exported.as_uri())
+            shots = []
+
+            def drawn() -> bool:
+                png = page.screenshot()
+                shots.append(colours(png))
+                (tmp_path / "export.png").write_bytes(png)
+                return shots[-1][0] > 100 and shots[-1][1] < 0.5
+
+            wait_wall(drawn, 90, "the exported page draws the scene", sleep=lambda: page.wait_for_timeout(500))
+        finally:
+            browser.close()
+    assert not errors, errors
+    assert all(url.startswith(("file:", "data:", "blob:")) for url in requests), requests  # nothing fetched
+
+
+def colours(png: bytes) -> tuple[int, float]:
+    """Distinct colours (5 bits a channel) in the middle of a screenshot and the share of the commonest: an
+    empty view is one background colour and the axes, the default scene hundreds of colours."""
+    image = Image.open(io.BytesIO(png)).convert("RGB")
+    width, height = image.size
+    middle = image.crop((int(width * 0.2), int(height * 0.25), int(width * 0.8), int(height * 0.85)))
+    pixels = np.asarray(middle.resize((160, 120))) >> 3
+    _, counts = np.unique(pixels.reshape(-1, 3), axis=0, return_counts=True)
+    return len(counts), float(counts.max() / counts.sum())
