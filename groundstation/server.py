@@ -25,8 +25,9 @@ from groundstation.recorder import Recorder
 from groundstation.replay import Player, Replay, ReplayError, index_tlog
 from groundstation.replay_scene import find_scene, logged_scene
 from groundstation.security import Access, is_loopback
-from groundstation.state import Fleet
+from groundstation.state import Fleet, VehicleState
 from groundstation.viz import SceneView
+from vehicle.mapping.picture import draw_map
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mission import MissionItem
 from vehicle.protocol.scene_note import note_text, scene_digest
@@ -206,6 +207,27 @@ class GroundStation:
         if self._player is not None:
             self._player.stop()
             self._player = None
+
+    def map_picture(self, vehicle: VehicleState, grid: tuple) -> bytes:
+        """A PNG of the vehicle's memory map ``grid`` (values, resolution, origin) for people, with its trail,
+        home, planned path and waypoints (``vehicle.mapping.picture``)."""
+        with self.fleet.lock:
+            trail, path, waypoints = list(vehicle.trail), vehicle.planned_path(), list(vehicle.waypoints)
+            home = vehicle.home
+            position = (vehicle.x, vehicle.y) if vehicle.x is not None else None
+            described = self.fleet.describe(vehicle, self.now())
+        replay = self.replay
+        scene = self._replay_world[0] if replay is not None else self.scene
+        agent = described["agent"]
+        title = (f"vehicle {vehicle.sysid} ({vehicle.kind})" + (f", {agent['mission']} mission" if agent else "")
+                 + (f" in {scene.path.name}" if scene is not None and scene.path is not None else "")
+                 + f": {vehicle.mode}" + (f", agent {agent['state'].upper()}" if agent else ""))
+        when = f"replay of {replay.name} at +{replay.clock:.1f} s" if replay is not None else \
+            time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
+        subtitle = f"{described['map']['occupied']} occupied cells, map from the {vehicle.map_source}, {when}"
+        values, resolution, origin = grid
+        return draw_map(values, resolution, origin, f"{title}\n{subtitle}", home, trail, path, waypoints,
+                        position).png()
 
     def note_waypoints(self, sysid: int, items: list[MissionItem]) -> None:
         vehicle = self.fleet.get(sysid)
