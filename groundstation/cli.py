@@ -31,6 +31,9 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
                              "always work; names guard against DNS rebinding)")
     parser.add_argument("--tls-cert", help="certificate file for HTTPS")
     parser.add_argument("--tls-key", help="private key file for HTTPS")
+    parser.add_argument("--scene-dir", action="append", default=[], metavar="DIR",
+                        help="a folder where replays look for the scene a recording names, repeatable (besides "
+                             "the bundled scenes and the recording's own folder)")
     parser.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
                         help="where the scene origin lies on Earth (default: the scene's datum hint, else "
                              "ArduPilot's simulator home; without a scene, the first vehicle's home)")
@@ -41,7 +44,8 @@ def _station(args, urls: list[str], scene_path: str | None):
     from vehicle.world.scene import load_scene
 
     scene = load_scene(scene_path) if scene_path else None
-    return GroundStation(urls, scene, args.token, args.record_dir or None, datum=args.datum)
+    return GroundStation(urls, scene, args.token, args.record_dir or None, datum=args.datum,
+                         scene_dirs=args.scene_dir)
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
@@ -141,9 +145,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if index.warning:
         print(f"warning: {index.warning}", file=sys.stderr)
     scene = load_scene(args.scene) if args.scene else None
-    station = GroundStation([], scene, args.token, record_dir=path.parent, datum=args.datum)
-    station.start_replay(path)
-    print(f"replaying {path.name}: {len(index)} messages, {index.duration:.1f} s", flush=True)
+    station = GroundStation([], scene, args.token, record_dir=path.parent, datum=args.datum,
+                            scene_dirs=args.scene_dir)
+    replay = station.start_replay(path)
+    print(f"replaying {path.name}: {len(index)} messages, {index.duration:.1f} s; scene: {replay.scene['note']}",
+          flush=True)
     _serve(station, args)
     return 0
 
@@ -174,7 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     replay = commands.add_parser("replay", help="replay a recorded .tlog in the page")
     replay.add_argument("file", help="a telemetry log (.tlog): recorded here, by vehicle experiment --log, "
                         "or by any MAVLink tool")
-    replay.add_argument("--scene", help="VRML scene to show it in")
+    replay.add_argument("--scene", help="VRML scene to show it in when the recording names none, or names "
+                        "this file (default: the scene the recording names, looked up by name and hash)")
     _server_options(replay)
     replay.set_defaults(run=cmd_replay)
 

@@ -105,7 +105,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     if args.log:
         from vehicle.lab.log import ExperimentLog
 
-        log = ExperimentLog(args.log)
+        log = ExperimentLog(args.log, scene=args.scene)
     try:
         result = run_experiment(experiment, scene=scene, map_out=args.map_out, on_step=log)
     finally:
