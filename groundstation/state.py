@@ -219,8 +219,8 @@ class Fleet:
 
     def _global_position_int(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)
-        if m.lat == 0 and m.lon == 0:
-            return  # no fix
+        if m.lat == 0 and m.lon == 0 or not _on_earth(m.lat, m.lon):
+            return  # no fix, or no place on Earth
         lat, lon = m.lat * 1e-7, m.lon * 1e-7
         datum = self._ensure_datum(lat, lon)
         vehicle.lat, vehicle.lon, vehicle.alt = lat, lon, m.relative_alt / 1000.0
@@ -235,13 +235,14 @@ class Fleet:
 
     def _local_position_ned(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)
-        if vehicle.lat is not None:
-            return  # the global position is better
+        if vehicle.lat is not None or not _finite(m.x, m.y, m.z):
+            return  # the global position is better; a broken one keeps the last good one
         home = vehicle.home or (0.0, 0.0)
         vehicle.home = home
         vehicle.x, vehicle.y, vehicle.alt = home[0] + m.y, home[1] + m.x, -m.z
-        vehicle.speed = math.hypot(m.vx, m.vy)
-        vehicle.climb = -m.vz
+        if _finite(m.vx, m.vy, m.vz):
+            vehicle.speed = math.hypot(m.vx, m.vy)
+            vehicle.climb = -m.vz
         self._extend_trail(vehicle)
 
     def _extend_trail(self, vehicle) -> None:
@@ -256,12 +257,14 @@ class Fleet:
 
     def _attitude(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)
-        vehicle.roll, vehicle.pitch = m.roll, m.pitch
-        vehicle.yaw = m.yaw % (2 * math.pi)
+        if _finite(m.roll, m.pitch, m.yaw):  # a broken estimate keeps the last good attitude
+            vehicle.roll, vehicle.pitch = m.roll, m.pitch
+            vehicle.yaw = m.yaw % (2 * math.pi)
 
     def _vfr_hud(self, vehicle, m, now) -> None:
-        vehicle.speed = m.groundspeed
-        vehicle.climb = m.climb
+        if _finite(m.groundspeed, m.climb):
+            vehicle.speed = m.groundspeed
+            vehicle.climb = m.climb
 
     def _sys_status(self, vehicle, m, now) -> None:
         vehicle.voltage = m.voltage_battery / 1000.0 if m.voltage_battery not in (0, 65535) else None
@@ -269,6 +272,8 @@ class Fleet:
         vehicle.remaining = m.battery_remaining if m.battery_remaining >= 0 else None
 
     def _home_position(self, vehicle, m, now) -> None:
+        if not _on_earth(m.latitude, m.longitude):
+            return
         lat, lon = m.latitude * 1e-7, m.longitude * 1e-7
         datum = self._ensure_datum(lat, lon)
         vehicle.home_latlon = (lat, lon)
@@ -324,8 +329,8 @@ class Fleet:
         age = None if v.last_heartbeat is None else round(now - v.last_heartbeat, 2)
         position = None
         if v.x is not None:
-            position = {"lat": v.lat, "lon": v.lon, "alt": _round(v.alt), "x": _round(v.x), "y": _round(v.y),
-                        "z": _round(self.height(v))}
+            position = {"lat": _round(v.lat, 7), "lon": _round(v.lon, 7), "alt": _round(v.alt), "x": _round(v.x),
+                        "y": _round(v.y), "z": _round(self.height(v))}
         return {
             "sysid": v.sysid, "type": v.kind, "mode": v.mode, "armed": v.armed, "position": position,
             "attitude": {"roll": _round(math.degrees(v.roll)), "pitch": _round(math.degrees(v.pitch)),
@@ -341,7 +346,7 @@ class Fleet:
                 "state": v.agent.state, "phase": v.agent.phase, "paused": v.agent.paused, "outcome": v.agent.outcome,
                 "mission": v.agent.mission, "reason": v.agent.reason, "companion": v.has_companion(now)},
             "home": None if v.home is None else {"x": _round(v.home[0]), "y": _round(v.home[1])},
-            "time_boot_s": v.time_boot_s,
+            "time_boot_s": _round(v.time_boot_s, 3),
             "messages": list(v.messages)[-20:],
             "map": {"occupied": self.occupied(v), "source": v.map_source},
             "path": [[_round(x), _round(y)] for x, y in v.planned_path()],
@@ -354,4 +359,16 @@ class Fleet:
 
 
 def _round(value: float | None, digits: int = 2) -> float | None:
-    return None if value is None else round(float(value), digits)
+    """A number for JSON: rounded, and None where there is none or it is not finite (JSON has no NaN)."""
+    if value is None or not math.isfinite(value):
+        return None
+    return round(float(value), digits)
+
+
+def _finite(*values: float) -> bool:
+    return all(math.isfinite(v) for v in values)
+
+
+def _on_earth(lat_e7: int, lon_e7: int) -> bool:
+    """Latitude and longitude (degrees * 1e7) that name a place: a peer may send any 32-bit number."""
+    return abs(lat_e7) <= 900_000_000 and abs(lon_e7) <= 1_800_000_000
