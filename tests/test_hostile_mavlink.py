@@ -12,13 +12,18 @@ from __future__ import annotations
 
 import json
 import math
+import struct
+import tracemalloc
+import zlib
 
 import pytest
-from harness import RunningStation, small_scene, wait_wall
+from harness import HEARTBEAT_WAIT, RunningStation, command_ok, small_scene, start_sim, wait_wall
 from mavlink_peer import Peer, non_finite_messages, position, vehicle_heartbeat
 
 from groundstation.replay import Replay
 from groundstation.state import Fleet
+from vehicle.agent.companion import tunnel
+from vehicle.protocol.mapstream import MAP_DELTA, MAX_SIDE, MapReceiver, snapshot_chunks
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.tlog import TlogWriter
 
@@ -98,3 +103,102 @@ def test_a_crafted_tlog_with_non_finite_numbers_replays_to_finite_json(tmp_path)
 def _decoded(message, sysid: int, compid: int = 1):
     packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
     return mavlink.MAVLink(None).decode(bytearray(message.pack(packer)))
+
+
+# ---- 2. what a map stream claims ------------------------------------------------------------------------
+def snapshot_blob(size: int, part: tuple[int, int, int, int], compressed: bytes, resolution: float = 10.0) -> bytes:
+    """A map snapshot blob (see vehicle.protocol.mapstream) with any geometry it likes to claim."""
+    return struct.pack("<BHfffIHHHH", 1, size, resolution, -20.0, -20.0, 0, *part) + compressed
+
+
+def zlib_bomb(megabytes: int) -> bytes:
+    """``megabytes`` MB of zeros, zlib-compressed about a thousand to one, made without holding them."""
+    packer = zlib.compressobj(9)
+    block = bytes(1 << 20)
+    return b"".join(packer.compress(block) for _ in range(megabytes)) + packer.flush()
+
+
+def peak_memory(run) -> int:
+    """Bytes Python allocated at the peak while ``run()`` ran (numpy's arrays included)."""
+    tracemalloc.start()
+    try:
+        run()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def feed_all(receiver: MapReceiver, payloads: list[tuple[int, bytes]]) -> None:
+    for kind, payload in payloads:
+        receiver.feed(kind, payload)
+
+
+def test_a_zlib_bomb_in_a_map_snapshot_is_inflated_no_further_than_its_claim():
+    bomb = snapshot_chunks(1, snapshot_blob(100, (0, 0, 10, 10), zlib_bomb(200)))  # 200 MB in ~1,700 chunks
+    receiver = MapReceiver()
+    assert peak_memory(lambda: feed_all(receiver, bomb)) < 20e6
+    assert receiver.grid is None and receiver.snapshots == 0
+
+
+@pytest.mark.parametrize("side", [MAX_SIDE + 1, 30_000, 65_535])
+def test_a_snapshot_claiming_a_huge_map_in_one_packet_is_refused_before_any_grid_exists(side):
+    claim = snapshot_chunks(1, snapshot_blob(side, (0, 0, 0, 0), zlib.compress(b"")))
+    assert len(claim) == 1 and len(claim[0][1]) < 64  # one small TUNNEL message
+    receiver = MapReceiver()
+    assert peak_memory(lambda: feed_all(receiver, claim)) < 5e6
+    assert receiver.grid is None and receiver.geometry is None
+
+
+def test_a_snapshot_with_a_geometry_that_is_no_number_is_refused():
+    for resolution in (math.nan, math.inf, 0.0, -1.0):
+        receiver = MapReceiver()
+        feed_all(receiver, snapshot_chunks(1, snapshot_blob(4, (0, 0, 0, 0), zlib.compress(b""), resolution)))
+        assert receiver.grid is None
+
+
+def test_the_largest_map_a_vehicle_may_stream_is_received():
+    receiver = MapReceiver()
+    feed_all(receiver, snapshot_chunks(1, snapshot_blob(MAX_SIDE, (5, 5, 2, 2), zlib.compress(bytes([9] * 4)))))
+    assert receiver.grid.shape == (MAX_SIDE, MAX_SIDE) and int(receiver.grid.sum()) == 36
+
+
+def test_a_delta_naming_more_cells_than_its_map_or_a_cell_twice_is_dropped():
+    receiver = MapReceiver()
+    feed_all(receiver, snapshot_chunks(1, snapshot_blob(4, (0, 0, 0, 0), zlib.compress(b""))))
+    assert receiver.synced and receiver.grid.shape == (4, 4)
+    twice = _raw_deflate(bytes([0] * 100) + bytes([20] * 100))  # cell 0, a hundred times over
+    receiver.feed(MAP_DELTA, struct.pack("<IH", 1, 100) + twice)
+    assert receiver.applied == 0 and not receiver.grid.any()
+    good = _raw_deflate(bytes([3, 1]) + bytes([20, 21]))  # cells 3 and 4
+    receiver.feed(MAP_DELTA, struct.pack("<IH", 1, 2) + good)
+    assert receiver.applied == 1 and receiver.grid.reshape(-1)[3:5].tolist() == [20, 21]
+
+
+def _raw_deflate(data: bytes) -> bytes:
+    packer = zlib.compressobj(9, zlib.DEFLATED, -15)
+    return packer.compress(data) + packer.flush()
+
+
+def test_a_station_keeps_tracking_its_vehicle_through_map_bombs_and_huge_claims(scene, tmp_path):
+    with RunningStation(scene, tmp_path) as station, start_sim(station, scene), \
+            Peer(station_address(station), sysid=1, compid=191) as spoofer:
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["map"]["source"] == "vehicle", what="the vehicle's own map")
+        before = resident_bytes()
+        for side in (30_000, 65_535):
+            claim = snapshot_chunks(7, snapshot_blob(side, (0, 0, 0, 0), zlib.compress(b"")))
+            spoofer.send(*(tunnel(kind, payload) for kind, payload in claim))
+        spoofer.send(*(tunnel(kind, payload) for kind, payload in
+                       snapshot_chunks(8, snapshot_blob(400, (0, 0, 10, 10), zlib_bomb(50)))))
+        spoofer.send(tunnel(MAP_DELTA, struct.pack("<IH", 10**6, 65535) + zlib_bomb(1)[:120]))
+        command_ok(api, 1, action="set_mode", mode="LOITER")
+        shown = api.wait_vehicle(1, lambda v: v["mode"] == "LOITER", sim_timeout=HEARTBEAT_WAIT, what="LOITER")
+        assert shown["link"]["heartbeat_age"] < 3 and shown["map"]["source"] == "vehicle"
+        assert station.station.live.get(1).map_stream.grid.shape == (400, 400)  # the vehicle's map, still
+        assert resident_bytes() - before < 100e6
+        assert api.get("/api/health").json()["status"] == "ok"
+
+
+def resident_bytes() -> int:
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * 4096
