@@ -25,7 +25,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from groundstation.state import LINK_LOST_AFTER, Fleet
+from groundstation.state import FORGET_AFTER, LINK_LOST_AFTER, Fleet
 from vehicle.protocol import links, mission
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.mission import MissionItem
@@ -68,8 +68,10 @@ class Link:
         self.urls = urls
         self.ports = [links.connect(url, sysid, GCS_COMPID) for url in urls]
         self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=GCS_COMPID)
-        self.route: dict[int, tuple] = {}  # sysid -> (the port it was last heard on, its address there)
+        # keyed by the 8-bit system id (so at most 255 entries), and pruned after FORGET_AFTER of silence:
+        self.route: dict[int, tuple] = {}  # sysid -> (the port it was last heard on, its address there, when)
         self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
+        self._pruned = 0.0
         self._waiters: list[_Waiter] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -92,9 +94,12 @@ class Link:
     def health(self) -> dict:
         """How the link side is doing, for /api/health: the thread, each link, and the recording."""
         stalled = not self._thread.is_alive() or time.monotonic() - self.turned > STALLED_AFTER
+        fleet = self.fleet
         return {"thread": "stalled" if stalled else "ok", "errors": self.stats["errors"],
                 "last_error": self.last_error or None, "recording_error": self.recording_error or None,
-                "links": [{"url": port.url, "up": port.up, "error": port.error or None} for port in self.ports]}
+                "links": [{"url": port.url, "up": port.up, "error": port.error or None} for port in self.ports],
+                "vehicles": {"held": len(fleet.vehicles), "limit": fleet.max_vehicles, "refused": fleet.refused,
+                             "forgotten": fleet.forgotten}}
 
     # ---- the loop ---------------------------------------------------------------------------------
     def _run(self) -> None:
@@ -109,6 +114,7 @@ class Link:
                     next_beat = now + 1.0
                 busy = self._read()
                 self._record_tick()
+                self._prune(now)
             except Exception as error:  # noqa: BLE001 - nothing may stop reception; counted and reported
                 self._failed(error)
                 busy = False
@@ -141,8 +147,10 @@ class Link:
         self.stats["received"] += 1
         self._record(message.get_msgbuf(), now)
         sysid = message.get_srcSystem()
-        self.route[sysid] = (port, getattr(message, "_peer", None))
-        if message.get_type() == "HEARTBEAT" and message.get_srcComponent() == AUTOPILOT:
+        self.route[sysid] = (port, getattr(message, "_peer", None), now)
+        self.fleet.apply(message, now)
+        if message.get_type() == "HEARTBEAT" and message.get_srcComponent() == AUTOPILOT and sysid in \
+                self.fleet.vehicles:  # a vehicle the fleet holds (a refused one gets no answer, so no flood of them)
             self._ask_for_telemetry(sysid, now)
         if hasattr(message, "time_boot_ms") and sysid in self._asked:
             heard, boot = self._asked[sysid]
@@ -150,12 +158,20 @@ class Link:
                 del self._asked[sysid]
             else:
                 self._asked[sysid] = (heard, max(boot, message.time_boot_ms / 1000.0))
-        self.fleet.apply(message, now)
         with self._lock:
             waiters = list(self._waiters)
         for waiter in waiters:
             if waiter.sysid == sysid and waiter.accepts(message):
                 waiter.replies.put(message)
+
+    def _prune(self, now: float) -> None:
+        """Once a second: forget the routes to systems not heard for FORGET_AFTER (as the fleet forgets them)."""
+        if now - self._pruned < 1.0:
+            return
+        self._pruned = now
+        for sysid in [s for s, (_, _, heard) in self.route.items() if now - heard > FORGET_AFTER]:
+            del self.route[sysid]
+            self._asked.pop(sysid, None)
 
     def _ask_for_telemetry(self, sysid: int, now: float) -> None:
         """Ask a vehicle heard for the first time, or again after its link was lost, for what the page shows."""
@@ -197,7 +213,7 @@ class Link:
         with self._lock:
             packet = pack(message, self.packer)
         if sysid in self.route:
-            port, peer = self.route[sysid]
+            port, peer, _ = self.route[sysid]
             port.write(packet, peer)
         else:
             for port in self.ports:

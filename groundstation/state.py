@@ -10,6 +10,12 @@ computer (component 191 of the vehicle's system) is part of its vehicle: its
 map, path, state and messages show on the vehicle of the same system id.
 Positions are kept in the scene frame (metres east and north of the datum,
 height above the vehicle's home).
+
+Anyone on a link can claim to be a vehicle, so the fleet holds at most
+``MAX_VEHICLES`` (a new system id is refused, and counted, until one is
+forgotten) and forgets a vehicle not heard for ``FORGET_AFTER`` seconds of the
+receiver's clock; a replayed log forgets nothing (``forget_after=None``). A
+peer's non-finite numbers are ignored (the last good value stays).
 """
 
 from __future__ import annotations
@@ -39,6 +45,8 @@ MESSAGES_KEPT = 50
 OWN_MAP_SPACE = 100.0  # m around home, for maps built from DISTANCE_SENSOR
 OWN_MAP_RESOLUTION = 5.0  # cells/m
 OWN_MAP_AFTER = 2.0  # s a vehicle is heard without a map stream or a companion before the station builds a map
+MAX_VEHICLES = 64  # vehicles held at once; each may hold a map of up to 16 MB
+FORGET_AFTER = 600.0  # s of the receiver's clock without a message before a vehicle is forgotten
 
 TYPES = {
     mavlink.MAV_TYPE_GROUND_ROVER: "rover", mavlink.MAV_TYPE_SURFACE_BOAT: "boat",
@@ -152,13 +160,19 @@ class VehicleState:
 class Fleet:
     """Every vehicle heard, by system id. Thread-safe: the link writes, views read snapshots."""
 
-    def __init__(self, datum: Datum | None = None, ground_height=None):
+    def __init__(self, datum: Datum | None = None, ground_height=None, forget_after: float | None = FORGET_AFTER,
+                 max_vehicles: int = MAX_VEHICLES):
         self.datum = datum  # None: the first home heard becomes the scene origin
         self.ground_height = ground_height or (lambda x, y: 0.0)
         self.vehicles: dict[int, VehicleState] = {}
         self.lock = threading.RLock()
         self.version = 0
         self.texts = Reassembler()
+        self.forget_after = forget_after  # None: never (a replayed log)
+        self.max_vehicles = max_vehicles
+        self.refused = 0  # heartbeats of new vehicles turned away while the fleet was full
+        self.forgotten = 0
+        self._swept = -math.inf  # when silent vehicles were last looked for
 
     def clear(self) -> None:
         with self.lock:
@@ -180,11 +194,16 @@ class Fleet:
             return
         sysid = message.get_srcSystem()
         with self.lock:
+            if now - self._swept >= 1.0:
+                self._forget_silent(now)
             vehicle = self.vehicles.get(sysid)
             if vehicle is None:
                 if kind != "HEARTBEAT" or message.type in NOT_VEHICLES or message.autopilot == \
                         mavlink.MAV_AUTOPILOT_INVALID:
                     return  # only a vehicle's heartbeat makes a vehicle
+                if len(self.vehicles) >= self.max_vehicles:
+                    self.refused += 1
+                    return
                 vehicle = self.vehicles[sysid] = VehicleState(sysid, first_heard=now)
             handler = getattr(self, f"_{kind.lower()}", None)
             vehicle.last_message = now
@@ -193,6 +212,19 @@ class Fleet:
                 handler(vehicle, message, now)
                 vehicle.version += 1
                 self.version += 1
+
+    def _forget_silent(self, now: float) -> None:
+        """Drop the vehicles not heard for ``forget_after`` seconds (never while a log replays)."""
+        self._swept = now
+        if self.forget_after is None:
+            return
+        silent = [sysid for sysid, v in self.vehicles.items() if now - (v.last_message or v.first_heard) >
+                  self.forget_after]
+        for sysid in silent:
+            del self.vehicles[sysid]
+        if silent:
+            self.forgotten += len(silent)
+            self.version += 1
 
     def _boot(self, vehicle: VehicleState, message) -> None:
         if hasattr(message, "time_boot_ms"):

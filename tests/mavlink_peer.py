@@ -25,7 +25,6 @@ class Peer:
         self.address = address
         self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.socket.bind(("127.0.0.1", 0))
-        self.socket.settimeout(0.05)
         self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         if key is not None:
             signing.sign_outgoing(self.packer, key)
@@ -56,7 +55,8 @@ class Peer:
         """Every message that came within ``timeout`` s, parsed per datagram."""
         got = []
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
+        while (left := deadline - time.monotonic()) > 0:
+            self.socket.settimeout(min(left, 0.05))
             try:
                 data = self.socket.recv(65535)
             except (TimeoutError, BlockingIOError):

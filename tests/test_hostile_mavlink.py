@@ -20,11 +20,13 @@ import pytest
 from harness import HEARTBEAT_WAIT, RunningStation, command_ok, small_scene, start_sim, wait_wall
 from mavlink_peer import Peer, non_finite_messages, position, vehicle_heartbeat
 
+from groundstation.link import Link
 from groundstation.replay import Replay
-from groundstation.state import Fleet
+from groundstation.state import FORGET_AFTER, MAX_VEHICLES, Fleet
 from vehicle.agent.companion import tunnel
 from vehicle.protocol.mapstream import MAP_DELTA, MAX_SIDE, MapReceiver, snapshot_chunks
 from vehicle.protocol.mav import mavlink, pack
+from vehicle.protocol.statustext import Reassembler, statustexts
 from vehicle.protocol.tlog import TlogWriter
 
 
@@ -202,3 +204,63 @@ def test_a_station_keeps_tracking_its_vehicle_through_map_bombs_and_huge_claims(
 def resident_bytes() -> int:
     with open("/proc/self/statm") as statm:
         return int(statm.read().split()[1]) * 4096
+
+
+# ---- 3. fake vehicles ------------------------------------------------------------------------------------
+def test_a_flood_of_fake_vehicles_fills_the_fleet_only_to_its_limit_and_the_real_one_still_answers(scene, tmp_path):
+    with RunningStation(scene, tmp_path) as station, start_sim(station, scene):
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok", what="the real vehicle")
+        fakes = [Peer(station_address(station), sysid=2 + k % 254) for k in range(300)]  # each from its own port
+        for fake in fakes:
+            fake.send(vehicle_heartbeat(), position())
+        health = wait_wall(lambda: (h := api.get("/api/health").json())["link"]["vehicles"]["refused"] > 0 and h,
+                           10, "fake vehicles refused")
+        held = health["link"]["vehicles"]
+        assert held["held"] == held["limit"] == MAX_VEHICLES and len(api.vehicles()) == MAX_VEHICLES
+        assert 1 in api.vehicles()  # heard first, kept
+        command_ok(api, 1, action="set_mode", mode="LOITER")
+        shown = api.wait_vehicle(1, lambda v: v["mode"] == "LOITER", sim_timeout=HEARTBEAT_WAIT, what="LOITER")
+        assert shown["link"]["heartbeat_age"] < 3
+        asked = {m.target_system for fake in fakes for m in fake.receive(0.005) if m.get_type() == "COMMAND_LONG"}
+        assert 0 < len(asked) <= MAX_VEHICLES - 1  # only the vehicles the fleet holds are asked for telemetry
+        for fake in fakes:
+            fake.close()
+
+
+def test_a_vehicle_not_heard_for_ten_minutes_is_forgotten_and_makes_room():
+    fleet = Fleet(max_vehicles=2)
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=3), 0.0)
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=4), 0.0)
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=5), 1.0)
+    assert fleet.ids() == [3, 4] and fleet.refused == 1  # full: the newcomer is refused
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=4), FORGET_AFTER - 10)
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=5), FORGET_AFTER + 1)
+    assert fleet.ids() == [4, 5] and fleet.forgotten == 1  # 3 was silent for ten minutes: forgotten
+
+
+def test_a_replayed_log_forgets_no_vehicle_however_long_it_was_silent(tmp_path):
+    path = tmp_path / "quiet.tlog"
+    log = TlogWriter(path)
+    first, second = (mavlink.MAVLink(None, srcSystem=s, srcComponent=1) for s in (9, 10))
+    log.write(pack(vehicle_heartbeat(), first), 1_700_000_000.0)
+    log.write(pack(vehicle_heartbeat(), second), 1_700_000_000.0 + 2 * FORGET_AFTER)
+    log.close()
+    replay = Replay.open(path, Fleet())
+    replay.advance(replay.duration)
+    assert replay.fleet.ids() == [9, 10]
+    replay.seek(replay.duration)
+    assert replay.fleet.ids() == [9, 10]
+
+
+def test_the_links_routes_and_unfinished_texts_stay_bounded():
+    link = Link([], Fleet())
+    for sysid in range(1, 256):
+        link.route[sysid] = (None, None, 0.0 if sysid > 1 else FORGET_AFTER)
+        link._asked[sysid] = (0.0, 0.0)
+    link._prune(FORGET_AFTER + 1)
+    assert list(link.route) == [1] and list(link._asked) == [1]  # only the one heard within ten minutes
+    texts = Reassembler()
+    for k in range(300):  # chunk 0 of a long text each, never finished, from many senders
+        texts.feed(_decoded(statustexts("x" * 120, 6, k + 1)[0], sysid=1 + k % 255, compid=1 + k // 255), 0.0)
+    assert len(texts._partial) <= texts.limit
