@@ -109,8 +109,7 @@ class Link:
             try:
                 now = time.time()
                 if now >= next_beat:
-                    self.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID,
-                                                                0, 0, mavlink.MAV_STATE_ACTIVE, 3))
+                    self.send(_gcs_heartbeat())
                     next_beat = now + 1.0
                 busy = self._read()
                 self._record_tick()
@@ -179,6 +178,7 @@ class Link:
         self._asked[sysid] = (now, boot)
         if heard is not None and now - heard <= LINK_LOST_AFTER:
             return
+        self.send(_gcs_heartbeat(), sysid)  # first: a vehicle takes orders only from a ground station it heard
         for message_id, rate in TELEMETRY.items():
             self.send(mavlink.MAVLink_command_long_message(sysid, AUTOPILOT, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
                                                            0, message_id, 1e6 / rate, 0, 0, 0, 0, 0), sysid)
@@ -272,3 +272,8 @@ class Link:
             return mission.upload(self, sysid, items, timeout=timeout)
         except mission.MissionError as error:
             raise LinkError(str(error)) from None
+
+
+def _gcs_heartbeat():
+    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
+                                             mavlink.MAV_STATE_ACTIVE, 3)

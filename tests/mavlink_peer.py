@@ -21,8 +21,8 @@ ARDUPILOT = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
 
 
 class Peer:
-    def __init__(self, address: tuple[str, int], sysid: int, compid: int = 1, key: bytes | None = None):
-        self.address = address
+    def __init__(self, address: tuple[str, int] | None, sysid: int, compid: int = 1, key: bytes | None = None):
+        self.address = address  # where it sends (None: set it once known)
         self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.socket.bind(("127.0.0.1", 0))
         self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
@@ -38,6 +38,11 @@ class Peer:
 
     def close(self) -> None:
         self.socket.close()
+
+    @property
+    def url(self) -> str:
+        """Where a vehicle sends to reach this peer."""
+        return f"udpout:127.0.0.1:{self.socket.getsockname()[1]}"
 
     def send(self, *messages) -> None:
         for message in messages:
@@ -77,6 +82,15 @@ class Peer:
                 if condition(message):
                     return message
         return None
+
+
+def command(command: int, *params: float, target: int = 1, component: int = 1):
+    return mavlink.MAVLink_command_long_message(target, component, command, 0, *(list(params) + [0.0] * 7)[:7])
+
+
+def acked(peer: Peer, number: int, timeout: float = 5.0):
+    """The COMMAND_ACK of command ``number`` the peer gets, or None."""
+    return peer.wait(lambda m: m.get_type() == "COMMAND_ACK" and m.command == number, timeout)
 
 
 # ---- messages a fake vehicle sends ----------------------------------------------------------------------

@@ -17,13 +17,24 @@ import tracemalloc
 import zlib
 
 import pytest
-from harness import HEARTBEAT_WAIT, RunningStation, command_ok, small_scene, start_sim, wait_wall
-from mavlink_peer import Peer, non_finite_messages, position, vehicle_heartbeat
+from harness import (
+    HEARTBEAT_WAIT,
+    RunningSim,
+    RunningStation,
+    command_ok,
+    make_vehicle,
+    small_scene,
+    start_sim,
+    wait_wall,
+)
+from mavlink_peer import Peer, acked, command, gcs_heartbeat, non_finite_messages, position, vehicle_heartbeat
 
 from groundstation.link import Link
 from groundstation.replay import Replay
 from groundstation.state import FORGET_AFTER, MAX_VEHICLES, Fleet
 from vehicle.agent.companion import tunnel
+from vehicle.cli import DEFAULT_SIM_LINK
+from vehicle.protocol import links
 from vehicle.protocol.mapstream import MAP_DELTA, MAX_SIDE, MapReceiver, snapshot_chunks
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.statustext import Reassembler, statustexts
@@ -264,3 +275,66 @@ def test_the_links_routes_and_unfinished_texts_stay_bounded():
     for k in range(300):  # chunk 0 of a long text each, never finished, from many senders
         texts.feed(_decoded(statustexts("x" * 120, 6, k + 1)[0], sysid=1 + k % 255, compid=1 + k // 255), 0.0)
     assert len(texts._partial) <= texts.limit
+
+
+# ---- 4. who the simulated vehicle obeys --------------------------------------------------------------------
+ARM, TAKEOFF, SET_MODE = (mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_CMD_NAV_TAKEOFF,
+                          mavlink.MAV_CMD_DO_SET_MODE)
+
+
+def sim_for(peer: Peer, scene, **options) -> RunningSim:
+    """A simulated copter sending to ``peer``, which sends back to it once started."""
+    runner = RunningSim(make_vehicle(scene), [peer.url], **options)
+    peer.address = runner.sim.endpoint.links[0].port.getsockname()
+    return runner
+
+
+def test_the_sim_denies_a_sender_that_is_no_ground_station_and_obeys_one_that_is(scene):
+    with Peer(None, sysid=66) as stranger, sim_for(stranger, scene) as sim:
+        pilot = sim.world.autopilot
+        for number, params in ((SET_MODE, (1, 5)), (ARM, (1,)), (TAKEOFF, (0, 0, 0, 0, 0, 0, 4))):
+            stranger.send(command(number, *params))
+            ack = acked(stranger, number)
+            assert ack.result == mavlink.MAV_RESULT_DENIED and ack.target_system == 66  # told, not ignored
+        stranger.send(mavlink.MAVLink_set_mode_message(1, 1, 5),
+                      mavlink.MAVLink_mission_count_message(1, 1, 3, 0))
+        assert stranger.wait(lambda m: m.get_type() == "MISSION_REQUEST_INT", 1.0) is None
+        assert not pilot.armed and pilot.mode == "GUIDED"  # as it booted
+        assert [t for t in stranger.texts if "Not obeying 66/1" in t] == ["Not obeying 66/1: no GCS heartbeat from it"]
+        stranger.send(gcs_heartbeat())  # now it is a ground station
+        for number, params in ((ARM, (1,)), (TAKEOFF, (0, 0, 0, 0, 0, 0, 4))):
+            stranger.send(command(number, *params))
+            assert acked(stranger, number).result == mavlink.MAV_RESULT_ACCEPTED
+        assert pilot.armed and pilot.mode == "GUIDED"
+
+
+def test_the_sim_obeys_its_own_companion_without_a_gcs_heartbeat(scene):
+    with Peer(None, sysid=1, compid=191) as companion, sim_for(companion, scene) as sim:
+        companion.send(command(SET_MODE, 1, 5))
+        assert acked(companion, SET_MODE).result == mavlink.MAV_RESULT_ACCEPTED
+        assert sim.world.autopilot.mode == "LOITER"
+        companion.as_system(1, 190).send(command(SET_MODE, 1, 4))  # the same system, another component
+        assert acked(companion, SET_MODE).result == mavlink.MAV_RESULT_DENIED
+
+
+def test_a_strangers_orders_are_not_routed_on_to_the_companion(scene):
+    with Peer(None, sysid=66) as stranger, Peer(None, sysid=1, compid=191) as agent:
+        runner = RunningSim(make_vehicle(scene, mission=None), [stranger.url, agent.url], sim_clock=True)
+        stranger.address = runner.sim.endpoint.links[0].port.getsockname()
+        agent.address = runner.sim.endpoint.links[1].port.getsockname()
+        with runner:
+            agent.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                                                         mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+            stranger.send(command(mavlink.MAV_CMD_MISSION_START, component=191))
+            assert acked(stranger, mavlink.MAV_CMD_MISSION_START).result == mavlink.MAV_RESULT_DENIED
+            assert agent.wait(lambda m: m.get_type() == "COMMAND_LONG", 1.0) is None
+            stranger.send(gcs_heartbeat(), command(mavlink.MAV_CMD_MISSION_START, component=191))
+            assert agent.wait(lambda m: m.get_type() == "COMMAND_LONG", 2.0) is not None  # a ground station's is
+
+
+def test_vehicle_sim_answers_on_loopback_only_unless_told_otherwise():
+    link = links.connect(DEFAULT_SIM_LINK)  # what ``vehicle sim`` talks on without --mavlink
+    try:
+        assert link.port.getsockname()[0] == "127.0.0.1"
+    finally:
+        link.close()

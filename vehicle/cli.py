@@ -15,6 +15,7 @@ from vehicle.world.bundled import default_scene
 from vehicle.world.suites import DEFAULT_SUITE, SENSOR_SUITES
 
 DEFAULT_SCENE = default_scene()
+DEFAULT_SIM_LINK = "udpout:127.0.0.1:14550"  # a ground station on this machine; the vehicle's port is loopback only
 
 
 def _point(text: str) -> tuple[float, ...]:
@@ -154,7 +155,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     world = stepper.simulation
     if items:
         world.autopilot.set_mission(items)
-    options = SimOptions(args.mavlink or ["udpout:127.0.0.1:14550"], args.sysid, args.speedup,
+    options = SimOptions(args.mavlink or [DEFAULT_SIM_LINK], args.sysid, args.speedup,
                          args.failsafe_timeout, args.log, sim_clock=autopilot)
     sim = SimVehicle(stepper, options)
     if autopilot:
@@ -255,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
                      help="vehicle: the autopilot and its onboard agent in one (default); autopilot: a plain "
                           "ArduPilot-like flight controller, for `vehicle agent` to fly")
     sim.add_argument("--mavlink", action="append", metavar="URL",
-                     help="pymavlink connection string, repeatable (default udpout:127.0.0.1:14550)")
+                     help=f"pymavlink connection string, repeatable (default {DEFAULT_SIM_LINK})")
     sim.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
     sim.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
     sim.add_argument("--autostart", action="store_true", help="arm and start the mission without a GCS")

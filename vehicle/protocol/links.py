@@ -47,6 +47,17 @@ def connect(url: str, source_system: int = 255, source_component: int = 0) -> Ud
     return StreamLink(url, source_system, source_component)
 
 
+def _interface_towards(host: str, port: int) -> str:
+    """The address of the interface that reaches ``host`` (loopback for a peer on this machine): a ``udpout``
+    port answers on that one interface, not on every one (0.0.0.0 only where no route is known)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect((host, port))
+            return probe.getsockname()[0]
+        except OSError:
+            return "0.0.0.0"
+
+
 def _parser() -> mavlink.MAVLink:
     parser = mavlink.MAVLink(None)
     parser.robust_parsing = True
@@ -74,7 +85,7 @@ class UdpLink:
             self.port.bind((host, port))
             self.destination = None
         else:
-            self.port.bind(("0.0.0.0" if host not in ("127.0.0.1", "localhost") else "127.0.0.1", 0))
+            self.port.bind((_interface_towards(host, port), 0))
             self.destination = (host, port)
         self.port.setblocking(False)
         self.mav = mavlink.MAVLink(self, srcSystem=source_system, srcComponent=source_component)  # writes here
