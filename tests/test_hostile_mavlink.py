@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import json
 import math
+import socket
 import struct
+import threading
+import time
 import tracemalloc
 import zlib
 
@@ -338,3 +341,50 @@ def test_vehicle_sim_answers_on_loopback_only_unless_told_otherwise():
         assert link.port.getsockname()[0] == "127.0.0.1"
     finally:
         link.close()
+
+
+# ---- 5. a flood of two-byte datagrams ------------------------------------------------------------------------
+class Flooder:
+    """Sends ``\\xfd\\xff`` (the start of a MAVLink 2 packet of 255 bytes that never comes) to some addresses, at
+    ``rate`` datagrams a second each, from its own socket, until stopped."""
+
+    def __init__(self, addresses: list[tuple[str, int]], rate: float = 150.0):
+        self.addresses, self.rate, self.sent = addresses, rate, 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> Flooder:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as flood:
+            while not self._stop.wait(1.0 / self.rate):
+                for address in self.addresses:
+                    flood.sendto(b"\xfd\xff", address)
+                    self.sent += 1
+
+
+@pytest.mark.parametrize("target", ["station", "vehicle"])
+def test_a_two_byte_datagram_flood_neither_hides_the_vehicle_nor_trips_its_failsafe(scene, tmp_path, target):
+    """Against the station's port, or the vehicle's: with one parser for all senders the flood swallowed the
+    real packets that followed it (commands went unanswered, the vehicle's GCS failsafe tripped)."""
+    with RunningStation(scene, tmp_path) as station, start_sim(station, scene, failsafe_timeout=2.0) as sim:
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok" and v["position"], what="the vehicle")
+        port = station_address(station) if target == "station" else sim.endpoint.links[0].port.getsockname()
+        with Flooder([port]) as flood:
+            deadline = time.monotonic() + 3.0  # longer than the vehicle's failsafe timeout
+            results = []
+            while time.monotonic() < deadline:
+                mode = "LOITER" if len(results) % 2 == 0 else "GUIDED"
+                results.append(api.result(1, action="set_mode", mode=mode))
+                assert api.vehicle(1)["link"]["heartbeat_age"] < 3
+                time.sleep(0.2)
+        assert flood.sent > 300 and len(results) >= 5 and set(results) == {"accepted"}
+        assert not sim.endpoint.in_failsafe
+        assert not [m for m in api.vehicle(1)["messages"] if "failsafe" in m["text"]]
