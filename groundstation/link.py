@@ -13,6 +13,12 @@ attitude only on links where someone asked. Commands are retried
 run out, as MAVLink asks of a sender. Nothing a peer sends or the disk does
 stops the thread: a failure is counted, kept for the health report, and the
 loop goes on.
+
+With a signing key the station signs everything it sends and shows, per
+vehicle, whether its messages carry a valid signature; with
+``require_signing`` it drops what is not signed with its key (such a vehicle
+is never shown; its system id and the messages dropped are in the health
+report).
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from groundstation.state import FORGET_AFTER, LINK_LOST_AFTER, Fleet
-from vehicle.protocol import links, mission
+from vehicle.protocol import links, mission, signing
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.mission import MissionItem
 
@@ -62,12 +68,18 @@ class _Waiter:
 
 
 class Link:
-    def __init__(self, urls: list[str], fleet: Fleet, recorder=None, sysid: int = GCS_SYSID):
+    def __init__(self, urls: list[str], fleet: Fleet, recorder=None, sysid: int = GCS_SYSID,
+                 signing_key: bytes | None = None, require_signing: bool = False):
+        if require_signing and signing_key is None:
+            raise ValueError("requiring signed vehicles needs a signing key")
         self.fleet = fleet
         self.recorder = recorder
         self.urls = urls
-        self.ports = [links.connect(url, sysid, GCS_COMPID) for url in urls]
+        self.signing_key, self.require_signing = signing_key, require_signing
+        self.ports = [links.connect(url, sysid, GCS_COMPID, signing_key, require_signing) for url in urls]
         self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=GCS_COMPID)
+        if signing_key is not None:
+            signing.sign_outgoing(self.packer, signing_key)
         # keyed by the 8-bit system id (so at most 255 entries), and pruned after FORGET_AFTER of silence:
         self.route: dict[int, tuple] = {}  # sysid -> (the port it was last heard on, its address there, when)
         self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
@@ -99,7 +111,15 @@ class Link:
                 "last_error": self.last_error or None, "recording_error": self.recording_error or None,
                 "links": [{"url": port.url, "up": port.up, "error": port.error or None} for port in self.ports],
                 "vehicles": {"held": len(fleet.vehicles), "limit": fleet.max_vehicles, "refused": fleet.refused,
-                             "forgotten": fleet.forgotten}}
+                             "forgotten": fleet.forgotten},
+                "signing": self._signing_health()}
+
+    def _signing_health(self) -> dict:
+        """Whether the station signs, whether it requires signed vehicles, and the systems whose messages it
+        dropped for their signature (with how many)."""
+        refused = sum((port.refused for port in self.ports), Counter())
+        return {"key": self.signing_key is not None, "required": self.require_signing,
+                "refused": [{"sysid": sysid, "messages": count} for sysid, count in sorted(refused.items())]}
 
     # ---- the loop ---------------------------------------------------------------------------------
     def _run(self) -> None:

@@ -33,7 +33,8 @@ from vehicle.world.scene import Scene
 
 class GroundStation:
     def __init__(self, urls: list[str], scene: Scene | None = None, token: str | None = None,
-                 record_dir: str | Path | None = "recordings", datum: Datum | None = None, viser_port: int = 0):
+                 record_dir: str | Path | None = "recordings", datum: Datum | None = None, viser_port: int = 0,
+                 signing_key: bytes | None = None, require_signing: bool = False):
         self.token = token or secrets.token_urlsafe(16)
         self.scene = scene
         ground = None
@@ -46,7 +47,8 @@ class GroundStation:
         self.record_dir = Path(record_dir) if record_dir else None
         self.recorder = Recorder(record_dir) if record_dir and urls else None
         self.link_urls = list(urls)
-        self.link = Link(urls, self.live, self.recorder) if urls else None
+        self.link = Link(urls, self.live, self.recorder, signing_key=signing_key,
+                         require_signing=require_signing) if urls else None
         self.view = SceneView(self.live, scene, viser_port)
         self.proxy = VizProxy(self.view.port)
         self.view.on_connect(self.proxy.client_connected)

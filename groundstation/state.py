@@ -80,6 +80,7 @@ class VehicleState:
     custom_mode: int = -1
     armed: bool = False
     mavlink_version: int = 2
+    signed: bool | None = None  # its heartbeat carried a valid signature (None: this station has no key)
     lat: float | None = None
     lon: float | None = None
     alt: float | None = None  # m above home
@@ -242,6 +243,7 @@ class Fleet:
         vehicle.armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         vehicle.mode = mavutil.mode_string_v10(m)
         vehicle.mavlink_version = 2 if m.get_msgbuf()[:1] == b"\xfd" else 1
+        vehicle.signed = getattr(m, "_verified", None)  # set by a link with a signing key
         vehicle.last_heartbeat = now
 
     def _ensure_datum(self, lat: float, lon: float) -> Datum:
@@ -371,7 +373,7 @@ class Fleet:
             "battery": None if v.voltage is None else {"voltage": _round(v.voltage), "remaining": v.remaining,
                                                        "current": _round(v.current)},
             "link": {"state": v.link_state(now), "heartbeat_age": age, "messages": v.messages_received,
-                     "mavlink": v.mavlink_version},
+                     "mavlink": v.mavlink_version, "signed": v.signed},
             "mission": {"current": v.mission_current, "total": v.mission_total, "reached": v.mission_reached},
             "status": v.status,
             "agent": None if v.agent is None else {

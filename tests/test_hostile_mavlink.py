@@ -10,6 +10,8 @@ that the vehicle obeys only its ground stations.
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import json
 import math
 import socket
@@ -18,6 +20,8 @@ import threading
 import time
 import tracemalloc
 import zlib
+from collections import Counter
+from unittest import mock
 
 import pytest
 from harness import (
@@ -37,7 +41,7 @@ from groundstation.replay import Replay
 from groundstation.state import FORGET_AFTER, MAX_VEHICLES, Fleet
 from vehicle.agent.companion import tunnel
 from vehicle.cli import DEFAULT_SIM_LINK
-from vehicle.protocol import links
+from vehicle.protocol import links, signing
 from vehicle.protocol.mapstream import MAP_DELTA, MAX_SIDE, MapReceiver, snapshot_chunks
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.statustext import Reassembler, statustexts
@@ -388,3 +392,94 @@ def test_a_two_byte_datagram_flood_neither_hides_the_vehicle_nor_trips_its_fails
         assert flood.sent > 300 and len(results) >= 5 and set(results) == {"accepted"}
         assert not sim.endpoint.in_failsafe
         assert not [m for m in api.vehicle(1)["messages"] if "failsafe" in m["text"]]
+
+
+# ---- 6. signing ----------------------------------------------------------------------------------------------
+KEY = signing.load_key("correct horse battery staple")
+WRONG_KEY = signing.load_key("not the key")
+
+
+def test_a_signing_key_is_a_file_of_32_bytes_or_of_hex_or_base64_or_a_passphrase(tmp_path):
+    raw = bytes(range(32))
+    for name, content in (("raw", raw), ("hex", raw.hex().encode() + b"\n"), ("b64", base64.b64encode(raw))):
+        (tmp_path / name).write_bytes(content)
+        assert signing.load_key(str(tmp_path / name)) == raw
+    assert KEY == hashlib.sha256(b"correct horse battery staple").digest()  # as MAVProxy's signing setup
+    (tmp_path / "short").write_bytes(b"0123")
+    for bad in (str(tmp_path / "short"), str(tmp_path / "missing.key"), ""):
+        with pytest.raises(signing.SigningKeyError):
+            signing.load_key(bad)
+
+
+def _signed(message, key: bytes, sysid: int = 1, compid: int = 1, packer=None):
+    packer = packer or mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+    if key is not None and not packer.signing.sign_outgoing:
+        signing.sign_outgoing(packer, key)
+    return mavlink.MAVLink(None).decode(bytearray(pack(message, packer)))
+
+
+def test_the_verifier_takes_each_signed_message_once_and_nothing_else():
+    verifier = signing.Verifier(KEY)
+    beat = _signed(vehicle_heartbeat(), KEY)
+    assert verifier.check(beat) == signing.SIGNED
+    assert verifier.check(beat) == signing.REPLAYED  # the same packet again (from anyone): a replay
+    assert verifier.check(_signed(vehicle_heartbeat(), WRONG_KEY)) == signing.BAD
+    assert verifier.check(_decoded(vehicle_heartbeat(), 1)) == signing.UNSIGNED
+    radio = _decoded(mavlink.MAVLink_radio_status_message(200, 190, 90, 80, 70, 0, 0), 51, 68)
+    assert verifier.admits(radio, verifier.check(radio))  # radios do not sign
+    assert not verifier.admits(beat, signing.UNSIGNED) and not verifier.admits(beat, signing.BAD)
+    assert signing.Verifier(KEY, require=False).admits(beat, signing.UNSIGNED)
+
+
+def test_a_forged_packet_with_a_future_timestamp_does_not_silence_the_genuine_stream():
+    """pymavlink's own check records the timestamp before it checks the signature."""
+    verifier = signing.Verifier(KEY)
+    genuine = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    signing.sign_outgoing(genuine, KEY)
+    forger = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    signing.sign_outgoing(forger, WRONG_KEY)
+    forger.signing.link_id = genuine.signing.link_id
+    forger.signing.timestamp = genuine.signing.timestamp + 10**9
+    assert verifier.check(_signed(vehicle_heartbeat(), KEY, packer=forger)) == signing.BAD
+    assert verifier.check(_signed(vehicle_heartbeat(), KEY, packer=genuine)) == signing.SIGNED
+
+
+def test_a_signed_sim_obeys_only_signed_commands_and_signs_what_it_sends(scene):
+    with Peer(None, sysid=66) as unsigned, Peer(None, sysid=67, key=WRONG_KEY) as forger, \
+            Peer(None, sysid=68, key=KEY) as operator:
+        runner = RunningSim(make_vehicle(scene), [unsigned.url, forger.url, operator.url], signing_key=KEY)
+        for k, peer in enumerate((unsigned, forger, operator)):
+            peer.address = runner.sim.endpoint.links[k].port.getsockname()
+        with runner as sim:
+            for peer in (unsigned, forger):
+                peer.send(gcs_heartbeat(), command(ARM, 1))
+                assert acked(peer, ARM, timeout=1.5) is None  # dropped unheard: not even denied
+            assert not sim.world.autopilot.armed
+            operator.send(gcs_heartbeat(), command(ARM, 1))
+            assert acked(operator, ARM).result == mavlink.MAV_RESULT_ACCEPTED and sim.world.autopilot.armed
+            unsigned.as_system(51, 68).send(mavlink.MAVLink_radio_status_message(200, 190, 90, 80, 70, 0, 0))
+            beat = unsigned.wait(lambda m: m.get_type() == "HEARTBEAT")
+            assert signing.Verifier(KEY).check(beat) == signing.SIGNED
+            refused = sum((link.refused for link in sim.endpoint.links), Counter())
+            assert refused[66] >= 2 and refused[67] >= 2 and 51 not in refused and 68 not in refused
+
+
+@pytest.mark.parametrize(("vehicle_key", "signed"), [(KEY, True), (None, False)])
+def test_a_station_with_a_key_shows_whether_each_vehicle_signs(scene, tmp_path, vehicle_key, signed):
+    with RunningStation(scene, tmp_path, signing_key=KEY) as station, \
+            start_sim(station, scene, signing_key=vehicle_key):
+        shown = station.http.wait_vehicle(1, lambda v: v["link"]["signed"] is not None, what="its link")
+        assert shown["link"]["signed"] is signed
+        command_ok(station.http, 1, action="set_mode", mode="LOITER")  # what the station sends is signed
+
+
+def test_a_station_that_requires_signing_shows_no_unsigned_vehicle(scene, tmp_path):
+    with RunningStation(scene, tmp_path, signing_key=KEY, require_signing=True) as station, \
+            start_sim(station, scene), start_sim(station, scene, sysid=2, signing_key=KEY):
+        station.http.wait_vehicle(2, lambda v: v["link"]["signed"], what="the signed vehicle")
+        health = wait_wall(lambda: (h := station.http.get("/api/health").json())["link"]["signing"]["refused"] and h,
+                           10, "the unsigned vehicle refused")
+        assert 1 not in station.http.vehicles()
+        assert health["link"]["signing"] == {"key": True, "required": True,
+                                             "refused": [{"sysid": 1, "messages": mock.ANY}]}
+

@@ -21,6 +21,7 @@ another UDP address through.
 
 from __future__ import annotations
 
+import argparse
 import base64
 import binascii
 import hashlib
@@ -71,6 +72,14 @@ def load_key(value: str) -> bytes:
     if not value:
         raise SigningKeyError("an empty passphrase is no key")
     return hashlib.sha256(value.encode("utf-8")).digest()
+
+
+def key_option(value: str) -> bytes:
+    """``load_key`` for argparse: a bad key is a usage error that says why."""
+    try:
+        return load_key(value)
+    except (SigningKeyError, OSError) as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def now_stamp() -> int:

@@ -22,6 +22,11 @@ targets, mission and parameter writes, manual control) are dropped, and one
 STATUSTEXT per sender says why. Reading (parameters, the mission, telemetry
 requests after a heartbeat) is for anyone who asks as a ground station.
 (ArduPilot obeys anyone on its links; a real vehicle relies on signing.)
+
+With a signing key it signs everything it sends and refuses every message
+not signed with that key but RADIO_STATUS, as ArduPilot does once signing is
+set up (``vehicle.protocol.signing``); a refused message is dropped before it
+is handled or routed.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ import math
 from collections import Counter
 from typing import Protocol
 
-from vehicle.protocol import links
+from vehicle.protocol import links, signing
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, Kind, mode_name
 from vehicle.protocol.tlog import TlogWriter
@@ -93,7 +98,8 @@ class Onboard(Protocol):
 
 class Endpoint:
     def __init__(self, urls: list[str], world: Simulation, telemetry: Telemetry, sysid: int = 1,
-                 failsafe_timeout: float = 5.0, log: TlogWriter | None = None, onboard: Onboard | None = None):
+                 failsafe_timeout: float = 5.0, log: TlogWriter | None = None, onboard: Onboard | None = None,
+                 signing_key: bytes | None = None):
         self.world = world
         self.autopilot = world.autopilot
         self.onboard = onboard
@@ -101,9 +107,12 @@ class Endpoint:
         self.sysid = sysid
         self.failsafe_timeout = failsafe_timeout
         self.log = log
-        self.links = [links.connect(url, sysid, AUTOPILOT) for url in urls]
+        self.links = [links.connect(url, sysid, AUTOPILOT, signing_key) for url in urls]
         self.packers = {component: mavlink.MAVLink(None, srcSystem=sysid, srcComponent=component)
                         for component in {AUTOPILOT, onboard.component if onboard else AUTOPILOT}}
+        if signing_key is not None:
+            for packer in self.packers.values():
+                signing.sign_outgoing(packer, signing_key)
         self.missions = MissionServer(self.autopilot)
         self.stats: Counter[str] = Counter()
         self.gcs_seen: float | None = None  # wall time of the last GCS heartbeat
