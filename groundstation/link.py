@@ -73,6 +73,7 @@ class Link:
         if require_signing and signing_key is None:
             raise ValueError("requiring signed vehicles needs a signing key")
         self.fleet = fleet
+        fleet.own_sysid = sysid  # so that it tells this station's orders from another station's
         self.recorder = recorder
         self.urls = urls
         self.signing_key, self.require_signing = signing_key, require_signing
@@ -106,13 +107,15 @@ class Link:
     def health(self) -> dict:
         """How the link side is doing, for /api/health: the thread, each link, and the recording."""
         stalled = not self._thread.is_alive() or time.monotonic() - self.turned > STALLED_AFTER
-        fleet = self.fleet
+        fleet, now = self.fleet, time.time()
         return {"thread": "stalled" if stalled else "ok", "errors": self.stats["errors"],
                 "last_error": self.last_error or None, "recording_error": self.recording_error or None,
                 "links": [{"url": port.url, "up": port.up, "error": port.error or None} for port in self.ports],
                 "vehicles": {"held": len(fleet.vehicles), "limit": fleet.max_vehicles, "refused": fleet.refused,
                              "forgotten": fleet.forgotten},
-                "signing": self._signing_health()}
+                "signing": self._signing_health(),
+                "other_stations": [{"sysid": sysid, "age": round(now - heard, 1)}
+                                   for sysid, heard in list(fleet.stations.items())]}
 
     def _signing_health(self) -> dict:
         """Whether the station signs, whether it requires signed vehicles, and the systems whose messages it
@@ -232,6 +235,7 @@ class Link:
         """Send to where the vehicle was heard (to every link and peer if it is unknown or None)."""
         with self._lock:
             packet = pack(message, self.packer)
+        self.fleet.apply(message, time.time())  # the fleet tells this station's orders from another's
         if sysid in self.route:
             port, peer, _ = self.route[sysid]
             port.write(packet, peer)

@@ -16,13 +16,20 @@ Anyone on a link can claim to be a vehicle, so the fleet holds at most
 forgotten) and forgets a vehicle not heard for ``FORGET_AFTER`` seconds of the
 receiver's clock; a replayed log forgets nothing (``forget_after=None``). A
 peer's non-finite numbers are ignored (the last good value stays).
+
+Another ground station in command shows on the vehicle (``other_gcs``): the
+fleet notes the other stations it hears (GCS heartbeats from system ids but
+ours), a COMMAND_ACK or MISSION_ACK of the vehicle addressed to another system
+than ours or its own, and a mode change this station did not order while
+another station is heard. This station's own messages (``apply`` gets them
+too: the link's and a replayed recording's) tell which orders were ours.
 """
 
 from __future__ import annotations
 
 import math
 import threading
-from collections import deque
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,6 +52,13 @@ MESSAGES_KEPT = 50
 OWN_MAP_SPACE = 100.0  # m around home, for maps built from DISTANCE_SENSOR
 OWN_MAP_RESOLUTION = 5.0  # cells/m
 OWN_MAP_AFTER = 2.0  # s a vehicle is heard without a map stream or a companion before the station builds a map
+OWN_SYSID = 255  # this station's system id (the link's)
+ORDERED_WITHIN = 5.0  # s after this station's order (or the companion's) a mode change is taken as its doing
+# (a mode other than the one it named is not)
+MAX_STATIONS = 16  # other ground stations remembered
+MODE_ORDERS = {mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_NAV_LAND,
+               mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_MISSION_START, mavlink.MAV_CMD_DO_REPOSITION,
+               mavlink.MAV_CMD_COMPONENT_ARM_DISARM}  # commands after which a vehicle may change its mode
 MAX_VEHICLES = 64  # vehicles held at once; each may hold a map of up to 16 MB
 FORGET_AFTER = 600.0  # s of the receiver's clock without a message before a vehicle is forgotten
 
@@ -115,6 +129,9 @@ class VehicleState:
     unmapped: deque = field(default_factory=lambda: deque(maxlen=HITS_KEPT))  # readings waiting for own_map
     first_heard: float = 0.0  # receiver clock
     waypoints: list[tuple[float, float]] = field(default_factory=list)  # the AUTO mission, scene x, y
+    other_gcs: tuple[int, str, float] | None = None  # another station in command: its sysid, what showed it, when
+    ordered: tuple[float, int | None] = (-math.inf, None)  # when this station or the companion last ordered a
+    # mode change, and the mode (custom_mode) if the order named one
     version: int = 0  # bumps on every change, for views that redraw
 
     @property
@@ -162,7 +179,7 @@ class Fleet:
     """Every vehicle heard, by system id. Thread-safe: the link writes, views read snapshots."""
 
     def __init__(self, datum: Datum | None = None, ground_height=None, forget_after: float | None = FORGET_AFTER,
-                 max_vehicles: int = MAX_VEHICLES):
+                 max_vehicles: int = MAX_VEHICLES, own_sysid: int = OWN_SYSID):
         self.datum = datum  # None: the first home heard becomes the scene origin
         self.ground_height = ground_height or (lambda x, y: 0.0)
         self.vehicles: dict[int, VehicleState] = {}
@@ -174,10 +191,13 @@ class Fleet:
         self.refused = 0  # heartbeats of new vehicles turned away while the fleet was full
         self.forgotten = 0
         self._swept = -math.inf  # when silent vehicles were last looked for
+        self.own_sysid = own_sysid
+        self.stations: OrderedDict[int, float] = OrderedDict()  # other ground stations: sysid -> last heartbeat
 
     def clear(self) -> None:
         with self.lock:
             self.vehicles.clear()
+            self.stations.clear()
             self.texts = Reassembler()
             self.version += 1
 
@@ -197,6 +217,11 @@ class Fleet:
         with self.lock:
             if now - self._swept >= 1.0:
                 self._forget_silent(now)
+            if sysid == self.own_sysid:
+                self._ours(message, now)
+                return
+            if kind == "HEARTBEAT" and message.type == mavlink.MAV_TYPE_GCS:
+                self._station_heard(sysid, now)
             vehicle = self.vehicles.get(sysid)
             if vehicle is None:
                 if kind != "HEARTBEAT" or message.type in NOT_VEHICLES or message.autopilot == \
@@ -227,6 +252,50 @@ class Fleet:
             self.forgotten += len(silent)
             self.version += 1
 
+    # ---- ground stations -------------------------------------------------------------------------
+    def _ours(self, message, now: float) -> None:
+        """A message this station sent: an order that may change a vehicle's mode is ours, not another's."""
+        kind = message.get_type()
+        vehicle = self.vehicles.get(getattr(message, "target_system", 0))
+        if vehicle is None:
+            return
+        if kind == "SET_MODE":
+            vehicle.ordered = (now, message.custom_mode)
+        elif kind in ("COMMAND_LONG", "COMMAND_INT") and message.command in MODE_ORDERS:
+            named = message.command == mavlink.MAV_CMD_DO_SET_MODE
+            vehicle.ordered = (now, int(message.param2) if named else None)
+
+    def _station_heard(self, sysid: int, now: float) -> None:
+        self.stations.pop(sysid, None)
+        self.stations[sysid] = now
+        while len(self.stations) > MAX_STATIONS:
+            self.stations.popitem(last=False)
+
+    def _command_ack(self, vehicle, m, now) -> None:
+        target = getattr(m, "target_system", 0)
+        if target == vehicle.sysid:  # the companion's order
+            vehicle.ordered = (now, None)
+        elif target not in (0, self.own_sysid):
+            name = mavlink.enums["MAV_CMD"][m.command].name if m.command in mavlink.enums["MAV_CMD"] else m.command
+            result = mavlink.enums["MAV_RESULT"][m.result].name.removeprefix("MAV_RESULT_").lower() \
+                if m.result in mavlink.enums["MAV_RESULT"] else f"result {m.result}"
+            vehicle.other_gcs = (target, f"COMMAND_ACK {name} {result.replace('_', ' ')}", now)
+
+    def _mission_ack(self, vehicle, m, now) -> None:
+        if m.target_system not in (0, self.own_sysid, vehicle.sysid):
+            name = mavlink.enums["MAV_MISSION_RESULT"][m.type].name if m.type in \
+                mavlink.enums["MAV_MISSION_RESULT"] else m.type
+            vehicle.other_gcs = (m.target_system, f"MISSION_ACK {name}", now)
+
+    def _mode_changed(self, vehicle, mode: str, now: float) -> None:
+        """Neither this station nor the companion ordered it: another station heard lately may have."""
+        when, wanted = vehicle.ordered
+        if now - when <= ORDERED_WITHIN and wanted in (None, vehicle.custom_mode):
+            return
+        heard = [sysid for sysid, when in self.stations.items() if now - when <= LINK_LOST_AFTER]
+        if heard:
+            vehicle.other_gcs = (heard[-1], f"mode {mode}, not ordered by this station", now)
+
     def _boot(self, vehicle: VehicleState, message) -> None:
         if hasattr(message, "time_boot_ms"):
             vehicle.time_boot_s = message.time_boot_ms / 1000.0
@@ -237,11 +306,14 @@ class Fleet:
             return
         if m.type in NOT_VEHICLES:
             return
+        changed = vehicle.custom_mode not in (-1, m.custom_mode)
         vehicle.mav_type = m.type
         vehicle.autopilot = m.autopilot
         vehicle.custom_mode = m.custom_mode
         vehicle.armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         vehicle.mode = mavutil.mode_string_v10(m)
+        if changed:
+            self._mode_changed(vehicle, vehicle.mode, now)
         vehicle.mavlink_version = 2 if m.get_msgbuf()[:1] == b"\xfd" else 1
         vehicle.signed = getattr(m, "_verified", None)  # set by a link with a signing key
         vehicle.last_heartbeat = now
@@ -384,6 +456,8 @@ class Fleet:
             "messages": list(v.messages)[-20:],
             "map": {"occupied": self.occupied(v), "source": v.map_source},
             "path": [[_round(x), _round(y)] for x, y in v.planned_path()],
+            "other_gcs": None if v.other_gcs is None else {"sysid": v.other_gcs[0], "last": v.other_gcs[1],
+                                                           "age": _round(now - v.other_gcs[2], 1)},
         }
 
     @staticmethod

@@ -26,14 +26,18 @@ from unittest import mock
 import pytest
 from harness import (
     HEARTBEAT_WAIT,
+    SPEEDUP,
     RunningSim,
     RunningStation,
     command_ok,
+    free_udp_port,
     make_vehicle,
     small_scene,
     start_sim,
+    wait_mode,
     wait_wall,
 )
+from mavlink_gcs import Gcs
 from mavlink_peer import Peer, acked, command, gcs_heartbeat, non_finite_messages, position, vehicle_heartbeat
 
 from groundstation.link import Link
@@ -483,3 +487,33 @@ def test_a_station_that_requires_signing_shows_no_unsigned_vehicle(scene, tmp_pa
         assert health["link"]["signing"] == {"key": True, "required": True,
                                              "refused": [{"sysid": 1, "messages": mock.ANY}]}
 
+
+# ---- 7. another ground station in command ------------------------------------------------------------------
+def test_the_station_shows_when_another_ground_station_commands_its_vehicle(scene, tmp_path):
+    other_port = free_udp_port()
+    other = Gcs(f"udpin:127.0.0.1:{other_port}", sysid=254, speedup=SPEEDUP)
+    with RunningStation(scene, tmp_path) as station, \
+            RunningSim(make_vehicle(scene), [station.vehicle_url(), f"udpout:127.0.0.1:{other_port}"]):
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok", what="the vehicle")
+        assert api.vehicle(1)["other_gcs"] is None
+        other.wait("HEARTBEAT")  # and its own heartbeats reach the vehicle, which routes them to the station
+        assert other.set_mode(5) == mavlink.MAV_RESULT_ACCEPTED  # LOITER, by station 254
+        shown = api.wait_vehicle(1, lambda v: v["other_gcs"] is not None, what="the other station")
+        assert shown["other_gcs"]["sysid"] == 254
+        assert shown["other_gcs"]["last"] == "COMMAND_ACK MAV_CMD_DO_SET_MODE accepted"
+        assert 0 <= shown["other_gcs"]["age"] < 3
+        health = api.get("/api/health").json()["link"]
+        assert [s["sysid"] for s in health["other_stations"]] == [254]
+
+        command_ok(api, 1, action="set_mode", mode="GUIDED")  # this station's own order: not another's doing
+        wait_mode(api, 1, "GUIDED")
+        assert api.vehicle(1)["other_gcs"]["last"] == "COMMAND_ACK MAV_CMD_DO_SET_MODE accepted"
+
+        other.heartbeat()
+        other.conn.mav.set_mode_send(1, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 17)  # BRAKE, unacknowledged
+        other.wait_mode(17)
+        shown = api.wait_vehicle(1, lambda v: v["mode"] == "BRAKE", sim_timeout=HEARTBEAT_WAIT, what="BRAKE")
+        assert shown["other_gcs"] == {"sysid": 254, "last": "mode BRAKE, not ordered by this station",
+                                      "age": mock.ANY}
+    other.close()
