@@ -11,9 +11,11 @@ that the vehicle obeys only its ground stations.
 from __future__ import annotations
 
 import base64
+import errno
 import hashlib
 import json
 import math
+import os
 import socket
 import struct
 import threading
@@ -517,3 +519,47 @@ def test_the_station_shows_when_another_ground_station_commands_its_vehicle(scen
         assert shown["other_gcs"] == {"sysid": 254, "last": "mode BRAKE, not ordered by this station",
                                       "age": mock.ANY}
     other.close()
+
+
+# ---- 8. a full disk, and a message that breaks the fleet ----------------------------------------------------
+class FullDisk:
+    """A file on a disk with no room left: every write and flush fails as a full disk does."""
+
+    def write(self, data) -> int:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def flush(self) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_full_disk_degrades_the_health_report_but_the_vehicle_stays_tracked(scene, tmp_path):
+    with RunningStation(scene, tmp_path) as station, start_sim(station, scene):
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok", what="the vehicle")
+        assert api.get("/api/health").json()["status"] == "ok"
+        station.station.recorder._writer._file = FullDisk()
+        health = wait_wall(lambda: (h := api.get("/api/health").json())["status"] == "degraded" and h, 10,
+                           "the health report degraded")
+        assert "No space left on device" in health["recording"]["error"] == health["link"]["recording_error"]
+        assert health["link"]["thread"] == "ok"
+        command_ok(api, 1, action="set_mode", mode="LOITER")
+        shown = api.wait_vehicle(1, lambda v: v["mode"] == "LOITER", sim_timeout=HEARTBEAT_WAIT, what="LOITER")
+        assert shown["link"]["heartbeat_age"] < 3
+
+
+def test_a_message_that_breaks_the_fleet_is_counted_and_the_link_thread_goes_on(tmp_path, monkeypatch):
+    def exhausted(*args):
+        raise MemoryError("a VFR_HUD too many")
+
+    with RunningStation(None, tmp_path) as station, Peer(station_address(station), sysid=7) as peer:
+        monkeypatch.setattr(station.station.live, "_vfr_hud", exhausted)
+        peer.send(vehicle_heartbeat(), mavlink.MAVLink_vfr_hud_message(1.0, 1.0, 0, 0, 0, 0), position(alt=2.0))
+        link = wait_wall(lambda: (h := station.http.get("/api/health").json()["link"])["errors"] and h, 10,
+                         "the error counted")
+        assert link["errors"] == 1 and link["last_error"] == "MemoryError: a VFR_HUD too many"
+        assert link["thread"] == "ok" and station.station.link._thread.is_alive()
+        shown = wait_wall(lambda: station.http.vehicle(7)["position"], 10, "the next message applied")
+        assert shown["alt"] == 2.0
