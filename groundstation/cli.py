@@ -41,6 +41,11 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--token", help="operator token (default: a new random one, printed at start)")
     parser.add_argument("--record-dir", default="recordings", help="where session recordings go (default "
                         "%(default)s; '' to not record)")
+    parser.add_argument("--viewer-token", help="a read-only token for watching, needed (with the operator token "
+                        "as the alternative) only when serving beyond loopback")
+    parser.add_argument("--allowed-host", action="append", default=[], metavar="NAME",
+                        help="a host name the page may be opened under, repeatable (IP addresses and localhost "
+                             "always work; names guard against DNS rebinding)")
     parser.add_argument("--tls-cert", help="certificate file for HTTPS")
     parser.add_argument("--tls-key", help="private key file for HTTPS")
     parser.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
@@ -60,11 +65,17 @@ def _station(args, urls: list[str], scene_path: str | None):
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from groundstation.server import serve
 
     station = _station(args, args.mavlink or [DEFAULT_LINK], args.scene)
-    serve(station, args.host, args.port, args.tls_cert, args.tls_key)
+    _serve(station, args)
     return 0
+
+
+def _serve(station, args) -> None:
+    from groundstation.server import serve
+
+    serve(station, args.host, args.port, args.tls_cert, args.tls_key, viewer_token=args.viewer_token,
+          allowed_hosts=tuple(args.allowed_host))
 
 
 def demo_starts(count: int) -> list[tuple[float, float]]:
@@ -76,7 +87,6 @@ def demo_starts(count: int) -> list[tuple[float, float]]:
 def cmd_demo(args: argparse.Namespace) -> int:
     """The station and, per vehicle, the two processes a user deploys: a flight controller (our simulator as a
     plain autopilot, in the scene) and the onboard agent beside it, speaking MAVLink as a companion computer."""
-    from groundstation.server import serve
 
     port = args.mavlink_port
     station = _station(args, [f"udpin:127.0.0.1:{port}"], args.scene)
@@ -111,7 +121,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"demo: {args.vehicles} simulated {args.vehicle}(s) in {Path(args.scene).name}, each a flight controller "
           f"and an onboard agent flying '{args.mission}'", flush=True)
     try:
-        serve(station, args.host, args.port, args.tls_cert, args.tls_key)
+        _serve(station, args)
     finally:
         stop_vehicles()
     return 0
@@ -156,7 +166,7 @@ def _exit_quietly(number, frame) -> None:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from groundstation.replay import index_tlog
-    from groundstation.server import GroundStation, serve
+    from groundstation.server import GroundStation
     from vehicle.world.scene import load_scene
 
     path = Path(args.file).resolve()
@@ -167,7 +177,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     station = GroundStation([], scene, args.token, record_dir=path.parent, datum=args.datum)
     station.start_replay(path)
     print(f"replaying {path.name}: {len(index)} messages, {index.duration:.1f} s", flush=True)
-    serve(station, args.host, args.port, args.tls_cert, args.tls_key)
+    _serve(station, args)
     return 0
 
 

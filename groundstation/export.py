@@ -23,7 +23,7 @@ MIN_FRAME = 0.25  # s of log time between frames
 def export_html(path: str | Path, scene: Scene | None, datum: Datum | None, ground_height=None) -> str:
     fleet = Fleet(datum, ground_height)
     replay = Replay.open(path, fleet)
-    view = SceneView(fleet, scene)
+    view = SceneView(fleet, scene, clock=lambda: replay.now)
     try:
         serializer = view.server.get_scene_serializer()
         frame = max(MIN_FRAME, replay.duration / MAX_FRAMES)

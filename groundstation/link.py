@@ -277,10 +277,10 @@ class Link:
         return RESULTS.get(ack.result, f"result {ack.result}")
 
     def command_int(self, sysid: int, command: int, frame: int, params: list[float], x: int, y: int, z: float,
-                    timeout: float = 1.0, retries: int = 3) -> str:
+                    timeout: float = 1.0, retries: int = 3, component: int = AUTOPILOT) -> str:
         def build(confirmation: int):
             # COMMAND_INT has no confirmation field: every try is the same message
-            return mavlink.MAVLink_command_int_message(sysid, 1, frame, command, 0, 0, *params, x, y, z)
+            return mavlink.MAVLink_command_int_message(sysid, component, frame, command, 0, 0, *params, x, y, z)
 
         ack = self.request(sysid, build(0), lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
                            timeout, retries, build)

@@ -8,7 +8,6 @@
 from __future__ import annotations
 
 import asyncio
-import ipaddress
 import secrets
 import sys
 import threading
@@ -22,6 +21,7 @@ from groundstation.link import Link
 from groundstation.proxy import VizProxy
 from groundstation.recorder import Recorder
 from groundstation.replay import Player, Replay, ReplayError, index_tlog
+from groundstation.security import Access, is_loopback
 from groundstation.state import Fleet
 from groundstation.viz import SceneView
 from vehicle.protocol.geodesy import Datum
@@ -36,6 +36,7 @@ class GroundStation:
                  record_dir: str | Path | None = "recordings", datum: Datum | None = None, viser_port: int = 0,
                  signing_key: bytes | None = None, require_signing: bool = False):
         self.token = token or secrets.token_urlsafe(16)
+        self.access = Access(self.token)  # serving beyond loopback makes it stricter (see app_config)
         self.scene = scene
         ground = None
         if scene is not None:
@@ -49,15 +50,14 @@ class GroundStation:
         self.link_urls = list(urls)
         self.link = Link(urls, self.live, self.recorder, signing_key=signing_key,
                          require_signing=require_signing) if urls else None
-        self.view = SceneView(self.live, scene, viser_port)
+        self.view = SceneView(self.live, scene, viser_port, clock=self.now)
         self.proxy = VizProxy(self.view.port)
-        self.view.on_connect(self.proxy.client_connected)
         self.view.on_target(self._target)
         self.replay: Replay | None = None  # set while a recording is replayed
         self._player: Player | None = None
         self._replay_lock = threading.Lock()
         self._durations: dict[tuple, float | None] = {}
-        self._inboxes: dict[str | None, set[asyncio.Queue]] = {}
+        self._inboxes: dict[str | None, set[asyncio.Queue]] = {}  # viewer id -> its pages' /ws queues
         self._loop: asyncio.AbstractEventLoop | None = None
 
     @property
@@ -168,6 +168,11 @@ class GroundStation:
         if vehicle is not None and self.fleet.datum is not None:
             vehicle.waypoints = positions(items, self.fleet.datum)
 
+    @property
+    def streams(self) -> int:
+        """/ws connections open now."""
+        return sum(len(inboxes) for inboxes in self._inboxes.values())
+
     def subscribe(self, viewer: str | None) -> asyncio.Queue:
         self._loop = asyncio.get_running_loop()
         inbox: asyncio.Queue = asyncio.Queue(maxsize=100)
@@ -175,7 +180,11 @@ class GroundStation:
         return inbox
 
     def unsubscribe(self, viewer: str | None, inbox: asyncio.Queue) -> None:
-        self._inboxes.get(viewer, set()).discard(inbox)
+        inboxes = self._inboxes.get(viewer)
+        if inboxes is not None:
+            inboxes.discard(inbox)
+            if not inboxes:  # a page that went leaves nothing behind
+                del self._inboxes[viewer]
 
     def _target(self, client_id: int, x: float, y: float) -> None:
         """A viewer clicked the ground (called from viser's thread): tell that viewer's page."""
@@ -192,26 +201,37 @@ def _offer(inbox: asyncio.Queue, note: dict) -> None:
         inbox.put_nowait(note)
 
 
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+WS_MAX_SIZE = 1 << 20  # bytes a browser may send in one websocket message (camera moves and clicks are small)
+MAX_CONNECTIONS = 1000  # HTTP connections and websockets at once; beyond, uvicorn answers 503
+
+
+def app_config(station: GroundStation, host: str = "127.0.0.1", port: int = 8000, tls_cert: str | None = None,
+               tls_key: str | None = None, viewer_token: str | None = None,
+               allowed_hosts: tuple[str, ...] = (), access: Access | None = None) -> uvicorn.Config:
+    """The web app as uvicorn serves it, with who may reach it set for ``host`` unless ``access`` says
+    (tests use this too)."""
+    if bool(tls_cert) != bool(tls_key):
+        raise ValueError("--tls-cert and --tls-key go together")
+    station.access = access or Access.for_host(host, station.token, viewer_token, allowed_hosts)
+    return uvicorn.Config(create_app(station), host=host, port=port, log_level="warning", ssl_certfile=tls_cert,
+                          ssl_keyfile=tls_key, ws_ping_interval=None, ws_max_size=WS_MAX_SIZE,
+                          limit_concurrency=MAX_CONNECTIONS)
 
 
 def serve(station: GroundStation, host: str = "127.0.0.1", port: int = 8000, tls_cert: str | None = None,
-          tls_key: str | None = None, announce=print) -> None:
+          tls_key: str | None = None, announce=print, viewer_token: str | None = None,
+          allowed_hosts: tuple[str, ...] = ()) -> None:
     """Run the web app until interrupted (blocking)."""
-    if bool(tls_cert) != bool(tls_key):
-        raise ValueError("--tls-cert and --tls-key go together")
+    config = app_config(station, host, port, tls_cert, tls_key, viewer_token, allowed_hosts)
     scheme = "https" if tls_cert else "http"
-    if not is_loopback(host) and not tls_cert:
-        print(f"WARNING: serving on {host} without TLS: the operator token and commands cross the network "
-              "in clear text. Give --tls-cert and --tls-key, or bind to 127.0.0.1.", file=sys.stderr, flush=True)
-    config = uvicorn.Config(create_app(station), host=host, port=port, log_level="warning",
-                            ssl_certfile=tls_cert, ssl_keyfile=tls_key, ws_ping_interval=None)
+    if not is_loopback(host):
+        if not tls_cert:
+            print(f"WARNING: serving on {host} without TLS: the operator token and commands cross the network "
+                  "in clear text. Give --tls-cert and --tls-key, or bind to 127.0.0.1.", file=sys.stderr, flush=True)
+        print("Serving beyond loopback: watching needs the operator token"
+              + (" or the viewer token" if viewer_token else " (give --viewer-token for read-only viewers)")
+              + "; host names other than IP addresses and localhost need --allowed-host.", file=sys.stderr,
+              flush=True)
     server = uvicorn.Server(config)
     station.start()
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host

@@ -58,13 +58,11 @@ const cards = new Map();  // sysid -> card element
 // ---------------------------------------------------------------------------------------------
 // Small helpers
 
-/** A random id for this page load, so the server can route click-to-go targets to this viewer. */
+/** A random, unguessable id for this page load: its 3D view and its stream present it, so the server
+ * routes click-to-go targets to this viewer and no other. */
 function makeViewerId() {
-  // randomUUID exists only in secure contexts (https or localhost); a LAN address over http is not.
-  if (window.crypto && typeof crypto.randomUUID === "function") return crypto.randomUUID();
   const bytes = new Uint8Array(16);
-  if (window.crypto && crypto.getRandomValues) crypto.getRandomValues(bytes);
-  else for (let i = 0; i < bytes.length; i++) bytes[i] = Math.floor(Math.random() * 256);
+  crypto.getRandomValues(bytes);  // (randomUUID exists only in secure contexts; a LAN address over http is not)
   return Array.from(bytes, (b) => b.toString(16).padStart(2, "0")).join("");
 }
 
@@ -687,9 +685,8 @@ function connect() {
 }
 
 function setupView() {
-  const proto = location.protocol === "https:" ? "wss" : "ws";
-  const vizSocket = `${proto}://${location.host}/viz?viewer=${viewerId}`;
-  $("#view").src = `/viz/?websocket=${encodeURIComponent(vizSocket)}`;
+  // viser's client connects to the socket of its page's own path: /viz/v/ID/ -> /viz/v/ID
+  $("#view").src = `/viz/v/${viewerId}/`;
 }
 
 // ---------------------------------------------------------------------------------------------

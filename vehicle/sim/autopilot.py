@@ -4,6 +4,9 @@ It turns mode and command requests into a wanted velocity and heading for the
 body each step. Requests answer with a MAVLink result code (MAV_RESULT_*), so
 the MAVLink endpoint can pass them straight into COMMAND_ACK. Positions are
 scene metres; mission items carry latitude/longitude, converted with the datum.
+A copter's RTL climbs to ``rtl_altitude`` first (ArduPilot's RTL_ALT), flies
+home and lands. It never stops in silence: held back by an obstacle for a
+moment, it says where and what it is doing, once per stop.
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ TURN_FIRST = math.radians(12)  # heading error above which the vehicle turns in 
 ARRIVED = 0.15  # m: a position target closer than this is reached
 VELOCITY_TIMEOUT = 3.0  # s: GUIDED velocity commands expire, as in ArduPilot
 LANDING_SPEED = 0.7  # m/s
+RTL_ALTITUDE = 15.0  # m above home a copter climbs to before flying home (ArduPilot's RTL_ALT default, 1500 cm)
+STOPPED_FOR = 1.0  # s held back by an obstacle before the autopilot says so
 
 
 @dataclass
@@ -53,7 +58,8 @@ class Event:
 
 class Autopilot:
     def __init__(self, kind: Kind, body: Body, home: tuple[float, float, float], datum: Datum,
-                 cruise_speed: float = 2.5, wp_radius: float = 1.0, avoidance: ObstacleDatabase | None = None):
+                 cruise_speed: float = 2.5, wp_radius: float = 1.0, avoidance: ObstacleDatabase | None = None,
+                 rtl_altitude: float = RTL_ALTITUDE):
         self.kind = kind
         self.body = body
         self.home = home  # x, y and ground height of the start
@@ -61,6 +67,7 @@ class Autopilot:
         self.cruise_speed = cruise_speed
         self.wp_radius = wp_radius
         self.avoidance = avoidance
+        self.rtl_altitude = rtl_altitude
         self.armed = False
         self.mode = "GUIDED" if kind is Kind.COPTER else "HOLD"
         self.mode_source = "boot"
@@ -82,7 +89,10 @@ class Autopilot:
         self._braking = False
         self._item_timer: float | None = None
         self._rtl_done = False
+        self._rtl_height: float | None = None  # the height RTL climbs to, set as RTL begins
         self._descending = False
+        self._blocked_since: float | None = None
+        self._told_blocked = False  # this stop has been reported
         self.wanted = (0.0, 0.0)  # horizontal velocity navigation asked for, before avoidance
         self.destination: tuple[float, float] | None = None  # where navigation is taking the vehicle now
         self.blocked = False  # avoidance holds the vehicle back from an obstacle
@@ -162,8 +172,14 @@ class Autopilot:
         self.mode_changes += 1
         self._target = self._velocity = self._yaw = self._altitude_goal = None
         self._rtl_done = False
+        self._rtl_height = None
         self._item_timer = None
         self.hold_here()
+        if name == "RTL" and self.kind is Kind.COPTER and self.armed:
+            height = max(self.body.pose.z, self.home[2] + self.rtl_altitude)
+            self._rtl_height = height
+            if height > self.body.pose.z + 0.5:
+                self.say(f"RTL: climbing to {height - self.home[2]:.0f} m, then home")
         if name == "AUTO":
             # a rover starts its mission on entering AUTO; a copter on the ground waits for MISSION_START
             self.mission_running = self.armed and (self.kind is Kind.ROVER or self.flying)
@@ -283,9 +299,33 @@ class Autopilot:
             if wanted > limit:
                 vx, vy = vx * limit / wanted, vy * limit / wanted
                 self.blocked = limit < 0.05
+        self._tell_if_stopped()
         self.body.step(dt, vx, vy, vz, yaw, ground, ground_normal)
         if self._descending and not self.flying:
             self._touchdown()
+
+    def _tell_if_stopped(self) -> None:
+        """Say once, after STOPPED_FOR, that an obstacle holds the vehicle back from where it is going."""
+        if not self.blocked or self.destination is None:
+            self._blocked_since, self._told_blocked = None, False
+            return
+        if self._blocked_since is None:
+            self._blocked_since = self.time
+        if self._told_blocked or self.time - self._blocked_since < STOPPED_FOR:
+            return
+        self._told_blocked = True
+        pose = self.body.pose
+        wanted_x, wanted_y = self.wanted
+        found = self.avoidance.obstacle_ahead(pose.x, pose.y, wanted_x, wanted_y, self.time)
+        where = "" if found is None else f"obstacle {found[0]:.1f} m ahead at ({found[1]:.1f}, {found[2]:.1f}); "
+        tx, ty = self.destination
+        if self.mode == "RTL":
+            doing = "holding; climb higher or steer it round" if self.kind is Kind.COPTER else "holding"
+            self.say(f"RTL: {where}cannot reach home, {doing}", mav.MAV_SEVERITY_WARNING)
+        elif self.mode == "GUIDED":
+            self.say(f"Go here: {where}stopped short of ({tx:.1f}, {ty:.1f})", mav.MAV_SEVERITY_WARNING)
+        else:
+            self.say(f"{self.mode}: {where}stopped short of ({tx:.1f}, {ty:.1f})", mav.MAV_SEVERITY_WARNING)
 
     def _touchdown(self) -> None:
         """A copter that was landing is on the ground: finish the item and disarm, as ArduPilot does."""
@@ -382,6 +422,11 @@ class Autopilot:
     def _return_home(self, dt):
         hx, hy, _ = self.home
         z = self.body.pose.z
+        if self._rtl_height is not None and not self._rtl_done:  # a copter climbs where it is first, as ArduPilot's
+            if self._rtl_height - z > 0.2:
+                vx, vy, _, yaw = self._hold_position(dt)
+                return vx, vy, self._climb_towards(self._rtl_height), yaw
+            z = self._rtl_height
         if self._rtl_done:
             return self._land_here(dt) if self.kind is Kind.COPTER else self._hold_position(dt)
         vx, vy, vz, yaw, arrived = self._fly_to(hx, hy, z, dt)

@@ -386,9 +386,10 @@ class Endpoint:
 
     # ---- the autopilot's own parameters (as a plain autopilot) ------------------------------------------
     def _autopilot_params(self) -> dict[str, float]:
-        """What an onboard agent reads to plan as the autopilot flies (ArduPilot's names); read-only here."""
+        """What an onboard agent reads to plan as the autopilot flies (ArduPilot's names and units); only
+        RTL_ALT (cm) can be set."""
         return {"AVOID_ENABLE": 7.0 if self.autopilot.avoidance is not None else 0.0, "AVOID_MARGIN": AVOID_MARGIN,
-                "WP_RADIUS": self.autopilot.wp_radius}
+                "WP_RADIUS": self.autopilot.wp_radius, "RTL_ALT": self.autopilot.rtl_altitude * 100.0}
 
     def _autopilot_param(self, m) -> list:
         params = self._autopilot_params()
@@ -402,6 +403,10 @@ class Endpoint:
             found = index if 0 <= index < len(names) else (names.index(wanted) if wanted in names else None)
             if found is None:
                 return []  # ArduPilot stays silent about unknown parameters
+            if kind == "PARAM_SET" and names[found] == "RTL_ALT" and math.isfinite(m.param_value) \
+                    and 0 <= m.param_value <= 30000:
+                self.autopilot.rtl_altitude = m.param_value / 100.0
+                params = self._autopilot_params()
             indices = [found]
         return [mavlink.MAVLink_param_value_message(names[i].encode(), float(params[names[i]]),
                                                     mavlink.MAV_PARAM_TYPE_REAL32, len(names), i) for i in indices]
