@@ -158,6 +158,7 @@ class Replay:
     @classmethod
     def open(cls, path: str | Path, fleet: Fleet) -> Replay:
         index = index_tlog(path)
+        fleet.forget_after = None  # a vehicle silent for a while in the log is still the log's
         replay = cls(index, fleet, Path(path).name)
         replay._data = Path(path).read_bytes()
         replay._decoder = mavlink.MAVLink(None)

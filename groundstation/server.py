@@ -40,7 +40,8 @@ from vehicle.world.scene import Scene
 class GroundStation:
     def __init__(self, urls: list[str], scene: Scene | None = None, token: str | None = None,
                  record_dir: str | Path | None = "recordings", datum: Datum | None = None, viser_port: int = 0,
-                 scene_dirs: Iterable[str | Path] = ()):
+                 scene_dirs: Iterable[str | Path] = (), signing_key: bytes | None = None,
+                 require_signing: bool = False):
         """``scene_dirs``: folders where replays look for the scenes their recordings name (besides the
         bundled scenes and the recording's own folder)."""
         self.token = token or secrets.token_urlsafe(16)
@@ -61,7 +62,8 @@ class GroundStation:
         self.recorder = Recorder(record_dir, note_text(scene_file) if scene_file else None) \
             if record_dir and urls else None
         self.link_urls = list(urls)
-        self.link = Link(urls, self.live, self.recorder) if urls else None
+        self.link = Link(urls, self.live, self.recorder, signing_key=signing_key,
+                         require_signing=require_signing) if urls else None
         self.view = SceneView(self.live, scene, viser_port, clock=self.now)
         self.proxy = VizProxy(self.view.port)
         self.view.on_target(self._target)
