@@ -1,26 +1,29 @@
 """The web app: the operator page, the REST API (OpenAPI at /docs), the status WebSocket and the 3D view proxy.
 
-Reading needs no secret; anything that commands a vehicle (or deletes a
-recording, or drives a replay) needs the operator token as
-``Authorization: Bearer TOKEN``. Blocking MAVLink exchanges run in worker
-threads so the event loop keeps serving the page and the stream.
+Anything that commands a vehicle (or deletes a recording, or drives a
+replay) needs the operator token as ``Authorization: Bearer TOKEN``; who may
+watch, and what reaches a route at all, is ``security.Gate``'s business.
+Every input is checked before it is used: a command's numbers must be finite
+and in range, a goto inside the vehicle's space, a mission what MAVLink can
+carry; errors answer 4xx with what was wrong. Blocking MAVLink exchanges run
+in worker threads so the event loop keeps serving the page and the stream.
 """
 
 from __future__ import annotations
 
 import asyncio
-import io
 import json
 import logging
-import secrets
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from fastapi import Depends, FastAPI, Header, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import (
     FileResponse,
+    HTMLResponse,
     JSONResponse,
     PlainTextResponse,
     RedirectResponse,
@@ -28,15 +31,15 @@ from fastapi.responses import (
     StreamingResponse,
 )
 from fastapi.staticfiles import StaticFiles
-from PIL import Image
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
-from groundstation.commands import Command, execute
-from groundstation.export import export_html
+from groundstation.commands import Command, execute, outside_space
 from groundstation.link import LinkError
+from groundstation.proxy import VIEWER_ID
 from groundstation.replay import ReplayError
+from groundstation.security import SESSION_COOKIE, BodyTooLarge, Gate
 from vehicle import __version__
-from vehicle.mapping.memory_map import FREE_AT, OCCUPIED_AT, state_image, states_of
+from vehicle.mapping.memory_map import FREE_AT, OCCUPIED_AT
 from vehicle.protocol.waypoints import WaypointError, mission_text, parse_mission
 
 if TYPE_CHECKING:
@@ -53,15 +56,21 @@ STATIC = _static()
 
 
 class ReplayStart(BaseModel):
-    name: str = Field(description="a recording's name, as GET /api/recordings lists it")
+    name: str = Field(max_length=255, description="a recording's name, as GET /api/recordings lists it")
 
 
 class ReplayControl(BaseModel):
+    model_config = ConfigDict(allow_inf_nan=False, strict=True)
+
     play: bool | None = None
     speed: float | None = Field(None, ge=0.1, le=20)
-    seek: float | None = Field(None, ge=0, description="seconds from the start of the recording")
+    seek: float | None = Field(None, ge=0, le=1e7, description="seconds from the start of the recording")
     step: Literal[-1, 1] | None = None
+
+
 STREAM_PERIOD = 0.25  # s between status frames on /ws
+MAX_STREAMS = 256  # /ws connections at once
+DOCS_ASSETS = "/docs/assets"
 log = logging.getLogger("groundstation")
 
 
@@ -78,12 +87,12 @@ def _read_prefix(path: Path, size: int, chunk: int = 1 << 16):
 
 
 def create_app(station: GroundStation) -> FastAPI:
-    app = FastAPI(title="scanstation ground station", version=__version__,
+    app = FastAPI(title="scanstation ground station", version=__version__, docs_url=None, redoc_url=None,
                   description="Watch and command scanning rovers and copters over MAVLink.")
+    app.add_middleware(Gate, access=station.access)
 
     def operator(authorization: str | None = Header(None, description="Bearer TOKEN (the operator token)")):
-        scheme, _, token = (authorization or "").partition(" ")
-        if scheme.lower() != "bearer" or not secrets.compare_digest(token.strip(), station.token):
+        if not station.access.is_operator(authorization):
             log.warning("refused a request without a valid operator token")
             raise HTTPException(401, "the operator token is missing or wrong",
                                 headers={"WWW-Authenticate": "Bearer"})
@@ -104,6 +113,26 @@ def create_app(station: GroundStation) -> FastAPI:
         return FileResponse(STATIC / "index.html")
 
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
+
+    @app.get("/docs", include_in_schema=False)
+    def docs():
+        """Swagger UI from files installed with the station (no CDN: it works offline, under our policy)."""
+        return HTMLResponse(_DOCS_PAGE, headers={"content-security-policy": _DOCS_POLICY})
+
+    app.mount(DOCS_ASSETS, StaticFiles(directory=_swagger_assets()), name="docs-assets")
+
+    @app.post("/api/session", tags=["status"], status_code=204,
+              responses={401: {"description": "neither the operator nor the viewer token"}})
+    def session(request: Request, authorization: str | None = Header(None, description="Bearer TOKEN")):
+        """Let this browser watch (a cookie for the 3D view and the stream, which cannot carry a header).
+        Needed only when the station serves beyond loopback; commands still need the operator token."""
+        if not station.access.grants_session(authorization):
+            raise HTTPException(401, "neither the operator nor the viewer token",
+                                headers={"WWW-Authenticate": "Bearer"})
+        response = Response(status_code=204)
+        response.set_cookie(SESSION_COOKIE, station.access.session_value(), httponly=True, samesite="strict",
+                            secure=request.url.scheme == "https", path="/")
+        return response
 
     @app.get("/api/health", tags=["status"])
     def health():
@@ -157,13 +186,7 @@ def create_app(station: GroundStation) -> FastAPI:
                     "occupied": int(np.count_nonzero(values >= OCCUPIED_AT)),
                     "window": {"row": r0, "col": c0, "rows": r1 - r0, "cols": c1 - c0},
                     "values": values[r0:r1, c0:c1].tolist()}
-        rgba = state_image(states_of(values))
-        background = np.full(rgba.shape, (40, 42, 48, 255), dtype=np.uint8)
-        alpha = rgba[..., 3:4] / 255.0
-        picture = (rgba * alpha + background * (1 - alpha)).astype(np.uint8)
-        buffer = io.BytesIO()
-        Image.fromarray(picture[..., :3]).save(buffer, "PNG")
-        return Response(buffer.getvalue(), media_type="image/png")
+        return Response(station.map_picture(v, grid), media_type="image/png")
 
     @app.post("/api/vehicles/{sysid}/commands", tags=["commands"], dependencies=[Depends(operator)],
               responses={401: {"description": "no or wrong operator token"}, 404: {"description": "no such vehicle"},
@@ -172,6 +195,10 @@ def create_app(station: GroundStation) -> FastAPI:
         """Send a command; answers with the vehicle's COMMAND_ACK result."""
         live_only()
         v = vehicle_or_404(sysid)
+        if body.action == "goto":
+            refusal = outside_space(station.fleet, v, body.x, body.y, station.scene)
+            if refusal:
+                raise HTTPException(422, refusal)
         try:
             result = await asyncio.to_thread(execute, station.link, v, body, station.fleet.datum, time.time())
         except LinkError as error:
@@ -196,7 +223,7 @@ def create_app(station: GroundStation) -> FastAPI:
         """Upload an AUTO mission (QGC WPL 110 text; item 0 is home)."""
         live_only()
         vehicle_or_404(sysid)
-        text = (await request.body()).decode("utf-8", "replace")
+        text = (await request.body()).decode("utf-8", "replace")  # at most security.MAX_BODY bytes
         try:
             items = parse_mission(text)
         except WaypointError as error:
@@ -292,8 +319,7 @@ def create_app(station: GroundStation) -> FastAPI:
         replay = station.replay
         if replay is None:
             raise HTTPException(409, "nothing is being replayed")
-        html = await asyncio.to_thread(export_html, replay.index.path, station.scene, station.datum,
-                                       station.live.ground_height)
+        html = await asyncio.to_thread(station.export_replay, replay)
         name = Path(replay.name).stem + ".html"
         return Response(html, media_type="text/html",
                         headers={"Content-Disposition": f'attachment; filename="{name}"'})
@@ -301,20 +327,23 @@ def create_app(station: GroundStation) -> FastAPI:
     # ---- the stream ----------------------------------------------------------------------------------
     @app.websocket("/ws")
     async def stream(socket: WebSocket, viewer: str | None = None):
+        """Status frames every STREAM_PERIOD, and this viewer's own notes (its 3D view's clicks)."""
+        if viewer is not None and not VIEWER_ID.fullmatch(viewer):
+            await socket.close(code=1008, reason="a viewer id is 8-64 letters, digits, - or _")
+            return
+        if station.streams >= MAX_STREAMS:
+            await socket.close(code=1013, reason="too many streams open; try again later")
+            return
         await socket.accept()
         inbox = station.subscribe(viewer)
+        sender = asyncio.create_task(_send_status(socket, inbox, station))
         try:
-            while True:
-                try:
-                    note = await asyncio.wait_for(inbox.get(), timeout=STREAM_PERIOD)
-                    await socket.send_text(json.dumps(note))
-                    continue
-                except TimeoutError:
-                    pass
-                await socket.send_text(json.dumps(station.status()))
+            while (await socket.receive())["type"] != "websocket.disconnect":
+                pass  # the page sends nothing we use; reading notices when it goes
         except (WebSocketDisconnect, RuntimeError):
             pass
         finally:
+            sender.cancel()
             station.unsubscribe(viewer, inbox)
 
     # ---- the 3D view --------------------------------------------------------------------------------
@@ -322,16 +351,69 @@ def create_app(station: GroundStation) -> FastAPI:
     def viz_slash():
         return RedirectResponse("/viz/")
 
-    @app.get("/viz/{path:path}", include_in_schema=False)
-    async def viz(request: Request, path: str):
-        return await station.proxy.http(request, path)
+    @app.get("/viz/", include_in_schema=False)
+    def viz_page(request: Request):
+        return station.proxy.http(request.query_params)
+
+    @app.get("/viz/v/{viewer}/", include_in_schema=False)
+    def viz_viewer_page(request: Request, viewer: str):
+        if not VIEWER_ID.fullmatch(viewer):
+            raise HTTPException(404, "no such view")
+        return station.proxy.http(request.query_params)
 
     @app.websocket("/viz")
     async def viz_socket(socket: WebSocket):
-        await station.proxy.websocket(socket)
+        await station.proxy.websocket(socket, None)
+
+    @app.websocket("/viz/v/{viewer}")
+    async def viz_viewer_socket(socket: WebSocket, viewer: str):
+        await station.proxy.websocket(socket, viewer)
 
     @app.exception_handler(LinkError)
     async def link_error(request: Request, error: LinkError):
         return JSONResponse({"detail": str(error)}, status_code=504)
 
+    @app.exception_handler(BodyTooLarge)
+    async def body_too_large(request: Request, error: BodyTooLarge):
+        return JSONResponse({"detail": str(error)}, status_code=413)
+
+    @app.exception_handler(RequestValidationError)
+    async def invalid(request: Request, error: RequestValidationError):
+        """What was wrong, without echoing the input (it may be NaN, which JSON cannot carry, or huge)."""
+        return JSONResponse({"detail": [{"loc": list(e.get("loc", ())), "msg": str(e.get("msg", "")),
+                                         "type": str(e.get("type", ""))} for e in error.errors()]},
+                            status_code=422)
+
     return app
+
+
+async def _send_status(socket: WebSocket, inbox: asyncio.Queue, station: GroundStation) -> None:
+    """Notes as they come, and the status when none came for a period. A frame that cannot be JSON (it
+    never should: the fleet keeps only finite numbers) is logged and skipped, never sent as NaN."""
+    while True:
+        try:
+            frame = await asyncio.wait_for(inbox.get(), timeout=STREAM_PERIOD)
+        except TimeoutError:
+            frame = station.status()
+        try:
+            text = json.dumps(frame, allow_nan=False)
+        except ValueError as error:
+            log.error("a status frame could not be sent: %s", error)
+            continue
+        await socket.send_text(text)
+
+
+def _swagger_assets() -> Path:
+    import fastapi_offline
+
+    return Path(fastapi_offline.__file__).parent / "static"
+
+
+_DOCS_PAGE = f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>scanstation ground station: API</title>
+<link rel="stylesheet" href="{DOCS_ASSETS}/swagger-ui.css"><link rel="icon" href="{DOCS_ASSETS}/favicon.png">
+</head><body><div id="swagger-ui"></div>
+<script src="{DOCS_ASSETS}/swagger-ui-bundle.js"></script><script src="/static/docs.js"></script>
+</body></html>"""
+_DOCS_POLICY = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data:; "
+                "connect-src 'self'; frame-ancestors 'self'; base-uri 'none'; form-action 'self'; object-src 'none'")

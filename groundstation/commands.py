@@ -10,28 +10,32 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
 
-from groundstation.link import Link
-from groundstation.state import VehicleState
+from groundstation.link import AUTOPILOT, Link
+from groundstation.state import Fleet, VehicleState
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import mavlink, mavutil
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE
 
 COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed"]
+GOTO_REACH = 1000.0  # m from home a goto may go when neither the vehicle's map nor a scene bounds its space
+SCENE_MARGIN = 20.0  # m beyond the scene's bounds a goto may go
 
 
 class Command(BaseModel):
     """A command from the operator (JSON body of POST /api/vehicles/{sysid}/commands)."""
 
+    model_config = ConfigDict(allow_inf_nan=False)
+
     action: Action
-    mode: str | None = Field(None, description="flight mode name for set_mode, e.g. GUIDED")
+    mode: str | None = Field(None, max_length=32, description="flight mode name for set_mode, e.g. GUIDED")
     altitude: float | None = Field(None, gt=0, le=1000, description="take-off altitude, m above home")
-    x: float | None = Field(None, description="goto target, scene metres east")
-    y: float | None = Field(None, description="goto target, scene metres north")
+    x: float | None = Field(None, ge=-1e6, le=1e6, description="goto target, scene metres east")
+    y: float | None = Field(None, ge=-1e6, le=1e6, description="goto target, scene metres north")
     speed: float | None = Field(None, gt=0, le=50, description="m/s, for speed")
-    confirm: bool = Field(False, description="kill needs this true: it force-disarms, even in the air")
+    confirm: StrictBool = Field(False, description="kill needs this JSON true: it force-disarms, even in the air")
 
     @model_validator(mode="after")
     def _complete(self) -> Command:
@@ -42,6 +46,32 @@ class Command(BaseModel):
         if self.action == "kill" and not self.confirm:
             raise ValueError("kill force-disarms the vehicle, even in the air: send confirm: true")
         return self
+
+
+def outside_space(fleet: Fleet, vehicle: VehicleState, x: float, y: float, scene=None) -> str | None:
+    """Why a goto to (x, y) is refused before it is sent, or None. It must lie in the vehicle's own space (the
+    square its agent maps), else in the scene give or take ``SCENE_MARGIN``, else within ``GOTO_REACH`` of
+    its home."""
+    geometry, home = vehicle.map_stream.geometry, vehicle.home
+    if geometry is not None and home is not None:
+        west, south = home[0] + geometry.origin[0], home[1] + geometry.origin[1]
+        side = geometry.size / geometry.resolution
+        if not (west <= x <= west + side and south <= y <= south + side):
+            return (f"({x:.1f}, {y:.1f}) is outside vehicle {vehicle.sysid}'s space, "
+                    f"x {west:.1f} to {west + side:.1f} and y {south:.1f} to {south + side:.1f}")
+        return None
+    if scene is not None and len(scene.faces):
+        low, high = scene.bounds
+        if not (low[0] - SCENE_MARGIN <= x <= high[0] + SCENE_MARGIN and
+                low[1] - SCENE_MARGIN <= y <= high[1] + SCENE_MARGIN):
+            return f"({x:.1f}, {y:.1f}) is more than {SCENE_MARGIN:.0f} m outside the scene"
+        return None
+    centre = home or (vehicle.x, vehicle.y)
+    if centre[0] is not None and (x - centre[0]) ** 2 + (y - centre[1]) ** 2 > GOTO_REACH ** 2:
+        return f"({x:.1f}, {y:.1f}) is more than {GOTO_REACH:.0f} m from vehicle {vehicle.sysid}'s home"
+    if fleet.datum is None:
+        return "no position is known yet to go from"
+    return None
 
 
 def mode_number(vehicle: VehicleState, name: str) -> int | None:
@@ -84,11 +114,12 @@ def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | 
         return result if result != "accepted" else link.command(sysid, mavlink.MAV_CMD_MISSION_START)
     if action == "speed":
         return link.command(sysid, mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, command.speed, -1)
-    if action == "goto":
+    if action == "goto":  # to its agent when it has one (which plans round what its map knows), else the autopilot
         if datum is None:
             return "denied"
         lat, lon = datum.to_global(command.x, command.y)
         return link.command_int(sysid, mavlink.MAV_CMD_DO_REPOSITION, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
                                 [-1, mavlink.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 0, float("nan")],
-                                int(round(lat * 1e7)), int(round(lon * 1e7)), float("nan"))
+                                int(round(lat * 1e7)), int(round(lon * 1e7)), float("nan"),
+                                component=COMPANION if vehicle.has_companion(now) else AUTOPILOT)
     raise ValueError(f"unknown action {action}")

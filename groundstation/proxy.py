@@ -1,111 +1,212 @@
-"""Reverse proxy for the viser client: its page under /viz/ and its websocket at /viz, on the app's port.
+"""viser's client on the app's own origin: its page under /viz/, its websocket relayed, each tied to its viewer.
 
 viser is not an ASGI app and has no authentication, so it listens on loopback
-only and is reached through here. The proxy also ties each viser client to the
-operator page that embeds it: the page opens the 3D view with ``?viewer=ID``
-in its websocket URL, and the proxy connects one viewer at a time, so the
-viser client id that appears next belongs to that viewer (viser reports a
-client after its first message, so the relay runs while the proxy waits). That is how a click
-in the 3D view reaches the right page (and never commands a vehicle by itself).
+only and is reached through here. Three things keep a hostile party out:
+
+- The page is viser's own file, served with a Content-Security-Policy that
+  lets in exactly its two scripts (by hash: its loader and the bundle the
+  loader unpacks), WebAssembly, and websockets to this origin only; a
+  ``?websocket=`` query (viser's client would connect wherever it names) is
+  refused outright. Script that a viser server might send (HTML elements,
+  ``RunJavascriptMessage``) cannot run.
+- The operator page opens its view at ``/viz/v/VIEWER/``, and viser's client
+  connects to the socket of the same path: the viewer id travels with that
+  one connection. Only the first live connection may claim an id.
+- The proxy learns which viser client a connection is from viser itself: on
+  connect the 3D view sends each client alone a marker node naming its id
+  (``CLIENT_MARKER``), and the proxy reads that connection's first frames
+  for it. A click in the 3D view then reaches the page that owns the
+  connection, and never another.
 """
 
 from __future__ import annotations
 
 import asyncio
-import threading
+import base64
+import hashlib
+import logging
+import re
+from pathlib import Path
 
-import httpx
+import msgspec
+import numpy as np
+import viser
 import websockets
-from fastapi import Request, WebSocket, WebSocketDisconnect
+import zstandard
+from fastapi import WebSocket, WebSocketDisconnect
 from fastapi.responses import Response
 
-CONNECT_WAIT = 3.0  # s for viser to report a new client
+from groundstation.viz import CLIENT_MARKER
+
+VIEWER_ID = re.compile(r"[A-Za-z0-9_-]{8,64}")
+MAX_VIEWS = 32  # viser connections at once (each holds a copy of the scene in its buffers)
+MARKER_FRAMES = 400  # frames to read for the marker before giving up on tying the connection
+log = logging.getLogger("groundstation.proxy")
 
 
 class VizProxy:
     def __init__(self, viser_port: int):
         self.base = f"127.0.0.1:{viser_port}"
-        self.viewers: dict[int, str] = {}  # viser client id -> the page's viewer id
-        self._pending: str | None = None
-        self._connected = threading.Event()
-        self._lock = asyncio.Lock()
-        self._http = httpx.AsyncClient(base_url=f"http://{self.base}", timeout=10.0)
-
-    def client_connected(self, client_id: int) -> None:
-        """Called by the 3D view (in viser's thread) for every new viser client."""
-        if self._pending is not None:
-            self.viewers[client_id] = self._pending
-        self._connected.set()
+        self.page = ViewerPage.of_installed_viser()
+        self.viewers: dict[int, str] = {}  # viser client id -> the page's viewer id, while connected
+        self._claimed: set[str] = set()  # viewer ids a live connection holds
+        self.connections = 0
 
     async def close(self) -> None:
-        await self._http.aclose()
+        pass
 
-    async def http(self, request: Request, path: str) -> Response:
-        upstream = await self._http.get("/" + path, params=request.query_params)
-        headers = {k: v for k, v in upstream.headers.items() if k.lower() in ("content-type", "cache-control")}
-        return Response(upstream.content, status_code=upstream.status_code, headers=headers)
+    def http(self, query: dict[str, str]) -> Response:
+        """viser's page; never with a ``websocket`` query (it would connect wherever that names)."""
+        if "websocket" in query:
+            return Response("the 3D view connects only to this station", status_code=400, media_type="text/plain")
+        return Response(self.page.html, media_type="text/html; charset=utf-8",
+                        headers={"content-security-policy": self.page.policy, "cache-control": "no-store"})
 
-    async def websocket(self, client: WebSocket) -> None:
+    async def websocket(self, client: WebSocket, viewer: str | None) -> None:
+        if viewer is not None and (not VIEWER_ID.fullmatch(viewer) or viewer in self._claimed):
+            await client.close(code=1008, reason="that viewer id is malformed or already connected")
+            return
+        if self.connections >= MAX_VIEWS:
+            await client.close(code=1013, reason="too many 3D views open; try again later")
+            return
         requested = client.headers.get("sec-websocket-protocol", "")
         protocols = [p.strip() for p in requested.split(",") if p.strip()]
-        viewer = client.query_params.get("viewer")
-        if viewer is None:  # not from the page (a script, say): nothing to tie it to, no need to queue
-            upstream = await self._connect(client, protocols)
-            if upstream is not None:
-                await self._relay(client, upstream)
-            return
-        async with self._lock:  # one page at a time, so the next viser client id is this viewer's
-            self._pending, _ = viewer, self._connected.clear()
-            upstream = await self._connect(client, protocols)
-            if upstream is None:
-                self._pending = None
-                return
-            # relay at once: viser reports a client only after its first message (the camera)
-            relay = asyncio.create_task(self._relay(client, upstream))
-            await asyncio.to_thread(self._connected.wait, CONNECT_WAIT)
-            self._pending = None
-        await relay
-
-    async def _connect(self, client: WebSocket, protocols: list[str]):
-        """Open the upstream websocket to viser and accept the client's; None if viser is not there."""
         try:
             upstream = await websockets.connect(f"ws://{self.base}", subprotocols=protocols or None,
                                                 max_size=None, ping_interval=None, compression=None)
         except OSError:
             await client.close(code=1011)
-            return None
-        await client.accept(subprotocol=upstream.subprotocol)
-        return upstream
-
-    @staticmethod
-    async def _relay(client: WebSocket, upstream) -> None:
-        async def downstream() -> None:
-            async for frame in upstream:
-                if isinstance(frame, bytes):
-                    await client.send_bytes(frame)
-                else:
-                    await client.send_text(frame)
-
-        async def upstream_pump() -> None:
-            while True:
-                message = await client.receive()
-                if message["type"] == "websocket.disconnect":
-                    return
-                if message.get("bytes") is not None:
-                    await upstream.send(message["bytes"])
-                elif message.get("text") is not None:
-                    await upstream.send(message["text"])
-
-        tasks = [asyncio.create_task(downstream()), asyncio.create_task(upstream_pump())]
+            return
+        self.connections += 1
+        if viewer is not None:
+            self._claimed.add(viewer)
+        tie = _Tie(self.viewers, viewer)
         try:
-            await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-        except (WebSocketDisconnect, websockets.ConnectionClosed):
-            pass
+            await client.accept(subprotocol=upstream.subprotocol)
+            await _relay(client, upstream, tie)
         finally:
-            for task in tasks:
-                task.cancel()
-            await upstream.close()
-            try:
-                await client.close()
-            except (RuntimeError, WebSocketDisconnect):
-                pass  # the page already went
+            self.connections -= 1
+            self._claimed.discard(viewer)
+            tie.release()
+
+
+class _Tie:
+    """Until it finds its marker, reads a connection's frames; then ties that viser client to the viewer."""
+
+    def __init__(self, viewers: dict[int, str], viewer: str | None):
+        self.viewers = viewers
+        self.viewer = viewer
+        self.client_id: int | None = None
+        self.frames = 0 if viewer is not None else MARKER_FRAMES  # nothing to tie without a viewer
+
+    def read(self, frame: bytes | str) -> None:
+        if self.frames >= MARKER_FRAMES or not isinstance(frame, bytes):
+            return
+        self.frames += 1
+        client_id = _marker_in(frame)
+        if client_id is not None:
+            self.client_id = client_id
+            self.viewers[client_id] = self.viewer
+            self.frames = MARKER_FRAMES
+        elif self.frames == MARKER_FRAMES:
+            log.warning("3D view of viewer %s: viser never named its client; its clicks go nowhere", self.viewer)
+
+    def release(self) -> None:
+        if self.client_id is not None:
+            self.viewers.pop(self.client_id, None)
+
+
+def _marker_in(frame: bytes) -> int | None:
+    """The client id in a viser frame's marker node, if it has one. viser's wire format: the message
+    block's size and its compressed size (two little-endian u64), zstd-compressed msgpack, binary buffers."""
+    if len(frame) < 16:
+        return None
+    size, compressed = int.from_bytes(frame[:8], "little"), int.from_bytes(frame[8:16], "little")
+    try:
+        inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + compressed], max_output_size=size)
+        messages = msgspec.msgpack.decode(inner).get("messages", ())
+    except (zstandard.ZstdError, msgspec.DecodeError, AttributeError, ValueError):
+        return None
+    for message in messages:
+        name = message.get("name") if isinstance(message, dict) else None
+        if isinstance(name, str) and name.startswith(CLIENT_MARKER) and name[len(CLIENT_MARKER):].isdigit():
+            return int(name[len(CLIENT_MARKER):])
+    return None
+
+
+async def _relay(client: WebSocket, upstream, tie: _Tie) -> None:
+    async def downstream() -> None:
+        async for frame in upstream:
+            tie.read(frame)
+            if isinstance(frame, bytes):
+                await client.send_bytes(frame)
+            else:
+                await client.send_text(frame)
+
+    async def upstream_pump() -> None:
+        while True:
+            message = await client.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+            if message.get("bytes") is not None:
+                await upstream.send(message["bytes"])
+            elif message.get("text") is not None:
+                await upstream.send(message["text"])
+
+    tasks = [asyncio.create_task(downstream()), asyncio.create_task(upstream_pump())]
+    try:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        await upstream.close()
+        try:
+            await client.close()
+        except (RuntimeError, WebSocketDisconnect):
+            pass  # the page already went
+
+
+class ViewerPage:
+    """viser's client page and the policy that lets exactly its own scripts run."""
+
+    def __init__(self, html: str):
+        self.html = html
+        loader, bundle = _scripts(html)
+        hashes = " ".join(f"'sha256-{base64.b64encode(hashlib.sha256(s).digest()).decode()}'"
+                          for s in (loader, bundle))
+        self.policy = (f"default-src 'none'; script-src {hashes} 'wasm-unsafe-eval'; worker-src blob:; "
+                       "style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; font-src 'self' data:; "
+                       "connect-src 'self' data: blob:; frame-ancestors 'self'; base-uri 'none'; form-action 'none'")
+
+    @classmethod
+    def of_installed_viser(cls) -> ViewerPage:
+        return cls((Path(viser.__file__).parent / "client" / "build" / "index.html").read_text(encoding="utf-8"))
+
+
+_LOADER = re.compile(r'<script data-p="([^"]*)" data-ss="(\d+)" data-cs="(\d+)">(.*?)</script>', re.S)
+_BASE88 = "".join(chr(c) for c in range(0x21, 0x7F) if chr(c) not in "\"&<>'`")
+
+
+def _scripts(html: str) -> tuple[bytes, bytes]:
+    """viser's page is one loader script whose ``data-p`` attribute holds its style and its bundle, zstd-compressed
+    in base-88 (viser's vite-plugin-compress-html); the loader adds the bundle as an inline module script, which
+    the policy must name by hash too."""
+    found = _LOADER.search(html)
+    if found is None:
+        raise RuntimeError("viser's client page is not laid out as expected (a loader script with data-p)")
+    packed, style_size, code_size, loader = found.group(1), int(found.group(2)), int(found.group(3)), found.group(4)
+    lookup = np.zeros(128, dtype=np.uint64)
+    lookup[np.frombuffer(_BASE88.encode(), dtype=np.uint8)] = np.arange(88, dtype=np.uint64)
+    digits = lookup[np.frombuffer(packed.encode("ascii"), dtype=np.uint8)]
+    whole = len(digits) // 5
+    groups = (digits[:whole * 5].reshape(whole, 5) * np.uint64(88) ** np.arange(4, -1, -1, dtype=np.uint64)).sum(1)
+    data = groups.astype(">u4").tobytes()
+    rest = digits[whole * 5:]
+    if len(rest):
+        value = 0
+        for digit in rest:
+            value = value * 88 + int(digit)
+        data += value.to_bytes(len(rest) - 1, "big")
+    unpacked = zstandard.ZstdDecompressor().decompress(data, max_output_size=style_size + code_size)
+    return loader.encode("utf-8"), unpacked[style_size:style_size + code_size]

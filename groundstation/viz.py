@@ -25,6 +25,7 @@ from vehicle.mapping.memory_map import state_image, states_of
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
 
+CLIENT_MARKER = "/_clients/"  # each client alone gets a hidden node of this name and its id (see proxy.py)
 RATE = 30.0  # frames per second at most (poses); trails, sonar and maps far less often
 SLOW_EVERY = 8  # trails, sonar, maps and labels every this many frames
 MAP_PIXELS = 512  # a map image is at most this many pixels a side
@@ -42,16 +43,18 @@ def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, fl
 
 
 class SceneView:
-    def __init__(self, fleet: Fleet, scene: Scene | None, port: int = 0):
+    def __init__(self, fleet: Fleet, scene: Scene | None, port: int = 0, clock: Callable[[], float] = time.time):
+        """``clock``: the time the fleet's messages are stamped in (the wall live, the log's own in a replay),
+        so that live and replay draw alike."""
         self.fleet = fleet
         self.scene = scene
+        self.clock = clock
         with contextlib.redirect_stdout(io.StringIO()):  # its banner names an internal port nobody should open
             self.server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)  # loopback: proxied only
         self.server.request_share_url = _refuse_share  # never open a public tunnel, whoever asks
         self.port = self.server.get_port()
         self.caster = RayCaster(scene) if scene is not None and len(scene.faces) else None
         self._on_target: Callable[[int, float, float], None] | None = None
-        self._on_connect: list[Callable[[int], None]] = []
         self._drawn: dict[int, dict] = {}
         self._draw_lock = threading.Lock()
         self._stop = threading.Event()
@@ -82,8 +85,8 @@ class SceneView:
 
         @server.on_client_connect
         def _connected(client: viser.ClientHandle) -> None:
-            for callback in self._on_connect:
-                callback(client.client_id)
+            # tells the proxy which viser client its connection carries (sent to this client only)
+            client.scene.add_frame(f"{CLIENT_MARKER}{client.client_id}", show_axes=False, visible=False)
 
         @server.scene.on_click()
         def _clicked(event) -> None:
@@ -93,6 +96,15 @@ class SceneView:
             event.client.scene.add_icosphere("/target", radius=0.4, color=(255, 230, 0), position=point)
             if self._on_target is not None:
                 self._on_target(event.client_id, point[0], point[1])
+
+    def set_scene(self, scene: Scene | None) -> None:
+        """Show another scene's mesh, or none: a replay's own while it plays, the live one after."""
+        with self._draw_lock:
+            self.scene = scene
+            self.caster = RayCaster(scene) if scene is not None and len(scene.faces) else None
+            self.server.scene.remove_by_name("/scene")
+            if self.caster is not None:
+                self.server.scene.add_mesh_trimesh("/scene", scene.mesh)
 
     def show(self, fleet: Fleet) -> None:
         """Draw this fleet from now on (the live one, or a replay's), starting from a clean slate."""
@@ -105,9 +117,6 @@ class SceneView:
     def on_target(self, callback: Callable[[int, float, float], None]) -> None:
         """``callback(client_id, x, y)`` when a viewer clicks a point on the ground."""
         self._on_target = callback
-
-    def on_connect(self, callback: Callable[[int], None]) -> None:
-        self._on_connect.append(callback)
 
     def ground_point(self, origin, direction) -> tuple[float, float, float] | None:
         """Where a click ray meets the scene (or the plane z = 0 when there is no scene)."""
@@ -190,7 +199,7 @@ class SceneView:
         drawn["trail"] = len(v.trail)
 
     def _draw_sonar(self, v: VehicleState, root: str) -> None:
-        now = time.time()
+        now = self.clock()
         rays = []
         for sonar in v.sonar.values():
             if now - sonar.time > 2.0:

@@ -44,7 +44,8 @@ const RESULT_CLASS = {
 
 const state = {
   token: "",
-  auth: "none",          // none | checking | valid | invalid | unverified
+  auth: "none",          // none | checking | valid | viewer | invalid | unverified
+  watchRefused: false,   // watching needs a token this page has not given yet
   mode: "live",          // live | replay, as the server last said
   vehicles: [],          // last vehicle list from the stream (kept while reconnecting)
   replay: null,          // last replay status from the stream
@@ -58,13 +59,11 @@ const cards = new Map();  // sysid -> card element
 // ---------------------------------------------------------------------------------------------
 // Small helpers
 
-/** A random id for this page load, so the server can route click-to-go targets to this viewer. */
+/** A random, unguessable id for this page load: its 3D view and its stream present it, so the server
+ * routes click-to-go targets to this viewer and no other. */
 function makeViewerId() {
-  // randomUUID exists only in secure contexts (https or localhost); a LAN address over http is not.
-  if (window.crypto && typeof crypto.randomUUID === "function") return crypto.randomUUID();
   const bytes = new Uint8Array(16);
-  if (window.crypto && crypto.getRandomValues) crypto.getRandomValues(bytes);
-  else for (let i = 0; i < bytes.length; i++) bytes[i] = Math.floor(Math.random() * 256);
+  crypto.getRandomValues(bytes);  // (randomUUID exists only in secure contexts; a LAN address over http is not)
   return Array.from(bytes, (b) => b.toString(16).padStart(2, "0")).join("");
 }
 
@@ -224,7 +223,11 @@ async function checkToken(token, quiet = false) {
   if (state.token !== token) return;  // signed out or replaced meanwhile
   if (status === 200) {
     storeToken(token);
+    await openSession();
     if (state.auth !== "valid") setAuth("valid");
+  } else if ((status === 401 || status === 403) && await openSession() && state.token === token) {
+    storeToken(token);  // not the operator's, but a viewer's: it may watch
+    if (state.auth !== "viewer") setAuth("viewer");
   } else if (status === 401 || status === 403) {
     storeToken("");
     state.token = "";
@@ -234,6 +237,34 @@ async function checkToken(token, quiet = false) {
     storeToken(token);
     setAuth("unverified");
   }
+}
+
+/**
+ * Trade the token for the cookie that lets this browser watch (the 3D view and the stream cannot send
+ * a header). Only a station served beyond loopback asks for it; elsewhere it is harmless. When watching
+ * was refused before, the view and the stream start again now.
+ */
+async function openSession() {
+  const { status } = await api("POST", "/api/session");
+  if (status !== 204) return false;
+  if (state.watchRefused) {
+    state.watchRefused = false;
+    $("#watch-hint").hidden = true;
+    setupView();
+    reconnectNow();
+    loadRecordings();
+  }
+  return true;
+}
+
+/** The stream was refused before it opened: does this station need a token to watch? */
+async function checkWatching() {
+  const { status } = await api("GET", "/api/health");
+  const refused = status === 401;
+  if (refused && !state.watchRefused) $("#view").removeAttribute("src");
+  state.watchRefused = refused;
+  $("#watch-hint").hidden = !refused;
+  return refused;
 }
 
 function markTokenRejected() {
@@ -251,12 +282,13 @@ function setAuth(auth, message) {
     none: "Not signed in",
     checking: "Checking token…",
     valid: "Signed in",
+    viewer: "Watching (the viewer token cannot command)",
     invalid: "Wrong token",
     unverified: "Cannot check the token: server unreachable. Retrying when connected.",
   };
   status.textContent = message || messages[auth];
   status.className = `auth-status ${auth}`;
-  const signedIn = auth === "valid";
+  const signedIn = auth === "valid" || auth === "viewer";
   $("#auth-form").hidden = signedIn;
   $("#sign-out").hidden = auth === "none" || auth === "invalid";
   updateControls();
@@ -514,11 +546,20 @@ function renderCard(card, v) {
   const link = v.link || {};
   const lost = link.state === "lost";
   const age = isNum(link.heartbeat_age) ? `${fmt(link.heartbeat_age)} s` : "–";
-  setText(card.querySelector(".link"), lost ? "LINK LOST" : link.state ? `link ${link.state} · ${age}` : "–");
+  const signed = link.signed ? " · signed" : "";
+  setText(card.querySelector(".link"), lost ? "LINK LOST" : link.state ? `link ${link.state} · ${age}${signed}` : "–");
   card.classList.toggle("lost", lost);
   const banner = card.querySelector(".lost-banner");
   banner.hidden = !lost;
   setText(banner, lost ? `LINK LOST — no heartbeat for ${age}` : "");
+  card.querySelector(".link").title = link.signed ? "its messages carry a valid MAVLink 2 signature" : "";
+
+  // Another ground station commanding the same vehicle: the operator must know orders may not be theirs.
+  const other = v.other_gcs;
+  const otherBanner = card.querySelector(".other-gcs-banner");
+  otherBanner.hidden = !other;
+  setText(otherBanner, other ? `Another ground station (system ${other.sysid}) is commanding this vehicle: ` +
+    `${other.last}, ${fmt(other.age)} s ago` : "");
 
   setText(card.querySelector(".progress-item"), progressText(v.mission));
   setText(card.querySelector(".progress-status"), v.status ? String(v.status) : "");
@@ -644,6 +685,15 @@ const viewerId = makeViewerId();
 let socket = null;
 let retryDelay = 500;
 let everConnected = false;
+let retryTimer = null;
+
+/** Connect again at once (the page was just given what it lacked), not after the backoff. */
+function reconnectNow() {
+  retryDelay = 500;
+  clearTimeout(retryTimer);
+  if (socket && socket.readyState <= WebSocket.OPEN) socket.close();  // its close handler reconnects
+  else connect();
+}
 
 function setConnection(kind, text) {
   $("#connection").className = `connection ${kind}`;
@@ -666,7 +716,9 @@ function onMessage(event) {
 function connect() {
   const proto = location.protocol === "https:" ? "wss:" : "ws:";
   socket = new WebSocket(`${proto}//${location.host}/ws?viewer=${encodeURIComponent(viewerId)}`);
+  let opened = false;
   socket.addEventListener("open", () => {
+    opened = true;
     retryDelay = 500;
     state.connected = true;
     setConnection("connected", "connected");
@@ -676,20 +728,23 @@ function connect() {
     everConnected = true;
   });
   socket.addEventListener("message", onMessage);
-  socket.addEventListener("close", () => {
+  const mine = socket;
+  socket.addEventListener("close", async () => {
     state.connected = false;
-    setConnection("reconnecting", "reconnecting… showing the last known state");
+    const refused = !opened && await checkWatching();
+    if (socket !== mine) return;  // reconnected meanwhile
+    setConnection("reconnecting", refused ? "this station needs a token to watch: sign in"
+      : "reconnecting… showing the last known state");
     // Exponential backoff with jitter, so many pages do not hammer a restarting server together.
-    setTimeout(connect, retryDelay * (0.8 + Math.random() * 0.4));
+    retryTimer = setTimeout(connect, retryDelay * (0.8 + Math.random() * 0.4));
     retryDelay = Math.min(retryDelay * 2, 10000);
   });
   // "error" is always followed by "close", which schedules the retry.
 }
 
 function setupView() {
-  const proto = location.protocol === "https:" ? "wss" : "ws";
-  const vizSocket = `${proto}://${location.host}/viz?viewer=${viewerId}`;
-  $("#view").src = `/viz/?websocket=${encodeURIComponent(vizSocket)}`;
+  // viser's client connects to the socket of its page's own path: /viz/v/ID/ -> /viz/v/ID
+  $("#view").src = `/viz/v/${viewerId}/`;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -833,15 +888,15 @@ function setupPanel() {
 
 // ---------------------------------------------------------------------------------------------
 
-function main() {
+async function main() {
   setupPanel();
-  setupView();
-  setupAuth();
   setupTarget();
   setupReplay();
   renderTarget(null);
   renderVehicles([]);
   setConnection("connecting", "connecting…");
+  if (!await checkWatching()) setupView();  // else once a token opens a session
+  setupAuth();
   connect();
   loadRecordings();
 }

@@ -26,8 +26,8 @@ from pathlib import Path
 import httpx
 import uvicorn
 
-from groundstation.app import create_app
-from groundstation.server import GroundStation
+from groundstation.security import Access
+from groundstation.server import GroundStation, app_config
 from vehicle.agent.settings import Settings
 from vehicle.lab.live import SimOptions, SimVehicle
 from vehicle.lab.stepper import Stepper, simulate
@@ -162,16 +162,16 @@ class RunningStation:
     """GroundStation on ``udpin:127.0.0.1:<free port>`` with its app served by uvicorn on a thread."""
 
     def __init__(self, scene: Scene | None, record_dir: str | Path | None, token: str = TOKEN,
-                 urls: list[str] | None = None, **station):
-        """``urls``: the MAVLink links (default: ``udpin`` on a free port, which ``vehicle_url`` sends to)."""
+                 urls: list[str] | None = None, access: Access | None = None, **station):
+        """``urls``: the MAVLink links (default: ``udpin`` on a free port, which ``vehicle_url`` sends to);
+        ``access``: who may reach the app (default: as when served on loopback)."""
         self.mavlink_port = free_udp_port()
         self.url = f"udpin:127.0.0.1:{self.mavlink_port}"
         self.station = GroundStation(urls or [self.url], scene, token, record_dir, **station)
         self.token = token
         self.http_port = free_tcp_port()
         self.base = f"http://127.0.0.1:{self.http_port}"
-        config = uvicorn.Config(create_app(self.station), host="127.0.0.1", port=self.http_port,
-                                log_level="warning", ws_ping_interval=None)
+        config = app_config(self.station, "127.0.0.1", self.http_port, access=access)
         self.server = uvicorn.Server(config)
         self._thread = threading.Thread(target=self.server.run, name="uvicorn", daemon=True)
 

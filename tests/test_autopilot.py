@@ -4,6 +4,7 @@ Everything runs on simulated time: the tests step the Simulation and look at the
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -440,11 +441,72 @@ def test_rtl_copter_returns_home_lands_and_disarms(flat_scene):
     world.autopilot.goto(15.0, 5.0)
     world.run_for(15.0)
     assert world.autopilot.set_mode("RTL") == ACCEPTED
-    step_until(world, lambda: not world.autopilot.armed, limit=40.0)
+    step_until(world, lambda: not world.autopilot.armed, limit=70.0)  # up to 15 m, home, down
     world.run_for(1.0)
     assert math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 0.3
     assert world.pose.z == pytest.approx(REST_Z, abs=0.01)
     assert "Reached home" in texts(world)
+    assert world.collision is None
+
+
+def test_rtl_copter_climbs_to_rtl_altitude_where_it_is_before_flying_home(flat_scene):
+    world = armed_copter(flat_scene, start=(2.0, -3.0))
+    world.autopilot.goto(15.0, 5.0)
+    world.run_for(15.0)
+    x, y = world.pose.x, world.pose.y
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    highest = world.pose.z
+
+    def climbed() -> bool:
+        nonlocal highest
+        highest = max(highest, world.pose.z)
+        if world.pose.z < 14.8:
+            assert math.hypot(world.pose.x - x, world.pose.y - y) < 0.5  # straight up first
+        return math.hypot(world.pose.x - x, world.pose.y - y) > 1.0
+
+    step_until(world, climbed, limit=30.0)
+    assert world.pose.z == pytest.approx(15.0, abs=0.3)
+    assert "RTL: climbing to 15 m, then home" in texts(world)
+    step_until(world, lambda: not world.autopilot.armed, limit=60.0)
+    assert math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 0.3
+    assert highest < 15.5
+
+
+def test_rtl_above_rtl_altitude_keeps_its_height_and_rtl_alt_can_be_set(flat_scene):
+    world = armed_copter(flat_scene, altitude=6.0)
+    world.autopilot.rtl_altitude = 3.0
+    world.autopilot.goto(10.0, 0.0)
+    world.run_for(10.0)
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    world.run_for(2.0)
+    assert world.pose.z == pytest.approx(6.0, abs=0.3)  # no climb (nor a descent before home)
+    assert not any(text.startswith("RTL: climbing") for text in texts(world))
+
+
+def test_a_stop_before_an_obstacle_is_told_once_with_where(wall_scene):
+    world = armed_copter(wall_scene)
+    world.autopilot.goto(0.0, 20.0)  # behind the wall
+    world.run_for(30.0)
+    assert world.autopilot.blocked
+    told = [text for text in texts(world) if text.startswith("Go here:")]
+    assert len(told) == 1, told
+    assert "stopped short of (0.0, 20.0)" in told[0]
+    distance, x, y = (float(v) for v in re.search(r"obstacle ([\d.]+) m ahead at \(([-\d.]+), ([-\d.]+)\)",
+                                                   told[0]).groups())
+    assert 0.3 < distance < 2.5 and abs(y - 9.9) < 0.3 and abs(x) < 1.0
+
+
+def test_rtl_held_back_by_a_tall_wall_says_so(make_scene, box):
+    ground = box(0, 0, -0.5, 200, 200, 1)
+    tower = box(0, 10.5, 15, 20, 1, 30)  # 30 m high: above RTL_ALT
+    world = armed_copter(make_scene(ground, tower), start=(0.0, 0.0))
+    world.autopilot.goto(0.0, 20.0)
+    world.run_for(20.0)  # stopped south of the wall
+    world.autopilot.home = (0.0, 25.0, 0.0)  # home lies behind it
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    world.run_for(40.0)
+    told = [text for text in texts(world) if text.startswith("RTL:") and "cannot reach home" in text]
+    assert len(told) == 1 and "obstacle" in told[0], texts(world)
     assert world.collision is None
 
 

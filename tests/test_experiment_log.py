@@ -2,9 +2,12 @@
 
 One pathfind run in a small scene is logged twice (and its final map saved with
 ``--map-out``); the log is read back with pymavlink's own ``mavlink_connection``.
-The autopilot's messages come from component 1, the agent's from component 191.
+The autopilot's messages come from component 1, the agent's from component 191;
+the note naming the scene from the ground station's system id and the logging
+component.
 """
 
+import hashlib
 from collections import defaultdict
 
 import numpy as np
@@ -47,7 +50,7 @@ def messages(logged):
         if message.get_type() == "BAD_DATA":
             pytest.fail(f"undecodable data in the log: {message}")
         component = message.get_srcComponent()
-        assert component in (1, 191)
+        assert (message.get_srcSystem(), component) in ((1, 1), (1, 191), (255, mavlink.MAV_COMP_ID_LOG))
         key = message.get_type() if component == 1 else f"{message.get_type()}@{component}"
         by_type[key].append((message._timestamp, message))
         order.append(message._timestamp)
@@ -201,3 +204,62 @@ def test_a_bad_datum_exits_2_with_the_reason(tmp_path, capsys):
     scene.write_text('#VRML V2.0 utf8\nWorldInfo { info ["datum=95,0"] }\n')
     assert main(["experiment", "--scene", str(scene), "--mission", "browse"]) == 2
     assert "the scene's datum hint" in capsys.readouterr().err
+
+
+def test_positions_hud_and_readings_carry_the_values_telemetry_builds(tmp_path):
+    """The log notes these as numbers and makes their payloads in batches: each must be the very payload
+    ``Telemetry``'s builders give at that step (byte for byte, pymavlink's packing)."""
+    from vehicle.lab.experiment import Experiment, run_experiment
+    from vehicle.lab.log import ExperimentLog
+    from vehicle.sim.telemetry import Telemetry
+    from vehicle.world.scene import parse_scene
+
+    scene = parse_scene(SCENE, "yard.wrl")
+    log = ExperimentLog(tmp_path / "run.tlog")
+    packer = mavlink.MAVLink(None)
+    expected = {}
+
+    def on_step(stepper, readings):
+        log(stepper, readings)
+        telemetry = Telemetry(stepper.simulation)
+        now = stepper.simulation.time
+        stamp = int((LOG_EPOCH + now) * 1e6)
+        for message in (telemetry.global_position(now), telemetry.local_position(now), telemetry.attitude(now),
+                        telemetry.vfr_hud(now), *[telemetry.distance_sensor(r, now) for r in readings]):
+            sensor = message.id if message.get_type() == "DISTANCE_SENSOR" else None
+            expected[(message.get_type(), stamp, sensor)] = message.pack(packer)[10:-2]
+
+    run_experiment(Experiment("yard.wrl", "pathfind", waypoints=[(-3.0, 6.0), (3.0, 6.0)]), scene=scene,
+                   on_step=on_step)
+    log.close()
+    reader = mavutil.mavlink_connection(str(tmp_path / "run.tlog"))
+    checked = {}
+    while (message := reader.recv_match(type=["GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE", "VFR_HUD",
+                                              "DISTANCE_SENSOR"])) is not None:
+        kind = message.get_type()
+        stamp = round(message._timestamp * 1e6)
+        if kind == "GLOBAL_POSITION_INT" and stamp not in {k[1] for k in expected}:
+            continue  # the closing position, after the last step
+        key = (kind, stamp, message.id if kind == "DISTANCE_SENSOR" else None)
+        assert message.get_msgbuf()[10:-2] == expected[key], key
+        checked[kind] = checked.get(kind, 0) + 1
+    reader.close()
+    assert checked["GLOBAL_POSITION_INT"] > 400 and checked["VFR_HUD"] > 90 and checked["DISTANCE_SENSOR"] > 600
+
+
+def test_a_writer_in_the_same_process_writes_the_same_log(logged, monkeypatch, tmp_path):
+    """Where no process can be forked, the log is written in the run's own process: byte for byte the same."""
+    from vehicle.lab import log
+
+    monkeypatch.setattr(log.multiprocessing, "get_all_start_methods", lambda: ["spawn"])
+    code = main(["experiment", "--scene", str(logged / "yard.wrl"), "--mission", "pathfind", "--time-limit", "150",
+                 "--json", "--log", str(tmp_path / "same.tlog")])
+    assert code == 0
+    assert (tmp_path / "same.tlog").read_bytes() == (logged / "a.tlog").read_bytes()
+
+
+def test_the_log_names_its_scene_at_its_start(logged, messages):
+    notes = messages[f"STATUSTEXT@{mavlink.MAV_COMP_ID_LOG}"]
+    digest = hashlib.sha256((logged / "yard.wrl").read_bytes()).hexdigest()[:16]
+    assert notes and all(m.text == f"scene yard.wrl sha256 {digest}" for _, m in notes)
+    assert notes[0][0] == pytest.approx(LOG_EPOCH, abs=0.1)  # before anything else that happened

@@ -30,6 +30,7 @@ import pytest
 import websockets.sync.client
 from harness import (
     TOKEN,
+    WALL_Y,
     RunningStation,
     free_tcp_port,
     free_udp_port,
@@ -43,7 +44,8 @@ from harness import (
 from PIL import Image
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
-from groundstation.server import is_loopback
+from groundstation.security import is_loopback
+from vehicle.mapping.picture import HOME
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.waypoints import parse_mission
 
@@ -262,9 +264,11 @@ def test_map_as_png(api, flyer):
     picture = Image.open(io.BytesIO(response.content))
     picture.load()
     assert picture.format == "PNG"
-    assert picture.size == (400, 400)  # space_size 20 m at 10 cells/m
-    pixels = np.asarray(picture.convert("RGB"))
-    assert len(np.unique(pixels.reshape(-1, 3), axis=0)) >= 2  # not blank: something was seen
+    assert max(picture.size) <= 900  # the explored part of a 400 x 400 map, with a title, a scale and a legend
+    pixels = np.asarray(picture.convert("RGB")).astype(int)
+    home_rows, _ = np.nonzero(np.all(pixels == HOME, axis=-1))  # the picture's home marker (and its swatch)
+    occupied = (pixels[..., 0] > 150) & (pixels[..., 1] < 80) & (pixels[..., 2] < 90)
+    assert occupied[:home_rows.min()].sum() >= 9  # the wall north of the start, above home: north is up
 
 
 def test_map_as_json(api, flyer):
@@ -378,6 +382,37 @@ def test_goto_moves_the_vehicle_there(api, flyer):
     assert arrived["position"]["alt"] == pytest.approx(4.0, abs=0.5)  # keeps its height
     back = goto_and_wait(api, 1, 0.0, 0.0)
     assert abs(back["position"]["x"]) < 0.3 and abs(back["position"]["y"]) < 0.3
+
+
+def test_goto_with_an_agent_is_planned_round_what_its_map_knows(api, flyer):
+    airborne(api)
+    goto_and_wait(api, 1, 0.0, 4.0)  # facing the wall north of the start: its sonars map it
+    wide = 0.0
+
+    def there(v):
+        nonlocal wide
+        wide = max([wide, *(abs(x) for x, _ in v["path"])])
+        return math.hypot(v["position"]["x"], v["position"]["y"] - 12.0) < 0.5
+
+    assert api.command(1, action="goto", x=0.0, y=12.0).json()["result"] == "accepted"  # behind the wall
+    arrived = api.wait_vehicle(1, there, sim_timeout=120, what="arrival behind the wall")
+    assert wide > 10.0  # the planned path went round the wall's end (it spans x -10 to 10)
+    assert arrived["armed"] and arrived["position"]["alt"] > 3.0
+    told = api.wait_vehicle(1, lambda v: any(m["text"] == "Go here: arrived at (0.0, 12.0); holding"
+                                             for m in v["messages"]), sim_timeout=10, what="the agent says so")
+    assert told["agent"]["paused"] and "where the operator sent it" in told["agent"]["reason"]
+    goto_and_wait(api, 1, 0.0, 0.0, tolerance=0.5, sim_timeout=120)
+
+
+def test_goto_into_a_known_obstacle_is_refused_with_the_reason(api, flyer):
+    airborne(api)
+    goto_and_wait(api, 1, 0.0, 4.0)
+    assert api.command(1, action="goto", x=0.0, y=WALL_Y + 0.25).json()["result"] == "denied"
+    told = api.wait_vehicle(1, lambda v: any("Go here refused" in m["text"] for m in v["messages"]),
+                            sim_timeout=10, what="the reason")
+    refusal = next(m for m in told["messages"] if "Go here refused" in m["text"])
+    assert refusal["text"] == "Go here refused: (0.0, 8.2) is inside a known obstacle"
+    goto_and_wait(api, 1, 0.0, 0.0)
 
 
 def test_speed_limits_the_cruise_speed(api, flyer):
@@ -663,8 +698,9 @@ def test_serving_beyond_loopback_without_tls_warns(tmp_path):
     try:
         out, err = read_until(process, "ground station:", timeout=30)
         assert process.poll() is None, (out, err)
-        health = wait_wall(lambda: _health(port), 10, "the served app answers")
+        health = wait_wall(lambda: _health(port, TOKEN), 10, "the served app answers")
         assert health["status"] == "ok"
+        assert httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=5).status_code == 401  # watching needs it
     finally:
         process.terminate()
         try:
@@ -675,13 +711,15 @@ def test_serving_beyond_loopback_without_tls_warns(tmp_path):
     err += rest[1].decode(errors="replace")
     assert "WARNING: serving on 0.0.0.0 without TLS" in err
     assert "--tls-cert" in err or "127.0.0.1" in err  # it says what to do about it
+    assert "watching needs the operator token" in err and "--viewer-token" in err
     assert f"#token={TOKEN}" in out
     assert not list(tmp_path.iterdir())  # --record-dir '' records nothing
 
 
-def _health(port: int) -> dict | None:
+def _health(port: int, token: str | None = None) -> dict | None:
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
     try:
-        response = httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=2)
+        response = httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=2, headers=headers)
     except httpx.HTTPError:
         return None
     return response.json() if response.status_code == 200 else None

@@ -7,6 +7,7 @@ import pytest
 from PIL import Image
 
 from vehicle.mapping.memory_map import FREE, FREE_SPREAD, NO_ECHO_CLEARS, OCCUPIED, SIDE_REACH, UNKNOWN, MemoryMap
+from vehicle.mapping.picture import draw_map
 
 ORIGIN = np.array([0.5, 0.5, 4.0])  # the centre of cell (10, 10) in the maps below, at the operating height
 EAST = np.array([1.0, 0.0, 0.0])
@@ -236,16 +237,23 @@ def test_save_npy_round_trips(grid, tmp_path):
 
 
 def test_save_png_writes_a_picture_north_up(grid, tmp_path):
-    grid.add_reading(ORIGIN, NORTH, 8.0, 40.0)  # occupied cell (18, 10): near the top of a north-up picture
-    grid.save_png(tmp_path / "map.png")
+    grid.add_reading(ORIGIN, NORTH, 8.0, 40.0)  # occupied cell (18, 10): north of the start
+    grid.save_png(tmp_path / "map.png", home=(0.5, 0.5))
+    picture = draw_map(grid.grid, grid.resolution, grid.origin, home=(0.5, 0.5))  # the same picture, and its layout
     with Image.open(tmp_path / "map.png") as image:
-        assert image.format == "PNG" and image.size == (20, 20)
+        assert image.format == "PNG"
         pixels = np.asarray(image.convert("RGB")).astype(int)
-    occupied = pixels[20 - 1 - 18, 10]
-    unknown = pixels[0, 0]
+    assert np.array_equal(pixels, np.asarray(picture.image))
+
+    def at(x: float, y: float) -> np.ndarray:
+        column, row = picture.pixel(x, y)
+        return pixels[int(row), int(column)]
+
+    occupied, free, unknown = at(*grid.center_of(18, 10)), at(*grid.center_of(14, 10)), at(*grid.center_of(14, 8))
+    assert picture.pixel(*grid.center_of(18, 10))[1] < picture.pixel(0.5, 0.5)[1]  # north is up
     assert occupied[0] > 150 and occupied[0] > occupied[1] + 100  # dark red
     assert tuple(unknown) == (60, 60, 66)  # the background shows through unknown cells
-    assert tuple(pixels[20 - 1 - 12, 10]) not in (tuple(unknown), tuple(occupied))  # free: pale
+    assert tuple(free) not in (tuple(unknown), tuple(occupied)) and free.min() > unknown.max()  # free: pale
 
 
 def test_occupied_version_changes_only_when_the_occupied_set_changes(grid):
@@ -523,8 +531,11 @@ def test_changes_folded_while_nobody_takes_them_are_all_returned():
     got = lazy.take_changes()
     assert got.dtype.kind == "i" and sorted(got.tolist()) == sorted(seen)
     assert lazy.take_changes().size == 0
-    lazy.add_reading(ORIGIN, EAST, 3.0, 40.0)  # after a take, changes are listed again, not folded
-    assert lazy.take_changes().size == 4
+    for m in (eager, lazy):  # after a take, changes are listed again, not folded
+        m.add_reading(ORIGIN, EAST, 3.0, 40.0)
+    assert lazy._folded is None and len(lazy._changed) == 1
+    expected = eager.take_changes()
+    assert expected.size and np.array_equal(lazy.take_changes(), expected)
 
 
 def test_a_cone_pointing_north_east_marks_both_sides(fine):
@@ -577,13 +588,17 @@ def test_a_long_line_that_ends_inside_the_map_stops_at_its_end():
     assert np.flatnonzero(m.free[row]).max() == m.cell_of(0.0, 5.05)[1] - 1  # free up to the echo, not past
 
 
-def test_a_picture_of_the_map_blends_free_cells_pale_over_the_background(grid, tmp_path):
+def test_the_picture_of_the_map_is_drawn_from_its_own_cells_size_and_place(grid, tmp_path):
+    """save_png hands the renderer (vehicle/mapping/picture.py, tested in test_map_picture.py) this map's
+    grid, resolution and origin: the file is the very picture drawn from them."""
+    from vehicle.mapping.picture import save_map_picture
+
     grid.add_reading(ORIGIN, NORTH, 8.0, 40.0)
-    grid.save_png(tmp_path / "map.png")
-    with Image.open(tmp_path / "map.png") as image:
-        pixels = np.asarray(image.convert("RGBA")).astype(int)
-    alpha = 110 / 255
-    expected = [int(235 * alpha + 60 * (1 - alpha)), int(240 * alpha + 60 * (1 - alpha)),
-                int(245 * alpha + 66 * (1 - alpha)), 255]
-    assert pixels[20 - 1 - 12, 10].tolist() == expected
-    assert pixels[20 - 1 - 18, 10].tolist() == [200, 30, 40, 255] and pixels[0, 0].tolist() == [60, 60, 66, 255]
+    grid.save_png(tmp_path / "map.png", title="t")
+    save_map_picture(tmp_path / "direct.png", grid.grid.copy(), grid.resolution, grid.origin, title="t")
+    other = MemoryMap((3.0, -2.0), space_size=10.0, resolution=1.0)
+    other.grid[:] = grid.grid
+    other.save_png(tmp_path / "moved.png", title="t")
+    with Image.open(tmp_path / "map.png") as a, Image.open(tmp_path / "direct.png") as b:
+        assert a.size == b.size and np.array_equal(np.asarray(a), np.asarray(b))
+    assert (tmp_path / "map.png").read_bytes() != (tmp_path / "moved.png").read_bytes()  # the origin is drawn

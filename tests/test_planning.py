@@ -1,7 +1,7 @@
+import hashlib
 from collections import Counter
 
 import numpy as np
-import pyastar2d
 import pytest
 import scipy.ndimage as ndi
 
@@ -10,6 +10,8 @@ from vehicle.mapping.planning import (
     START_BLOCKED,
     UNREACHABLE,
     NoPath,
+    _astar_cells,
+    _search,
     astar,
     corner_cuts,
     inflate,
@@ -56,6 +58,19 @@ def test_inflate_is_a_disc_dilation(radius):
     R = int(radius)
     yy, xx = np.mgrid[-R : R + 1, -R : R + 1]
     expected = ndi.binary_dilation(g, yy**2 + xx**2 <= radius**2)
+    assert (inflate(g, radius) == expected).all()
+
+
+@pytest.mark.parametrize("radius", [63.0, 64.0, 64.7, 130.2])
+def test_inflate_is_a_disc_dilation_across_whole_words(radius):
+    """Radii of 64 cells and more shift rows by whole 64-cell words and more."""
+    g = np.zeros((300, 333), bool)
+    g[[5, 150, 290], [7, 200, 330]] = True
+    g[100, 60:70] = True
+    rows, cols = np.mgrid[:300, :333]
+    expected = np.zeros_like(g)
+    for r, c in zip(*np.nonzero(g), strict=True):  # a few cells: each one's disc directly
+        expected |= (rows - r) ** 2 + (cols - c) ** 2 <= radius**2
     assert (inflate(g, radius) == expected).all()
 
 
@@ -186,9 +201,8 @@ def test_diagonal_corner_cutting_is_refused():
     g = np.zeros((12, 12), bool)
     for i in range(12):
         g[i, 11 - i] = True  # a wall of cells touching only at their corners
-    w = np.where(g, np.inf, 1).astype(np.float32)
-    raw = pyastar2d.astar_path(w, (0, 0), (11, 11), allow_diagonal=True)
-    assert raw is not None and len(corner_cuts(raw, g))  # pyastar2d itself slips through
+    raw = _search(g, (0, 0), (11, 11))
+    assert len(raw) and len(corner_cuts(raw, g))  # the search itself slips through, as pyastar2d's does
     with pytest.raises(NoPath):
         astar(g, (0, 0), (11, 11))
     g[11, 0] = False  # an opening at one end: the path must use it
@@ -196,6 +210,28 @@ def test_diagonal_corner_cutting_is_refused():
     assert not len(corner_cuts(path, g))
     assert ((path[:, 0] >= 10) & (path[:, 1] <= 1)).any()  # crossed at the opening
     assert_clear(plan(g, (0, 0), (11, 11), 0), g)
+
+
+def test_search_returns_pyastar2d_paths():
+    """The very paths pyastar2d 1.1 returned (``astar_path`` on weights 1 / inf, diagonals allowed) for 200
+    seeded grids, hashed: among equally short paths the search picks the same one, so missions fly as before."""
+    rng = np.random.default_rng(2024)
+    digest = hashlib.sha256()
+    for _ in range(200):
+        shape = (int(rng.integers(2, 60)), int(rng.integers(2, 60)))
+        g = rng.random(shape) < rng.choice([0.0, 0.1, 0.3, 0.4])
+        s, t = tuple(int(v) for v in rng.integers(0, shape, 2)), tuple(int(v) for v in rng.integers(0, shape, 2))
+        g[s] = g[t] = False
+        path = _search(g, s, t)
+        digest.update(path.astype(np.int64).tobytes() if len(path) else b"none")
+    assert digest.hexdigest() == "064dcde82d03278ab4c8e7e269b8ad138fe69e80901561f7b707974e3216d944"
+
+
+def test_search_reports_a_heap_too_small():
+    g = np.zeros((20, 20), bool)
+    path, complete = _astar_cells(g, 0, 399, np.empty(4, dtype=np.int64))
+    assert not complete and not len(path)
+    assert np.array_equal(_search(g, (0, 0), (19, 19)), np.column_stack([np.arange(20), np.arange(20)]))
 
 
 def test_noisy_grids_get_a_path_without_corner_cuts_exactly_when_one_exists():

@@ -746,6 +746,24 @@ def test_seeking_backwards_gives_the_state_a_direct_seek_gives(experiment_run):
     assert (back.position, back.clock) == (direct.position, direct.clock)
 
 
+def test_a_replayed_old_log_draws_its_sonar_beams(experiment_run, monkeypatch):
+    """The 3D view takes its clock from the station: a log flown months ago draws its beams as live does."""
+    from groundstation.server import GroundStation
+
+    station = GroundStation([], None, record_dir=None)
+    try:
+        scene = station.view.server.scene
+        drawn, add = [], scene.add_line_segments
+        monkeypatch.setattr(scene, "add_line_segments", lambda name, *a, **k: drawn.append(name) or add(name, *a, **k))
+        replay = station.start_replay(experiment_run.log)
+        replay.playing = False
+        replay.seek(replay.duration / 2)  # mid-scan
+        station.view.draw()
+        assert "/vehicles/1/rays" in drawn
+    finally:
+        station.close()
+
+
 def test_after_a_seek_a_vehicle_was_last_heard_at_its_last_record(tmp_path):
     """A seek applies only the records that rebuild the state, maps before poses; the vehicle was still
     last heard at its very last record before the seek time, often a map message."""

@@ -7,7 +7,9 @@ one way: preflight -> take-off -> mission -> homing -> landing -> done. A
 mission that completes or gives up, a vehicle that leaves the allowed space,
 or a time budget that runs low all lead home. Someone else taking over (a
 mode change the agent did not make, another ground station's target) pauses
-the agent; ``resume`` hands control back to it.
+the agent; ``resume`` hands control back to it. The operator's "Go here"
+(``go_to``) pauses the mission too, and the agent flies there along a path
+planned on its map, refusing a target it knows to be inside an obstacle.
 """
 
 from __future__ import annotations
@@ -61,6 +63,7 @@ class Agent:
         self.paused = False
         self.pause_reason = ""
         self._travel: Travel | None = None
+        self._errand: Travel | None = None  # the operator's "Go here", flown while the mission is paused
         self._settling = False
         self._blocked_since: float | None = None
         self._relaunch: Phase | None = None  # the phase to go back to after taking off again on a resume
@@ -83,6 +86,7 @@ class Agent:
             self.outcome, self.reason, self._travel = None, "", None
         self.paused = False
         self.pause_reason = ""
+        self._errand = None
         self.ctx.started = self.ctx.time = self.fc.time
         self.phase = Phase.PREFLIGHT
         self.fc.took_over()  # what the operator did to get here (GUIDED, arm) is no takeover
@@ -94,6 +98,9 @@ class Agent:
             return False
         self.paused = False
         self.pause_reason = ""
+        if self._errand is not None:  # resumed on the way to the operator's target: the mission goes first
+            self._errand = None
+            self.ctx.planned_path = []
         self.fc.took_over()  # the operator's own switch back is the hand-back, not a takeover
         self.say("Agent: resuming mission")
         if self._landed_meanwhile():  # an operator's RTL or LAND brought it down: up again first
@@ -118,6 +125,42 @@ class Agent:
         self.pause_reason = reason
         self.say(f"Agent: paused, {reason}", mavlink.MAV_SEVERITY_WARNING)
 
+    def go_to(self, point: tuple[float, float]) -> str | None:
+        """The operator's "Go here": pause the mission and fly to ``point`` around what the map knows.
+        Returns why it is refused, or None when the vehicle is on its way."""
+        fc, ctx = self.fc, self.ctx
+        where = place(point)
+        if not ctx.inside(point, margin=0.5):
+            return f"{where} is outside the allowed space around home"
+        if not ctx.is_clear(point, padding=0.0):
+            return f"{where} is inside a known obstacle"
+        if not fc.armed or (fc.kind is Kind.COPTER and not fc.flying):
+            return "not flying: arm and take off first"
+        self._errand = Travel(ctx, point, HOME_TOLERANCE)
+        self.paused = True
+        self.pause_reason = f"going to {where} for the operator"
+        if fc.mode != "GUIDED":
+            self._set_mode("GUIDED")
+        fc.took_over()  # the operator's own command is no takeover
+        self.say(f"Go here: on the way to {where}")
+        return None
+
+    def _run_errand(self) -> None:
+        travel = self._errand
+        status = travel.too_close() if self.ctx.observation.too_close else travel.step()
+        if status is Status.RUNNING:
+            return
+        self._errand = None
+        self.ctx.planned_path = []
+        where = place(travel.goal)
+        if status is Status.DONE:  # the autopilot's last target is the goal itself: it settles there
+            self.pause_reason = f"holding at {where}, where the operator sent it"
+            self.say(f"Go here: arrived at {where}; holding")
+        else:
+            self.pause_reason = f"holding: could not reach {where} ({travel.reason})"
+            self.say(f"Go here: {travel.reason}; holding", mavlink.MAV_SEVERITY_WARNING)
+            self.fc.hold()
+
     def _set_mode(self, mode: str) -> None:
         self.fc.set_mode(mode)
 
@@ -131,6 +174,15 @@ class Agent:
         observation = self.monitor.observe(now, pose.x, pose.y, navigation.heading, fc.speed, navigation.reach)
         ctx.observation = observation
         taken = fc.took_over()
+        if self._errand is not None:
+            if taken is not None:  # someone else took over on the way
+                self._errand = None
+                ctx.planned_path = []
+                self.pause(taken)
+                return
+            self._note_blocked(now, observation)
+            self._run_errand()
+            return
         if self.phase in (Phase.WAITING, Phase.DONE):
             if fc.taking_off and fc.mode == "GUIDED":
                 self.start()  # the operator's GUIDED take-off starts the mission
@@ -139,14 +191,18 @@ class Agent:
             self.pause(taken)
         if self.paused:
             return
-        if fc.blocked:
+        self._note_blocked(now, observation)
+        getattr(self, f"_{self.phase.value}")(now)
+
+    def _note_blocked(self, now: float, observation) -> None:
+        """Held back by the autopilot's avoidance for BLOCKED_FOR counts as an obstacle too close."""
+        if self.fc.blocked:
             self._blocked_since = now if self._blocked_since is None else self._blocked_since
         else:
             self._blocked_since = None
         if self._blocked_since is not None and now - self._blocked_since >= BLOCKED_FOR:
             observation.too_close = True
             self._blocked_since = None
-        getattr(self, f"_{self.phase.value}")(now)
 
     def _preflight(self, now: float) -> None:
         fc = self.fc
@@ -240,3 +296,8 @@ class Agent:
     def _landing(self, now: float) -> None:
         if not self.fc.armed:
             self.phase = Phase.DONE
+
+
+def place(point: tuple[float, float]) -> str:
+    """A point as messages name it, "(x, y)" to the decimetre (never "-0.0")."""
+    return f"({round(point[0], 1) + 0.0:.1f}, {round(point[1], 1) + 0.0:.1f})"

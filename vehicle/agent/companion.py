@@ -5,12 +5,16 @@ flies: a HEARTBEAT (type ONBOARD_CONTROLLER), its memory map and planned path
 (the TUNNEL map stream), its state (running, paused and why; TUNNEL
 ``AGENT_STATUS``) and its messages (STATUSTEXT, chunked when long). What it
 answers: MAV_CMD_MISSION_START addressed to it starts or resumes the mission
-(a ground station's Resume), and the parameter protocol for the mission
+(a ground station's Resume), MAV_CMD_DO_REPOSITION addressed to it is the
+operator's "Go here" (planned and flown by the agent, or denied with the
+reason in a STATUSTEXT), and the parameter protocol for the mission
 parameters (``SCN_*``). The caller sends what ``tick`` and ``handle`` return,
 packed as component 191; the clock is the caller's (the wall clock live).
 """
 
 from __future__ import annotations
+
+import math
 
 from vehicle.agent.agent import Agent
 from vehicle.agent.params import Parameters
@@ -50,15 +54,24 @@ class Companion:
             self._next_heartbeat = now + HEARTBEAT_PERIOD
             out.append(self.heartbeat())
         out += self.texts()
-        out += [tunnel(kind, payload) for kind, payload in self.streamer.tick(now)]
+        out += [self.tunnel(kind, payload) for kind, payload in self.streamer.tick(now)]
         if now >= self._next_path:
             self._next_path = now + PATH_PERIOD
-            out += [tunnel(kind, payload) for kind, payload in self.streamer.path(self.agent.ctx.planned_path)]
+            out += [self.tunnel(kind, payload) for kind, payload in self.streamer.path(self.agent.ctx.planned_path)]
         status = self.status()
         if status != self._status or now >= self._next_status:
             self._status, self._next_status = status, now + STATUS_PERIOD
-            out.append(tunnel(agent_status.AGENT_STATUS, agent_status.encode(status)))
+            out.append(self.tunnel(agent_status.AGENT_STATUS, agent_status.encode(status)))
         return out
+
+    def tunnel(self, kind: int, payload: bytes):
+        """The TUNNEL message of one of the agent's payloads (a log may keep the payload as it is instead)."""
+        return tunnel(kind, payload)
+
+    def next_due(self) -> float:
+        """When ``tick`` next has something to send by the clock alone (a heartbeat, map, path or status repeat);
+        until then only a step of the agent gives it more."""
+        return min(self._next_heartbeat, self._next_path, self._next_status, self.streamer.next_due())
 
     def final(self) -> list:
         """A heartbeat, the messages not sent yet, the status and a full map snapshot: the last word of a log."""
@@ -94,9 +107,28 @@ class Companion:
             result = mavlink.MAV_RESULT_ACCEPTED if self.mission_start() else mavlink.MAV_RESULT_DENIED
             return [mavlink.MAVLink_command_ack_message(message.command, result, 0, 0, message.get_srcSystem(),
                                                         message.get_srcComponent())]
+        if kind in ("COMMAND_LONG", "COMMAND_INT") and message.command == mavlink.MAV_CMD_DO_REPOSITION:
+            result = mavlink.MAV_RESULT_ACCEPTED if self.go_here(message) else mavlink.MAV_RESULT_DENIED
+            return [mavlink.MAVLink_command_ack_message(message.command, result, 0, 0, message.get_srcSystem(),
+                                                        message.get_srcComponent()), *self.texts()]
         if kind in PARAM_MESSAGES:
             return self._param(message)
         return None
+
+    def go_here(self, message) -> bool:
+        """DO_REPOSITION's latitude and longitude (COMMAND_INT: degrees x 1e7; COMMAND_LONG: degrees) as a target
+        for the agent; False (and the reason said) if it refuses."""
+        if message.get_type() == "COMMAND_INT":
+            lat, lon = message.x * 1e-7, message.y * 1e-7
+        else:
+            lat, lon = message.param5, message.param6
+        if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
+            self.agent.say("Go here: the target is not a position", mavlink.MAV_SEVERITY_WARNING)
+            return False
+        refused = self.agent.go_to(self.agent.fc.datum.to_local(lat, lon))
+        if refused:
+            self.agent.say(f"Go here refused: {refused}", mavlink.MAV_SEVERITY_WARNING)
+        return refused is None
 
     def mission_start(self) -> bool:
         """Start the mission if it waits, resume it if paused; False if neither (it runs, or just ended)."""

@@ -86,21 +86,27 @@ class Monitor:
         self._last_xy = (x, y)
         self.map.mark_body(x, y, self.radius)
         farness = self.settings.farness
+        pending = self._pending
         readings = [r if r.distance is None or r.distance <= farness else replace(r, distance=None)
-                    for r in self._pending]  # past farness: a glitch, or too far to trust
+                    for r in pending]  # past farness: a glitch, or too far to trust
         observation.readings = readings
-        self.readings_used += len(readings)
-        self.readings_dropped += sum(r.distance is not None for r in self._pending) - \
-            sum(r.distance is not None for r in readings)
+        count = len(readings)
+        self.readings_used += count
+        self.readings_dropped += sum(r is not kept for r, kept in zip(pending, readings, strict=True))
         if readings:
-            origins = np.array([r.origin for r in readings])
-            directions = np.array([r.direction for r in readings])
-            distances = np.array([np.nan if r.distance is None else r.distance for r in readings])
-            max_ranges = np.minimum([r.max_range for r in readings], farness)
-            beams = np.radians([r.beam_angle for r in readings])
+            # one pass into arrays (np.array of a list of small arrays is slow)
+            origins, directions = np.empty((count, 3)), np.empty((count, 3))
+            distances, max_ranges, beams = np.empty(count), np.empty(count), np.empty(count)
+            latest = {}
+            for i, r in enumerate(readings):
+                origins[i] = r.origin
+                directions[i] = r.direction
+                distances[i] = np.nan if r.distance is None else r.distance
+                max_ranges[i] = min(r.max_range, farness)
+                beams[i] = math.radians(r.beam_angle)
+                latest[r.sensor] = i
             # free space from each sensor's latest reading of the period: the earlier ones only repeat it
-            latest = {r.sensor: i for i, r in enumerate(readings)}
-            free = np.zeros(len(readings), dtype=bool)
+            free = np.zeros(count, dtype=bool)
             free[list(latest.values())] = True
             self.map.add_readings(origins, directions, distances, max_ranges, beams, free)
             if travel is not None:

@@ -89,7 +89,8 @@ class MemoryMap:
         or ceiling) is no obstacle. ``free`` (a mask) picks the readings whose beams
         mark free space, when several of a batch would only repeat each other.
         """
-        origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+        if not (type(origins) is np.ndarray and origins.dtype == np.float64 and origins.shape[1:] == (3,)):
+            origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
         count = len(origins)
         if not count:
             return 0
@@ -99,16 +100,14 @@ class MemoryMap:
         spreads = np.zeros(count) if beams is None else FREE_SPREAD * _per_reading(beams, (count,), "beams")
         marks = np.ones(count, dtype=np.bool_) if free is None else _per_reading(free, (count,), "free", np.bool_)
         self.version += 1
-        passed, hits, crossed = _loops().project(
+        changed, hits, crossed = _loops().project(
             self.grid.reshape(-1), self.ever_hit.reshape(-1), self.size, self.origin[0], self.origin[1],
             self.resolution, self.band, np.ascontiguousarray(origins), directions, distances, clears, spreads,
             beams is not None, marks)
         self.occupied_version += crossed
-        if len(passed):
-            self._note_changes(passed)
-        if len(hits):
-            self._note_changes(hits)
-        return len(hits)
+        if len(changed):
+            self._note_changes(changed)
+        return hits
 
     def add_reading(self, origin: np.ndarray, direction: np.ndarray, distance: float | None,
                     max_range: float) -> bool:
@@ -135,16 +134,22 @@ class MemoryMap:
             self._folded[np.concatenate(self._changed)] = True
             self._changed.clear()
 
-    def take_changes(self) -> np.ndarray:
-        """Flat indices of cells changed since the last call (for streaming deltas)."""
+    def take_changes(self, in_order: bool = True) -> np.ndarray:
+        """Flat indices of cells changed since the last call (for streaming deltas), in increasing order and
+        each once; ``in_order=False``: as they were noted (a caller that sorts them elsewhere)."""
         if self._folded is not None:
             self._changed.append(np.flatnonzero(self._folded))
             self._folded = None
         if not self._changed:
             return np.zeros(0, dtype=np.int64)
-        changed = np.unique(np.concatenate(self._changed))
+        changed = np.concatenate(self._changed)
         self._changed.clear()
-        return changed
+        if not in_order:
+            return changed
+        changed.sort()  # then without repeats (np.unique, several times slower)
+        first = np.ones(len(changed), dtype=bool)
+        first[1:] = changed[1:] != changed[:-1]
+        return changed[first]
 
     # ---- views -------------------------------------------------------------------------------
     @property
@@ -169,7 +174,7 @@ class MemoryMap:
     @property
     def detections(self) -> int:
         """Cells occupied now (the thesis's memory-map count)."""
-        return int(np.count_nonzero(self.occupied))
+        return int(_loops().count_occupied(self.grid.reshape(-1)))
 
     @property
     def cells_ever_hit(self) -> int:
@@ -188,15 +193,12 @@ class MemoryMap:
     def save_npy(self, path: str | Path) -> None:
         np.save(path, self.grid)
 
-    def save_png(self, path: str | Path) -> None:
-        from PIL import Image
+    def save_png(self, path: str | Path, **decorations) -> None:
+        """A picture of the map for people (``picture.draw_map``: cropped to what was explored, with a legend,
+        scale and north; ``decorations`` are its title, home, trail, path, waypoints and position)."""
+        from vehicle.mapping.picture import save_map_picture
 
-        rgba = self.image()
-        background = np.full(rgba.shape, (60, 60, 66, 255), dtype=np.uint8)
-        alpha = rgba[..., 3:4].astype(np.float32) / 255
-        blended = (rgba * alpha + background * (1 - alpha)).astype(np.uint8)
-        blended[..., 3] = 255
-        Image.fromarray(blended).save(path)
+        save_map_picture(path, self.grid, self.resolution, self.origin, **decorations)
 
 
 def _loops():
@@ -209,6 +211,8 @@ def _loops():
 
 def _per_reading(values, shape: tuple[int, ...], what: str, dtype=np.float64) -> np.ndarray:
     """``values`` as a C array of ``shape`` (a scalar, or one row, applies to every reading)."""
+    if type(values) is np.ndarray and values.shape == shape and values.dtype == dtype and values.flags.c_contiguous:
+        return values  # as the monitor builds them: nothing to convert
     array = np.asarray(values, dtype=dtype)
     if array.shape == shape:
         return np.ascontiguousarray(array)

@@ -12,13 +12,19 @@ The memory map is a 2D occupancy grid, rows along +y (north) and columns along
 
 :func:`plan` chains the three and handles the awkward cases.
 
-Why pyastar2d: A* in C++ with a thin numpy wrapper. Measured on random grids of
-scattered rectangles (200x200 / 1000x1000 / 2000x2000): pyastar2d 1.1 / 27 /
-79 ms, python-tcod 1.8 / 123 / 831 ms, scikit-image MCP 17 / 593 ms, a
-pure-Python heapq A* 41 / 1847 ms. A 100 m map at 10 cells/m is 2000x2000, so
-only pyastar2d keeps a full replan under 0.1 s.
+Why an A* of our own: the search is the one pyastar2d (A* in C++) does, step
+for step, written out in :func:`_astar_cells` and compiled with numba. Among
+the many equally short 8-connected paths, which one A* returns depends on the
+order its priority queue breaks ties in, so the loop keeps pyastar2d's order
+exactly (libstdc++'s binary heap) and returns the very same paths; missions
+planned before fly the same routes. pyastar2d was chosen over python-tcod,
+scikit-image's MCP and a pure-Python heapq A* for speed (on random grids of
+200x200 / 1000x1000 / 2000x2000 cells: 1.1 / 27 / 79 ms, against 1.8 / 123 /
+831 ms for tcod); the replica searches as fast, and saves what each call cost
+around the search (a float32 weight grid, its minimum, a flattened copy, the
+ctypes call), about a fifth of a typical replan's A* time.
 
-What pyastar2d does, and what we add:
+What the search does, and what we add:
 
 * A move costs the weight of the cell it enters (1 free, inf blocked), a
   diagonal move as much as a straight one, so its raw paths are shortest in
@@ -44,13 +50,13 @@ Run ``python bench/astar.py`` for the current timings.
 
 from __future__ import annotations
 
+import functools
 import math
 import operator
 from collections import deque
 
 import numba
 import numpy as np
-import pyastar2d
 
 START_BLOCKED = "start is inside an obstacle"
 GOAL_BLOCKED = "goal is inside an obstacle"
@@ -88,36 +94,64 @@ def inflate(blocked: np.ndarray, radius_cells: float) -> np.ndarray:
     disc). The disc is done row by row: for each row offset ``dy`` the
     obstacles are dilated horizontally by ``floor(sqrt(r^2 - dy^2))`` (grown
     one column at a time, as widths only grow while ``|dy|`` shrinks) and ORed
-    in shifted by ``dy``. That is about 4r whole-array ORs, several times
-    faster than scipy's generic dilation or distance transform. The grid is
-    padded by r on every side and flattened, so that every shift is one slice
-    of one contiguous array (the padding keeps rows from spilling into each other).
+    in shifted by ``dy``. Rows are packed 64 cells to a machine word, so a
+    window of a few hundred cells a side is a few words a row and each of the
+    about 4r passes a few thousand word operations: several times faster than
+    the same passes on a boolean array, or scipy's generic dilation.
     """
     b = _mask(blocked)
     if radius_cells < 1:
         return b.copy()
     rows, cols = b.shape
-    R = int(math.floor(radius_cells))
-    half = [int(math.floor(math.sqrt(radius_cells**2 - dy * dy) + 1e-9)) for dy in range(R + 1)]
-    width = cols + 2 * R
-    padded = np.zeros((rows + 2 * R, width), dtype=bool)
-    padded[R:R + rows, R:R + cols] = b
-    flat = padded.reshape(-1)
-    h = flat.copy()  # b dilated horizontally by w
-    out = np.zeros_like(flat)
+    reach, half = _half_widths(float(radius_cells))
+    packed = np.zeros((rows, (cols + 63) // 64 * 8), dtype=np.uint8)
+    packed[:, :(cols + 7) // 8] = np.packbits(b, axis=1, bitorder="little")  # bit k of word j: column 64 j + k
+    out = _dilate_rows(packed.view(np.uint64), reach, half)
+    return np.unpackbits(out.view(np.uint8), axis=1, count=cols, bitorder="little").view(bool)
+
+
+@functools.cache
+def _half_widths(radius_cells: float) -> tuple[int, np.ndarray]:
+    """floor(radius) and, for each row offset dy up to it, the half-width of the disc on that row."""
+    reach = int(math.floor(radius_cells))
+    half = [int(math.floor(math.sqrt(radius_cells**2 - dy * dy) + 1e-9)) for dy in range(reach + 1)]
+    return reach, np.array(half, dtype=np.int64)
+
+
+@numba.njit(cache=True)
+def _dilate_rows(words, reach, half):
+    """``inflate`` on rows of bits: each row dilated horizontally by half[dy], ORed into the rows dy above
+    and below. Shifting a row by w columns moves every word's bits by w % 64 and the words by w // 64,
+    carrying the bits that fall off a word into its neighbour."""
+    rows, count = words.shape
+    wide = words.copy()  # the rows dilated horizontally by w
+    out = np.zeros((rows, count), dtype=np.uint64)
     w = 0
-    for dy in range(R, -1, -1):
+    for dy in range(reach, -1, -1):
         while w < half[dy]:
             w += 1
-            h[w:] |= flat[:-w]
-            h[:-w] |= flat[w:]
-        shift = dy * width
-        if shift:
-            out[shift:] |= h[:-shift]
-            out[:-shift] |= h[shift:]
-        else:
-            out |= h
-    return out.reshape(padded.shape)[R:R + rows, R:R + cols].copy()
+            skip, bits = w // 64, np.uint64(w % 64)
+            carry = np.uint64(64) - bits  # used only when bits > 0: a shift by 64 is undefined
+            for r in range(rows):
+                for j in range(count):
+                    moved = np.uint64(0)
+                    if j - skip >= 0:  # towards higher columns
+                        moved |= words[r, j - skip] << bits
+                        if bits and j - skip - 1 >= 0:
+                            moved |= words[r, j - skip - 1] >> carry
+                    if j + skip < count:  # towards lower columns
+                        moved |= words[r, j + skip] >> bits
+                        if bits and j + skip + 1 < count:
+                            moved |= words[r, j + skip + 1] << carry
+                    wide[r, j] |= moved
+        for r in range(rows):
+            if r - dy >= 0:
+                for j in range(count):
+                    out[r - dy, j] |= wide[r, j]
+            if dy and r + dy < rows:
+                for j in range(count):
+                    out[r + dy, j] |= wide[r, j]
+    return out
 
 
 def corner_cuts(path: np.ndarray, blocked: np.ndarray) -> np.ndarray:
@@ -168,27 +202,136 @@ def astar(blocked_inflated: np.ndarray, start, goal, doubtful: bool = False) -> 
         return np.array([start], dtype=np.int64)
     if doubtful and not _connected(grid, start, goal):
         raise NoPath(UNREACHABLE)
-    path = _search(grid, start, goal, diagonal=True)
-    if path is None:
+    path = _search(grid, start, goal)
+    if not len(path):
         raise NoPath(UNREACHABLE)
     if not len(corner_cuts(path, grid)):
         return path
-    path = _search(_close_pinches(grid, keep=goal), start, goal, diagonal=True)
-    if path is not None and not len(corner_cuts(path, grid)):
+    path = _search(_close_pinches(grid, keep=goal), start, goal)
+    if len(path) and not len(corner_cuts(path, grid)):
         return path
     # Closing the pinches closed every way (a corridor turning at a pinch, or start and goal the
     # free pair of one): four-connected steps never cut a corner and find a way whenever one exists.
     path = _search(grid, start, goal, diagonal=False)
-    if path is None:
+    if not len(path):
         raise NoPath(UNREACHABLE, "start and goal are only connected through a corner")
     return path
 
 
-def _search(blocked: np.ndarray, start: tuple[int, int], goal: tuple[int, int], diagonal: bool) -> np.ndarray | None:
-    weights = np.ones(blocked.shape, dtype=np.float32)
-    np.copyto(weights, np.inf, where=blocked)
-    path = pyastar2d.astar_path(weights, start, goal, allow_diagonal=diagonal)
-    return None if path is None else path.astype(np.int64)
+def _search(blocked: np.ndarray, start: tuple[int, int], goal: tuple[int, int], diagonal: bool = True) -> np.ndarray:
+    """``_astar_cells`` (8-connected, or 4-connected if not ``diagonal``) with room in its heap for as many
+    entries as cells, or, in the rare search that needs more, for the most it can ever hold: a cell is pushed
+    only when its cost drops, which happens only when a neighbour is expanded for the first time (the
+    heuristic is consistent), so at most 8 times."""
+    blocked = np.ascontiguousarray(blocked)
+    width = blocked.shape[1]
+    for room in (blocked.size + 16, 8 * blocked.size + 1):
+        path, complete = _astar_cells(blocked, start[0] * width + start[1], goal[0] * width + goal[1],
+                                      np.empty(room, dtype=np.int64), diagonal)
+        if complete:
+            break
+    return path
+
+
+_ROW_STEPS = np.array([-1, -1, -1, 0, 0, 1, 1, 1])  # the neighbours in pyastar2d's order
+_COL_STEPS = np.array([-1, 0, 1, -1, 1, -1, 0, 1])
+
+
+@numba.njit(cache=True)
+def _astar_cells(blocked, start, goal, heap, diagonal=True):
+    """pyastar2d's A*, step for step: 8-connected, each free cell entered costs 1 (blocked ones are never
+    entered), priority = cost + the L-inf distance to the goal, neighbours in pyastar2d's order, and a
+    binary heap that breaks ties as libstdc++'s std::priority_queue (``_push``, ``_pop``), so the path is
+    the very one pyastar2d returns. Costs are whole numbers, as pyastar2d's float32 sums of ones are.
+    Flat cell indices in; out an (n, 2) array of (row, col), empty when the goal is unreachable, and
+    False if ``heap`` was too small to finish. Not ``diagonal``: 4-connected, with the L1 distance to the
+    goal as the heuristic (pyastar2d's ``allow_diagonal=False``)."""
+    h, w = blocked.shape
+    flat = blocked.reshape(-1)
+    costs = np.full(h * w, np.int32(1 << 30))  # 32 bits: less memory to fill and to read
+    parents = np.empty(h * w, dtype=np.int32)
+    costs[start] = 0
+    heap[0] = start  # priority << 32 | cell: the heap compares priorities only
+    size = 1
+    goal_row, goal_col = goal // w, goal % w
+    while size > 0:
+        cell = heap[0] & 0xFFFFFFFF
+        if cell == goal:
+            return _walk_back(parents, start, goal, w), True
+        size = _pop(heap, size)
+        row, col = cell // w, cell % w
+        cost = costs[cell] + 1
+        for k in range(8):
+            if not diagonal and _ROW_STEPS[k] != 0 and _COL_STEPS[k] != 0:
+                continue
+            r, c = row + _ROW_STEPS[k], col + _COL_STEPS[k]
+            if not (0 <= r < h and 0 <= c < w):
+                continue
+            nb = r * w + c
+            if flat[nb] or cost >= costs[nb]:
+                continue
+            if size == len(heap):
+                return np.empty((0, 2), dtype=np.int64), False
+            costs[nb] = cost
+            parents[nb] = cell
+            if diagonal:
+                priority = np.int64(cost + max(abs(r - goal_row), abs(c - goal_col)))
+            else:
+                priority = np.int64(cost + abs(r - goal_row) + abs(c - goal_col))
+            size = _push(heap, size, (priority << 32) | nb)
+    return np.empty((0, 2), dtype=np.int64), True
+
+
+@numba.njit(cache=True)
+def _push(heap, size, item):
+    """libstdc++'s push_heap for a min-heap on priority (``item >> 32``); returns the new size."""
+    hole = size
+    parent = (hole - 1) // 2
+    while hole > 0 and (heap[parent] >> 32) > (item >> 32):
+        heap[hole] = heap[parent]
+        hole = parent
+        parent = (hole - 1) // 2
+    heap[hole] = item
+    return size + 1
+
+
+@numba.njit(cache=True)
+def _pop(heap, size):
+    """libstdc++'s pop_heap (its __adjust_heap: the hole goes down to a leaf, then the last item is pushed
+    back up from there); returns the new size."""
+    size -= 1
+    last = heap[size]
+    hole = 0
+    child = 0
+    while child < (size - 1) // 2:
+        child = 2 * (child + 1)
+        if (heap[child] >> 32) > (heap[child - 1] >> 32):
+            child -= 1
+        heap[hole] = heap[child]
+        hole = child
+    if size % 2 == 0 and child == (size - 2) // 2:
+        child = 2 * (child + 1)
+        heap[hole] = heap[child - 1]
+        hole = child - 1
+    _push(heap, hole, last)
+    return size
+
+
+@numba.njit(cache=True)
+def _walk_back(parents, start, goal, w):
+    """The cells from start to goal, following parents back from the goal."""
+    count = 1
+    cell = goal
+    while cell != start:
+        cell = parents[cell]
+        count += 1
+    path = np.empty((count, 2), dtype=np.int64)
+    cell = goal
+    for i in range(count - 1, -1, -1):
+        path[i, 0], path[i, 1] = cell // w, cell % w
+        if i:
+            cell = parents[cell]
+    return path
 
 
 def _connected(blocked: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> bool:
@@ -210,8 +353,7 @@ def line_is_clear(blocked: np.ndarray, p, q) -> bool:
     whose range meets it (at most three) are tested. Cells beyond the grid's
     edge (a line along it may touch them at a corner) count as clear.
     """
-    (r0, c0), (r1, c1) = (int(v) for v in p), (int(v) for v in q)
-    return _supercover_is_clear(blocked, r0, c0, r1, c1)
+    return _supercover_is_clear(blocked, int(p[0]), int(p[1]), int(q[0]), int(q[1]))
 
 
 @numba.njit(cache=True)

@@ -25,6 +25,10 @@ class TlogWriter:
         """Append one packet received or sent at ``timestamp`` (seconds since the Unix epoch)."""
         self._file.write(_STAMP.pack(int(timestamp * 1e6)) + packet)
 
+    def write_records(self, records: bytes) -> None:
+        """Append records already in the format (each a timestamp and a packet), as many as given."""
+        self._file.write(records)
+
     def flush(self) -> None:
         self._file.flush()
 

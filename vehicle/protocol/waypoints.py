@@ -8,6 +8,7 @@ a waypoint where it was put.
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -20,30 +21,54 @@ class WaypointError(ValueError):
     pass
 
 
-def load_mission(path: str | Path) -> list[MissionItem]:
-    """Mission items from a QGC WPL file (item 0 is home)."""
+def load_mission(path: str | Path, source: str | None = None) -> list[MissionItem]:
+    """Mission items from a QGC WPL file (item 0 is home); ``source`` names it in errors (default: the path)."""
     from pymavlink import mavwp  # loaded when a mission file is read (mavutil comes with it)
 
+    source = source or str(path)
     loader = mavwp.MAVWPLoader()
     try:
         loader.load(str(path))
     except (OSError, UnicodeDecodeError) as error:
-        raise WaypointError(f"{path}: {error}") from None
+        raise WaypointError(f"{source}: {error.strerror if isinstance(error, OSError) else error}") from None
     except Exception as error:  # mavwp raises MAVWPError and bare ValueErrors/IndexErrors on bad lines
-        raise WaypointError(f"{path}: not a QGC WPL 110 mission ({error})") from None
-    return [MissionItem(command=w.command, lat=w.x, lon=w.y, alt=w.z, param1=w.param1, param2=w.param2,
-                        param3=w.param3, param4=w.param4, frame=w.frame, autocontinue=w.autocontinue)
-            for w in (loader.wp(i) for i in range(loader.count()))]
+        raise WaypointError(f"{source}: not a QGC WPL 110 mission ({error})") from None
+    items = [MissionItem(command=w.command, lat=w.x, lon=w.y, alt=w.z, param1=w.param1, param2=w.param2,
+                         param3=w.param3, param4=w.param4, frame=w.frame, autocontinue=w.autocontinue)
+             for w in (loader.wp(i) for i in range(loader.count()))]
+    _check(items, source)
+    return items
 
 
 def parse_mission(text: str) -> list[MissionItem]:
-    """Mission items from QGC WPL text (for uploads over HTTP)."""
+    """Mission items from QGC WPL text (an upload over HTTP); errors call it "the mission", never by the
+    temporary file mavwp reads it from."""
     with tempfile.NamedTemporaryFile("w", suffix=".waypoints", delete=False, encoding="utf-8") as handle:
         handle.write(text)
     try:
-        return load_mission(handle.name)
+        return load_mission(handle.name, "the mission")
     finally:
         os.unlink(handle.name)
+
+
+MAX_ITEMS = 65535  # MAVLink numbers mission items with 16 bits
+
+
+def _check(items: list[MissionItem], source: str) -> None:
+    """What MAVLink can carry: a bounded count, finite coordinates on Earth, fields that fit their types."""
+    if len(items) > MAX_ITEMS:
+        raise WaypointError(f"{source}: {len(items)} items; MAVLink carries at most {MAX_ITEMS}")
+    for seq, item in enumerate(items):
+        where = f"{source}: item {seq}"
+        if not all(math.isfinite(v) for v in (item.lat, item.lon, item.alt)):
+            raise WaypointError(f"{where}: its position is not a number")
+        if abs(item.lat) > 90 or abs(item.lon) > 180:
+            raise WaypointError(f"{where}: latitude {item.lat} or longitude {item.lon} is not on Earth")
+        if not (0 <= item.command <= 65535 and 0 <= item.frame <= 255 and item.autocontinue in (0, 1)):
+            raise WaypointError(f"{where}: command {item.command}, frame {item.frame} or autocontinue "
+                                f"{item.autocontinue} out of range")
+        if any(math.isinf(p) for p in (item.param1, item.param2, item.param3, item.param4)):
+            raise WaypointError(f"{where}: a parameter is infinite")
 
 
 def mission_text(items: list[MissionItem]) -> str:

@@ -4,6 +4,9 @@ It turns mode and command requests into a wanted velocity and heading for the
 body each step. Requests answer with a MAVLink result code (MAV_RESULT_*), so
 the MAVLink endpoint can pass them straight into COMMAND_ACK. Positions are
 scene metres; mission items carry latitude/longitude, converted with the datum.
+A copter's RTL climbs to ``rtl_altitude`` first (ArduPilot's RTL_ALT), flies
+home and lands. It never stops in silence: held back by an obstacle for a
+moment, it says where and what it is doing, once per stop.
 """
 
 from __future__ import annotations
@@ -34,10 +37,13 @@ DENIED = mav.MAV_RESULT_DENIED
 UNSUPPORTED = mav.MAV_RESULT_UNSUPPORTED
 FAILED = mav.MAV_RESULT_FAILED
 
+_PI, _TWO_PI = math.pi, 2 * math.pi
 TURN_FIRST = math.radians(12)  # heading error above which the vehicle turns in place before moving
 ARRIVED = 0.15  # m: a position target closer than this is reached
 VELOCITY_TIMEOUT = 3.0  # s: GUIDED velocity commands expire, as in ArduPilot
 LANDING_SPEED = 0.7  # m/s
+RTL_ALTITUDE = 15.0  # m above home a copter climbs to before flying home (ArduPilot's RTL_ALT default, 1500 cm)
+STOPPED_FOR = 1.0  # s held back by an obstacle before the autopilot says so
 
 
 @dataclass
@@ -52,7 +58,8 @@ class Event:
 
 class Autopilot:
     def __init__(self, kind: Kind, body: Body, home: tuple[float, float, float], datum: Datum,
-                 cruise_speed: float = 2.5, wp_radius: float = 1.0, avoidance: ObstacleDatabase | None = None):
+                 cruise_speed: float = 2.5, wp_radius: float = 1.0, avoidance: ObstacleDatabase | None = None,
+                 rtl_altitude: float = RTL_ALTITUDE):
         self.kind = kind
         self.body = body
         self.home = home  # x, y and ground height of the start
@@ -60,6 +67,7 @@ class Autopilot:
         self.cruise_speed = cruise_speed
         self.wp_radius = wp_radius
         self.avoidance = avoidance
+        self.rtl_altitude = rtl_altitude
         self.armed = False
         self.mode = "GUIDED" if kind is Kind.COPTER else "HOLD"
         self.mode_source = "boot"
@@ -81,7 +89,10 @@ class Autopilot:
         self._braking = False
         self._item_timer: float | None = None
         self._rtl_done = False
+        self._rtl_height: float | None = None  # the height RTL climbs to, set as RTL begins
         self._descending = False
+        self._blocked_since: float | None = None
+        self._told_blocked = False  # this stop has been reported
         self.wanted = (0.0, 0.0)  # horizontal velocity navigation asked for, before avoidance
         self.destination: tuple[float, float] | None = None  # where navigation is taking the vehicle now
         self.blocked = False  # avoidance holds the vehicle back from an obstacle
@@ -161,8 +172,14 @@ class Autopilot:
         self.mode_changes += 1
         self._target = self._velocity = self._yaw = self._altitude_goal = None
         self._rtl_done = False
+        self._rtl_height = None
         self._item_timer = None
         self.hold_here()
+        if name == "RTL" and self.kind is Kind.COPTER and self.armed:
+            height = max(self.body.pose.z, self.home[2] + self.rtl_altitude)
+            self._rtl_height = height
+            if height > self.body.pose.z + 0.5:
+                self.say(f"RTL: climbing to {height - self.home[2]:.0f} m, then home")
         if name == "AUTO":
             # a rover starts its mission on entering AUTO; a copter on the ground waits for MISSION_START
             self.mission_running = self.armed and (self.kind is Kind.ROVER or self.flying)
@@ -274,16 +291,41 @@ class Autopilot:
         self.wanted = (vx, vy)
         self.blocked = False
         if self.avoidance is not None and (vx or vy):
-            pose = self.body.pose
+            body = self.body
+            pose = body.pose
             limit = self.avoidance.speed_limit(pose.x, pose.y, vx, vy, self.time)
-            limit = max(0.0, limit - self.body.speed * dt)  # one step of reaction time
+            limit = max(0.0, limit - math.hypot(body.vx, body.vy) * dt)  # one step of reaction time
             wanted = math.hypot(vx, vy)
             if wanted > limit:
                 vx, vy = vx * limit / wanted, vy * limit / wanted
                 self.blocked = limit < 0.05
+        self._tell_if_stopped()
         self.body.step(dt, vx, vy, vz, yaw, ground, ground_normal)
         if self._descending and not self.flying:
             self._touchdown()
+
+    def _tell_if_stopped(self) -> None:
+        """Say once, after STOPPED_FOR, that an obstacle holds the vehicle back from where it is going."""
+        if not self.blocked or self.destination is None:
+            self._blocked_since, self._told_blocked = None, False
+            return
+        if self._blocked_since is None:
+            self._blocked_since = self.time
+        if self._told_blocked or self.time - self._blocked_since < STOPPED_FOR:
+            return
+        self._told_blocked = True
+        pose = self.body.pose
+        wanted_x, wanted_y = self.wanted
+        found = self.avoidance.obstacle_ahead(pose.x, pose.y, wanted_x, wanted_y, self.time)
+        where = "" if found is None else f"obstacle {found[0]:.1f} m ahead at ({found[1]:.1f}, {found[2]:.1f}); "
+        tx, ty = self.destination
+        if self.mode == "RTL":
+            doing = "holding; climb higher or steer it round" if self.kind is Kind.COPTER else "holding"
+            self.say(f"RTL: {where}cannot reach home, {doing}", mav.MAV_SEVERITY_WARNING)
+        elif self.mode == "GUIDED":
+            self.say(f"Go here: {where}stopped short of ({tx:.1f}, {ty:.1f})", mav.MAV_SEVERITY_WARNING)
+        else:
+            self.say(f"{self.mode}: {where}stopped short of ({tx:.1f}, {ty:.1f})", mav.MAV_SEVERITY_WARNING)
 
     def _touchdown(self) -> None:
         """A copter that was landing is on the ground: finish the item and disarm, as ArduPilot does."""
@@ -353,16 +395,23 @@ class Autopilot:
     def _fly_to(self, x: float, y: float, z: float, dt: float, speed: float | None = None,
                 turn_first: bool = True):
         """Velocity and heading that bring the body to (x, y, z): turn first, then move, braking to arrive."""
-        pose = self.body.pose
+        # run every step: _climb_towards, heading_of and wrap_pi inlined (the same operations)
+        body = self.body
+        pose = body.pose
         self.destination = (x, y)
         dx, dy = x - pose.x, y - pose.y
         distance = math.hypot(dx, dy)
-        vz = self._climb_towards(z)
-        arrived = distance < ARRIVED and abs(z - pose.z) < 0.2 if self.kind is Kind.COPTER else distance < ARRIVED
+        copter = self.kind is Kind.COPTER
+        if copter:
+            climb = body.limits.climb_rate
+            vz = max(-climb, min(climb, 2.0 * (z - pose.z)))
+        else:
+            vz = 0.0
+        arrived = distance < ARRIVED and abs(z - pose.z) < 0.2 if copter else distance < ARRIVED
         if distance < ARRIVED:
             return 0.0, 0.0, vz, None, arrived
-        heading = heading_of(dx, dy)
-        if turn_first and distance > 0.5 and abs(wrap_pi(heading - pose.yaw)) > TURN_FIRST:
+        heading = math.atan2(dx, dy) % _TWO_PI
+        if turn_first and distance > 0.5 and abs((heading - pose.yaw + _PI) % _TWO_PI - _PI) > TURN_FIRST:
             return 0.0, 0.0, vz, heading, False
         cruise = self.speed if speed is None else speed
         wanted = min(cruise, math.sqrt(2 * self.body.limits.accel * distance) * 0.9, distance / dt)
@@ -373,6 +422,11 @@ class Autopilot:
     def _return_home(self, dt):
         hx, hy, _ = self.home
         z = self.body.pose.z
+        if self._rtl_height is not None and not self._rtl_done:  # a copter climbs where it is first, as ArduPilot's
+            if self._rtl_height - z > 0.2:
+                vx, vy, _, yaw = self._hold_position(dt)
+                return vx, vy, self._climb_towards(self._rtl_height), yaw
+            z = self._rtl_height
         if self._rtl_done:
             return self._land_here(dt) if self.kind is Kind.COPTER else self._hold_position(dt)
         vx, vy, vz, yaw, arrived = self._fly_to(hx, hy, z, dt)

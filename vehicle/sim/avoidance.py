@@ -58,6 +58,23 @@ class ObstacleDatabase:
         return math.sqrt(2 * self.accel * gap) if gap > 0 else 0.0
 
 
+    def obstacle_ahead(self, x: float, y: float, vx: float, vy: float, now: float):
+        """The nearest remembered obstacle in the corridor along (vx, vy): (distance, x, y), or None. Asked
+        rarely (to say what holds the vehicle back), so plain numpy."""
+        speed = math.hypot(vx, vy)
+        if speed < 1e-9:
+            return None
+        ux, uy = vx / speed, vy / speed
+        live = self._times > now - self.lifetime
+        dx, dy = self._points[live, 0] - x, self._points[live, 1] - y
+        ahead = dx * ux + dy * uy
+        inside = (ahead > 0) & (np.abs(dx * uy - dy * ux) < self.body_radius + self.margin)
+        if not inside.any():
+            return None
+        k = np.flatnonzero(inside)[np.argmin(ahead[inside])]
+        return float(np.hypot(dx[k], dy[k])), float(x + dx[k]), float(y + dy[k])
+
+
 @numba.njit(cache=True)
 def _nearest_and_ahead(points, times, oldest, x, y, ux, uy, reach, corridor):
     """Over the points remembered after ``oldest``: the distance to the nearest, and how far (less the

@@ -12,11 +12,13 @@ import math
 from dataclasses import dataclass, field
 
 from vehicle.protocol.frames import Pose
-from vehicle.protocol.geodesy import heading_vector, wrap_pi
+from vehicle.protocol.geodesy import heading_vector
 from vehicle.protocol.modes import Kind
 
 GRAVITY = 9.81
 MAX_TILT = math.radians(30)
+_PI, _TWO_PI = math.pi, 2 * math.pi
+_hypot, _sin, _cos, _atan2 = math.hypot, math.sin, math.cos, math.atan2
 
 
 @dataclass
@@ -56,33 +58,39 @@ class Body:
 
         ``falling`` is a copter without thrust (disarmed in the air): it drops freely.
         """
+        # Run every simulated step, so written with locals and with the small helpers it uses inlined
+        # (wrap_pi, heading_vector, rest_height, _tilt_with_acceleration): the same operations in the same order.
         lim = self.limits
+        pose = self.pose
         if yaw is not None:
-            turn = max(-lim.turn_rate * dt, min(lim.turn_rate * dt, wrap_pi(yaw - self.pose.yaw)))
+            most = lim.turn_rate * dt
+            turn = max(-most, min(most, (yaw - pose.yaw + _PI) % _TWO_PI - _PI))
         else:
             turn = 0.0
-        self.pose.yaw = (self.pose.yaw + turn) % (2 * math.pi)
+        heading = (pose.yaw + turn) % _TWO_PI
+        pose.yaw = heading
         self.yaw_rate = turn / dt
 
-        wanted = math.hypot(vx, vy)
+        wanted = _hypot(vx, vy)
         if wanted > lim.max_speed:
             vx, vy = vx * lim.max_speed / wanted, vy * lim.max_speed / wanted
-        if self.kind is Kind.ROVER:  # wheels: no sideways motion, no reversing
-            hx, hy = heading_vector(self.pose.yaw)
+        rover = self.kind is Kind.ROVER
+        if rover:  # wheels: no sideways motion, no reversing
+            hx, hy = _sin(heading), _cos(heading)
             along = max(0.0, vx * hx + vy * hy)
             vx, vy = along * hx, along * hy
         dvx, dvy = vx - self.vx, vy - self.vy
-        change = math.hypot(dvx, dvy)
+        change = _hypot(dvx, dvy)
         max_change = lim.accel * dt
         if change > max_change:
             dvx, dvy = dvx * max_change / change, dvy * max_change / change
         ax, ay = dvx / dt, dvy / dt
         self.vx += dvx
         self.vy += dvy
-        self.pose.x += self.vx * dt
-        self.pose.y += self.vy * dt
+        pose.x += self.vx * dt
+        pose.y += self.vy * dt
 
-        if self.kind is Kind.ROVER:
+        if rover:
             self.vz = 0.0
             self._settle_on_ground(ground, ground_normal)
         else:
@@ -90,10 +98,16 @@ class Body:
                 self.vz -= GRAVITY * dt
             else:
                 self.vz = max(-lim.climb_rate, min(lim.climb_rate, vz))
-            self.pose.z = self.pose.z + self.vz * dt
-            if self.pose.z <= self.rest_height(ground):
-                self.pose.z, self.vz = self.rest_height(ground), 0.0
-            self._tilt_with_acceleration(ax, ay)
+            pose.z = pose.z + self.vz * dt
+            rest = ground + lim.radius + lim.ground_clearance
+            if pose.z <= rest:
+                pose.z, self.vz = rest, 0.0
+            # a multirotor leans into its acceleration: nose down to speed up, right down to go right
+            hx, hy = _sin(heading), _cos(heading)
+            forward = ax * hx + ay * hy
+            right = ax * hy - ay * hx
+            pose.pitch = max(-MAX_TILT, min(MAX_TILT, -_atan2(forward, GRAVITY)))
+            pose.roll = max(-MAX_TILT, min(MAX_TILT, _atan2(right, GRAVITY)))
 
     def _settle_on_ground(self, ground: float, normal: tuple[float, float, float]) -> None:
         nx, ny, nz = normal
@@ -103,14 +117,6 @@ class Body:
         self.pose.z = self.rest_height(ground)
         self.pose.pitch = math.atan(-(nx * hx + ny * hy) / nz)
         self.pose.roll = math.atan((nx * rx + ny * ry) / nz)
-
-    def _tilt_with_acceleration(self, ax: float, ay: float) -> None:
-        """A multirotor leans into its acceleration: nose down to speed up, right down to go right."""
-        hx, hy = heading_vector(self.pose.yaw)
-        forward = ax * hx + ay * hy
-        right = ax * hy - ay * hx
-        self.pose.pitch = max(-MAX_TILT, min(MAX_TILT, -math.atan2(forward, GRAVITY)))
-        self.pose.roll = max(-MAX_TILT, min(MAX_TILT, math.atan2(right, GRAVITY)))
 
     def stop(self) -> None:
         self.vx = self.vy = self.vz = self.yaw_rate = 0.0

@@ -96,14 +96,14 @@ class Simulation:
 
     def ground_under(self, x: float, y: float, z: float) -> tuple[float, tuple[float, float, float]]:
         """Height and normal of the surface below a point (a rover's wheels may climb a small step)."""
-        origin = np.array([[x, y, z + STEP_HEIGHT]])
-        distance, face = self.caster.cast(origin, np.array([[0.0, 0.0, -1.0]]))
-        if not np.isfinite(distance[0]):
+        top = z + STEP_HEIGHT
+        distance, face = self.caster.cast_down(x, y, top)
+        if not math.isfinite(distance):
             return self._ground[0], (0.0, 0.0, 1.0)
-        normal = self.caster.face_normals[face[0]]
-        if normal[2] < 0:
-            normal = -normal
-        return float(origin[0, 2] - distance[0]), (float(normal[0]), float(normal[1]), float(normal[2]))
+        nx, ny, nz = self.caster.face_normals[face].tolist()
+        if nz < 0:
+            nx, ny, nz = -nx, -ny, -nz
+        return top - distance, (nx, ny, nz)
 
     def _ground_stale(self) -> bool:
         """A copter high above the ground it last measured need not look again until it moves a metre."""
@@ -137,7 +137,8 @@ class Simulation:
             self.autopilot.armed = False
             return []
         self.distance_travelled += math.dist(before, after)
-        self.battery.drain(self.dt, self.autopilot.armed, self.autopilot.flying, self.body.speed, self.body.vz)
+        autopilot, body = self.autopilot, self.body
+        self.battery.drain(self.dt, autopilot.armed, autopilot.flying, math.hypot(body.vx, body.vy), body.vz)
         if self.time + 1e-9 < self._next_reading:
             return []
         self._next_reading += 1.0 / self.sonar_rate
@@ -145,11 +146,14 @@ class Simulation:
             if sensor.servo is not None and sensor.servo.channel in self.autopilot.servos:
                 sensor.servo.pwm = self.autopilot.servos[sensor.servo.channel]
         readings = self.sonars.read(pose, self.time)
-        for reading in readings:
-            if reading.distance is not None:
-                x, y, z = reading.hit.tolist()
-                if abs(z - pose.z) <= 1.0:
-                    self.avoidance.add(x, y, self.time)
+        if readings:
+            ox, oy, oz = readings[0].origin.tolist()  # one origin for every sensor of a read
+            for reading in readings:
+                distance = reading.distance
+                if distance is not None:
+                    dx, dy, dz = reading.direction.tolist()  # reading.hit, in plain floats
+                    if abs(oz + dz * distance - pose.z) <= 1.0:
+                        self.avoidance.add(ox + dx * distance, oy + dy * distance, self.time)
         return readings
 
     def run_for(self, seconds: float) -> list[Reading]:

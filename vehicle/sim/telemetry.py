@@ -75,6 +75,11 @@ class Telemetry:
         out += self.events(now)
         return out
 
+    def next_due(self) -> float:
+        """When the next periodic message falls due (inf if none is sent): until then, and while the autopilot
+        reports no events, ``tick`` has nothing to send."""
+        return min((self._due[i] for i, interval in self.intervals.items() if interval > 0), default=math.inf)
+
     def builders(self) -> dict:
         return {
             mavlink.MAVLINK_MSG_ID_HEARTBEAT: self.heartbeat,

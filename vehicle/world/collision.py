@@ -52,6 +52,7 @@ class TriangleGrid:
         self._lo = triangles.min(axis=1) if len(triangles) else np.zeros((0, 3))
         self._hi = triangles.max(axis=1) if len(triangles) else np.zeros((0, 3))
         self._grid = self._build_grid()
+        self._blocks: dict[tuple[int, int, int, int], np.ndarray] = {}  # candidates by block of cells
 
     def _build_grid(self) -> dict[tuple[int, int], np.ndarray]:
         """Triangles by cell; big ones (ground planes) go in ``_large``, checked everywhere."""
@@ -77,12 +78,19 @@ class TriangleGrid:
 
     def candidates(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Indices of triangles whose bounding box overlaps the box [lo, hi]."""
-        i0, j0 = np.floor(lo[:2] / self.cell_size).astype(int)
-        i1, j1 = np.floor(hi[:2] / self.cell_size).astype(int)
-        found = [self._grid[key] for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)
-                 if (key := (i, j)) in self._grid]
-        found.append(self._large)
-        ids = np.unique(np.concatenate(found))
+        size = self.cell_size
+        block = (math.floor(lo[0] / size), math.floor(lo[1] / size), math.floor(hi[0] / size),
+                 math.floor(hi[1] / size))
+        ids = self._blocks.get(block)
+        if ids is None:  # the grid never changes: each block of cells is gathered once
+            i0, j0, i1, j1 = block
+            found = [self._grid[key] for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)
+                     if (key := (i, j)) in self._grid]
+            found.append(self._large)
+            ids = np.unique(np.concatenate(found))
+            if len(self._blocks) >= 4096:
+                self._blocks.clear()
+            self._blocks[block] = ids
         overlap = np.all((self._lo[ids] <= hi) & (self._hi[ids] >= lo), axis=1)
         return ids[overlap]
 

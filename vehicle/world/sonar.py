@@ -77,6 +77,7 @@ class SonarArray:
         self._cos_critical = np.array([s._cos_critical for s in sensors])
         self._min_range = np.array([s.min_range for s in sensors])
         self._servos = any(s.servo is not None for s in sensors)
+        self._yaw_offsets = [s.yaw_offset for s in sensors]  # fixed unless a servo turns one
 
     def _body_rays(self) -> tuple[np.ndarray, np.ndarray]:
         """All sensors' rays and beam axes in the body frame; recomputed only when a servo moved."""
@@ -93,22 +94,26 @@ class SonarArray:
     def read(self, pose: Pose, time: float) -> list[Reading]:
         if not self.sensors:
             return []
-        origin = np.array((pose.x, pose.y, pose.z))
-        body = body_to_world(pose)
+        xyz = (pose.x, pose.y, pose.z)
+        origin = np.array(xyz)
+        to_world = body_to_world(pose).T
         rays, axes = self._body_rays()
-        directions = rays @ body.T
-        distance, faces = self.caster.cast_from(origin, directions)
+        directions = rays @ to_world
+        distance, faces = self.caster.cast_from(xyz, directions)
         nearest = _nearest_echoes(distance, faces, directions, self.caster.face_normals, self._first_ray,
                                   self._cos_critical, self._min_range).tolist()
-        world_axes = axes @ body.T
+        world_axes = axes @ to_world
         readings = []
         for index, sensor in enumerate(self.sensors):
-            value = nearest[index] if nearest[index] <= sensor.max_range else None
-            if value is not None and sensor.noise > 0:
+            value = nearest[index]
+            if value > sensor.max_range:
+                value = None
+            elif sensor.noise > 0:
                 noisy = value + self.rng.normal(0.0, sensor.noise)
                 value = float(min(sensor.max_range, max(sensor.min_range, noisy)))
+            yaw_offset = sensor.yaw_offset if self._servos else self._yaw_offsets[index]
             readings.append(Reading(time, index, origin, world_axes[index], value, sensor.max_range,
-                                    sensor.yaw_offset, sensor.beam_angle, sensor.min_range, sensor.mount_pitch))
+                                    yaw_offset, sensor.beam_angle, sensor.min_range, sensor.mount_pitch))
         return readings
 
 

@@ -7,12 +7,17 @@ onto it, which keeps it around the outside of objects. We add two things: goals
 near places already visited are not considered, and goals among unknown cells
 score higher, so it keeps finding new ground (the next room, the far side of a
 building). It ends when no goal is left, or when its time budget is spent.
+
+Which sweep headings lie in the arcs beside each echo is one loop over all
+pairs of a sweep (a few hundred readings): numpy built it from a dozen n x n
+temporaries, a tenth of a Search's time, so the loop is compiled with numba.
 """
 
 from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from vehicle.agent.missions.base import Mission, Status
@@ -129,7 +134,41 @@ class Search(Mission):
 def _means_in_arcs(headings: np.ndarray, values: np.ndarray, start: float, end: float) -> np.ndarray:
     """For each heading h, the mean of the values whose heading lies in the arc [h + start, h + end]
     (radians, any period), 0 where none does."""
-    starts, ends = headings + start, headings + end
-    inside = (headings[None, :] - starts[:, None]) % (2 * math.pi) <= (ends - starts)[:, None]
-    count = inside.sum(axis=1)
+    inside, count = _arc_mask(np.ascontiguousarray(headings, dtype=np.float64), float(start), float(end))
     return np.where(count > 0, (inside @ values) / np.maximum(count, 1), 0.0)
+
+
+@numba.njit(cache=True)
+def _arc_mask(headings, start, end):
+    """inside[i, j] = 1.0 where heading j lies in the arc of heading i, that is where
+    ``(h[j] - (h[i] + start)) % 2pi <= (h[i] + end) - (h[i] + start)``, and the count of each row. As float64,
+    so that ``inside @ values`` multiplies the same matrix numpy made of a boolean mask."""
+    n = len(headings)
+    inside = np.zeros((n, n))
+    count = np.zeros(n, dtype=np.int64)
+    turn = 2 * math.pi
+    for i in range(n):
+        low = headings[i] + start
+        width = (headings[i] + end) - low
+        for j in range(n):
+            if _wrap(headings[j] - low, turn) <= width:
+                inside[i, j] = 1.0
+                count[i] += 1
+    return inside, count
+
+
+@numba.njit(cache=True)
+def _wrap(x, turn):
+    """Python's ``x % turn`` (turn > 0) without a call to fmod where |x| < 2 turn: fmod is then x, x - turn
+    or x + turn, each exact (Sterbenz), and Python adds turn to a negative remainder."""
+    if 0.0 < x < turn:
+        return x
+    if x == 0.0:
+        return 0.0  # +0.0, as Python gives for -0.0 too
+    if turn <= x < 2.0 * turn:
+        return x - turn
+    if -turn <= x < 0.0:
+        return x + turn
+    if -2.0 * turn < x < -turn:
+        return (x + turn) + turn
+    return x % turn

@@ -1,0 +1,421 @@
+"""The web app attacked: each test is one attack, run over real sockets against a real station and vehicle.
+
+A token thief, a cross-site page, a DNS-rebinding page, a huge or endless
+body, numbers JSON should never carry, a second viewer racing the operator's:
+the station must answer each with a clear 4xx (or a refused websocket) and
+keep serving the operator. The attacks that need a browser (script injected
+through the 3D view, a socket to a foreign server) run in headless Chromium.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+from pathlib import Path
+
+import httpx
+import msgspec
+import pytest
+import viser
+import websockets
+from harness import CHROMIUM, TOKEN, RunningStation, launch_chromium, small_scene, start_sim, wait_wall
+from websockets.sync.client import connect as ws_connect
+
+from groundstation.security import MAX_BODY, Access
+
+VIEWER = "operator-viewer-0123456789abcdef"
+SUBPROTOCOL = f"viser-v{viser.__version__}"
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return small_scene()
+
+
+@pytest.fixture(scope="module")
+def station(scene):
+    with RunningStation(scene, None) as running:
+        yield running
+
+
+@pytest.fixture(scope="module")
+def api(station):
+    with station.api() as client:
+        yield client
+
+
+@pytest.fixture(scope="module")
+def vehicle(station, api, scene):
+    """Vehicle 1, on the ground and disarmed; its onboard agent streams its map (its space: 60 m square)."""
+    with start_sim(station, scene, sysid=1, start=(0.0, 0.0)) as sim:
+        api.wait_vehicle(1, lambda v: v["position"] is not None and v["map"]["source"] == "vehicle",
+                         sim_timeout=20, what="position and the vehicle's own map")
+        yield sim
+
+
+def ws_url(station: RunningStation, path: str) -> str:
+    return station.base.replace("http://", "ws://") + path
+
+
+def raw_request(station: RunningStation, head: str, body: bytes = b"", timeout: float = 5.0) -> bytes:
+    """Send bytes as they are (no client library to tidy them up); whatever the server answers first."""
+    with socket.create_connection(("127.0.0.1", station.http_port), timeout=timeout) as raw:
+        raw.sendall(head.encode("latin-1") + body)
+        try:
+            return raw.recv(65536)
+        except TimeoutError:
+            return b""
+
+
+# ---- 1. the 3D view must not connect anywhere else, nor run what a viser server sends ----------------------
+def test_the_view_refuses_a_websocket_query(station):
+    for path in ("/viz/", f"/viz/v/{VIEWER}/"):
+        response = httpx.get(f"{station.base}{path}", params={"websocket": "ws://evil.example:8080"})
+        assert response.status_code == 400, path
+        assert "only to this station" in response.text
+    assert httpx.get(f"{station.base}/viz/v/short/").status_code == 404  # not a viewer id
+
+
+def test_every_response_says_nosniff_and_has_a_policy(station, api):
+    for path in ("/", "/static/app.js", "/api/vehicles", "/api/nothing-here", "/viz/", "/docs"):
+        response = api.get(path)
+        assert response.headers["x-content-type-options"] == "nosniff", path
+        policy = response.headers["content-security-policy"]
+        assert "frame-ancestors 'self'" in policy or "default-src 'none'" in policy, path
+    view = api.get("/viz/").headers["content-security-policy"]
+    script = next(part for part in view.split(";") if part.strip().startswith("script-src"))
+    assert "'unsafe-inline'" not in script and "'unsafe-eval'" not in script and "'sha256-" in script
+    assert "connect-src 'self'" in view
+
+
+# ---- 6. the token before the body; bodies capped --------------------------------------------------------------
+def test_a_huge_body_without_the_token_is_refused_unread(station):
+    head = (f"POST /api/vehicles/1/commands HTTP/1.1\r\nHost: 127.0.0.1:{station.http_port}\r\n"
+            "Content-Type: application/json\r\nContent-Length: 1000000000\r\n\r\n")
+    answer = raw_request(station, head)  # no body sent at all: an answer now means it was never waited for
+    assert answer.startswith(b"HTTP/1.1 401"), answer[:200]
+
+
+def test_a_body_over_the_cap_is_refused_even_with_the_token(station):
+    head = (f"PUT /api/vehicles/1/mission HTTP/1.1\r\nHost: 127.0.0.1:{station.http_port}\r\n"
+            f"Authorization: Bearer {TOKEN}\r\nContent-Length: {MAX_BODY + 1}\r\n\r\n")
+    assert raw_request(station, head).startswith(b"HTTP/1.1 413")
+
+
+def test_a_chunked_body_is_cut_off_at_the_cap(station, vehicle):
+    head = (f"PUT /api/vehicles/1/mission HTTP/1.1\r\nHost: 127.0.0.1:{station.http_port}\r\n"
+            f"Authorization: Bearer {TOKEN}\r\nTransfer-Encoding: chunked\r\n\r\n")
+    chunk = b"x" * (1 << 20)
+    answer = b""
+    with socket.create_connection(("127.0.0.1", station.http_port), timeout=10) as raw:
+        raw.sendall(head.encode())
+        try:
+            for _ in range(MAX_BODY // len(chunk) + 4):
+                raw.sendall(f"{len(chunk):x}\r\n".encode() + chunk + b"\r\n")
+        except (BrokenPipeError, ConnectionResetError):
+            pass  # it stopped listening: the answer is waiting
+        answer = raw.recv(65536)
+    assert answer.startswith(b"HTTP/1.1 413"), answer[:200]
+
+
+# ---- 7. a viewer's clicks reach that viewer's page only -------------------------------------------------------
+def camera_message() -> bytes:
+    return msgspec.msgpack.encode({
+        "type": "ViewerCameraMessage", "wxyz": [1.0, 0.0, 0.0, 0.0], "position": [0.0, -10.0, 10.0], "fov": 1.0,
+        "near": 0.01, "far": 1000.0, "image_height": 480, "image_width": 640, "look_at": [0.0, 0.0, 0.0],
+        "up_direction": [0.0, 0.0, 1.0]})
+
+
+def click_message(x: float, y: float) -> bytes:
+    return msgspec.msgpack.encode({
+        "type": "ScenePointerMessage", "event_type": "click", "ray_origin": [x, y, 30.0],
+        "ray_direction": [0.0, 0.0, -1.0], "screen_pos": [[0.5, 0.5]], "modifier": None})
+
+
+def targets(stream, seconds: float) -> list[dict]:
+    """The target notes a /ws stream brings within ``seconds``."""
+    found, deadline = [], time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            frame = json.loads(stream.recv(timeout=max(0.01, deadline - time.monotonic())))
+        except TimeoutError:
+            break
+        if frame.get("type") == "target":
+            found.append(frame)
+    return found
+
+
+def test_a_racing_client_cannot_become_the_operators_viewer(station):
+    clients = station.station.view.server.get_clients
+    with ws_connect(ws_url(station, f"/ws?viewer={VIEWER}")) as stream, \
+            ws_connect(ws_url(station, "/viz"), subprotocols=[SUBPROTOCOL], max_size=None) as intruder, \
+            ws_connect(ws_url(station, f"/viz/v/{VIEWER}"), subprotocols=[SUBPROTOCOL], max_size=None) as view:
+        before = len(clients())
+        intruder.send(camera_message())  # its first message while the operator's view is connecting
+        wait_wall(lambda: len(clients()) == before + 1, 10, "viser knows the intruder")
+        view.send(camera_message())
+        wait_wall(lambda: VIEWER in station.station.proxy.viewers.values(), 10, "the operator's view is tied")
+        intruder.send(click_message(3.0, -2.0))
+        assert targets(stream, 2.0) == []  # the intruder's click is nobody's target
+        view.send(click_message(-2.0, 1.0))
+        assert [(t["x"], t["y"]) for t in targets(stream, 5.0)] == [(-2.0, 1.0)]
+        with pytest.raises(websockets.InvalidStatus):  # a second connection cannot claim a live viewer id
+            ws_connect(ws_url(station, f"/viz/v/{VIEWER}"), subprotocols=[SUBPROTOCOL]).recv(timeout=5)
+    wait_wall(lambda: not station.station.proxy.viewers, 10, "ties released when the views close")
+
+
+def test_garbage_on_the_view_socket_harms_no_one_else(station):
+    for junk in (b"\xc1\xff\x00", "text viser never expects", msgspec.msgpack.encode({"type": "NoSuchMessage"})):
+        with ws_connect(ws_url(station, "/viz"), subprotocols=[SUBPROTOCOL]) as hostile:
+            hostile.send(junk)
+            time.sleep(0.2)
+    with ws_connect(ws_url(station, "/viz"), subprotocols=[SUBPROTOCOL], max_size=None) as view:
+        view.send(camera_message())
+        assert isinstance(view.recv(timeout=10), bytes)  # viser still serves a new client
+
+
+# ---- 8. Host and Origin ---------------------------------------------------------------------------------------
+def test_a_foreign_host_name_is_refused(station, api):
+    for path in ("/", "/api/vehicles", "/api/recordings"):
+        response = api.get(path, headers={"Host": "rebind.attacker.example"})
+        assert response.status_code == 421, path
+    assert api.get("/api/vehicles", headers={"Host": f"localhost:{station.http_port}"}).status_code == 200
+    assert api.get("/api/vehicles", headers={"Host": f"[::1]:{station.http_port}"}).status_code == 200
+    answer = raw_request(station, "GET /api/vehicles HTTP/1.0\r\n\r\n")  # no Host at all
+    assert answer.startswith(b"HTTP/1.1 421"), answer[:100]
+
+
+def test_a_name_given_with_allowed_host_is_served(scene):
+    with RunningStation(None, None, access=Access(TOKEN, allowed_hosts=frozenset({"station.lan"}))) as running:
+        assert httpx.get(f"{running.base}/api/health", headers={"Host": "station.lan:80"}).status_code == 200
+        assert httpx.get(f"{running.base}/api/health", headers={"Host": "other.lan"}).status_code == 421
+
+
+def test_websockets_from_a_foreign_origin_are_refused(station):
+    for path in ("/ws", "/viz", f"/viz/v/{VIEWER}"):
+        with pytest.raises(websockets.InvalidStatus) as refused:
+            ws_connect(ws_url(station, path), origin="http://evil.example", subprotocols=[SUBPROTOCOL])
+        assert refused.value.response.status_code == 403, path
+    with ws_connect(ws_url(station, "/ws"), origin=station.base) as own:  # the station's own page
+        assert json.loads(own.recv(timeout=5))["type"] == "vehicles"
+
+
+# ---- 9. 4xx, never 500 ------------------------------------------------------------------------------------
+def post_raw_json(api, text: str, sysid: int = 1, headers: dict | None = None) -> httpx.Response:
+    return api.post(f"/api/vehicles/{sysid}/commands", content=text.encode("utf-8"),
+                    headers={"Content-Type": "application/json", **(api.operator if headers is None else headers)})
+
+
+@pytest.mark.parametrize("body", [
+    '{"action": "takeoff", "altitude": NaN}', '{"action": "takeoff", "altitude": Infinity}',
+    '{"action": "takeoff", "altitude": 1e300}', '{"action": "speed", "speed": NaN}',
+    '{"action": "speed", "speed": -Infinity}', '{"action": "goto", "x": NaN, "y": 0}',
+    '{"action": "goto", "x": 0, "y": Infinity}', '{"action": "goto", "x": 1e7, "y": 0}',
+    '{"action": "goto", "x": 1e300, "y": 1e300}', '{"action": "kill", "confirm": "yes"}',
+    '{"action": "kill", "confirm": 1}', '{"action": "set_mode", "mode": "' + "G" * 5000 + '"}',
+])
+def test_unusable_numbers_and_lax_truths_are_422(api, vehicle, body):
+    response = post_raw_json(api, body)
+    assert response.status_code == 422, (body[:60], response.status_code, response.text[:200])
+    assert "NaN" not in response.text and "Infinity" not in response.text
+    assert response.json()["detail"]
+
+
+def test_kill_needs_json_true(api, vehicle):
+    assert post_raw_json(api, '{"action": "kill", "confirm": true}').status_code == 200
+
+
+def test_a_goto_outside_the_vehicles_space_is_refused_before_sending(station, api, vehicle):
+    sent = station.station.link.stats["sent"]
+    response = api.command(1, action="goto", x=500.0, y=0.0)
+    assert response.status_code == 422
+    assert "outside vehicle 1's space" in response.json()["detail"]
+    time.sleep(0.2)
+    beats = station.station.link.stats["sent"] - sent
+    assert beats <= 2  # at most the heartbeats of the moment: no command went out
+
+
+def test_a_non_ascii_token_is_401(station):
+    head = (f"GET /api/auth HTTP/1.1\r\nHost: 127.0.0.1:{station.http_port}\r\n").encode() + \
+        "Authorization: Bearer ÿÿ-токен\r\n\r\n".encode()
+    with socket.create_connection(("127.0.0.1", station.http_port), timeout=5) as raw:
+        raw.sendall(head)
+        assert raw.recv(65536).startswith(b"HTTP/1.1 401")
+
+
+def test_replay_seek_rejects_nan(api):
+    response = api.post("/api/replay/control", content=b'{"seek": NaN}',
+                        headers={"Content-Type": "application/json", **api.operator})
+    assert response.status_code == 422
+
+
+@pytest.mark.parametrize(("text", "reason"), [
+    ("QGC WPL 110\n" + "".join(f"{i}\t0\t3\t16\t0\t0\t0\t0\t-35.36\t149.16\t10\t1\n" for i in range(65536)),
+     "at most 65535"),
+    ("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\tnan\t149.16\t0\t1\n", "not a number"),
+    ("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.36\tinf\t0\t1\n", "not a number"),
+    ("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-135.36\t149.16\t0\t1\n", "not on Earth"),
+    ("QGC WPL 110\n0 1 0 16 0 0 0\n", "not a QGC WPL 110 mission"),
+])
+def test_a_mission_mavlink_cannot_carry_is_422_naming_no_path(api, vehicle, text, reason):
+    response = api.put("/api/vehicles/1/mission", content=text.encode(), headers=api.operator)
+    assert response.status_code == 422
+    detail = response.json()["detail"]
+    assert reason in detail and "/tmp" not in detail and ".waypoints" not in detail
+
+
+# ---- 10. nothing left behind ----------------------------------------------------------------------------------
+def test_streams_leave_nothing_behind_and_are_capped(station, monkeypatch):
+    import groundstation.app as app
+
+    for n in range(200):
+        with ws_connect(ws_url(station, f"/ws?viewer=passing-viewer-{n:06d}")) as passing:
+            passing.recv(timeout=5)
+    wait_wall(lambda: not station.station._inboxes, 10, "every stream's inbox forgotten")
+    with pytest.raises(websockets.InvalidStatus):
+        ws_connect(ws_url(station, "/ws?viewer=bad id!"))
+    monkeypatch.setattr(app, "MAX_STREAMS", 2)
+    with ws_connect(ws_url(station, "/ws")), ws_connect(ws_url(station, "/ws")):
+        with pytest.raises(websockets.InvalidStatus) as refused:
+            ws_connect(ws_url(station, "/ws"))
+        assert refused.value.response.status_code == 403
+    with ws_connect(ws_url(station, "/ws")) as later:  # room again once they went
+        assert json.loads(later.recv(timeout=5))["type"] == "vehicles"
+
+
+# ---- viewers beyond loopback ----------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def guarded():
+    """A station as it is served beyond loopback: watching needs the viewer or the operator token."""
+    with RunningStation(None, None, access=Access(TOKEN, "viewer-token-1234", viewing_needs_token=True)) as running:
+        yield running
+
+
+def test_beyond_loopback_watching_needs_a_token(guarded):
+    base, viewer = guarded.base, {"Authorization": "Bearer viewer-token-1234"}
+    for path in ("/api/vehicles", "/api/health", "/api/recordings", "/viz/", "/openapi.json"):
+        assert httpx.get(base + path).status_code == 401, path
+        assert httpx.get(base + path, headers=viewer).status_code == 200, path
+    assert httpx.get(base + "/").status_code == 200  # the page itself, to sign in
+    assert httpx.get(base + "/static/app.js").status_code == 200
+    with pytest.raises(websockets.InvalidStatus):
+        ws_connect(ws_url(guarded, "/ws"))
+    assert httpx.post(base + "/api/vehicles/1/commands", json={"action": "rtl"}, headers=viewer).status_code == 401
+
+
+def test_a_session_cookie_lets_a_browser_watch(guarded):
+    refused = httpx.post(guarded.base + "/api/session", headers={"Authorization": "Bearer wrong"})
+    assert refused.status_code == 401
+    granted = httpx.post(guarded.base + "/api/session", headers={"Authorization": "Bearer viewer-token-1234"})
+    assert granted.status_code == 204
+    cookie = granted.headers["set-cookie"]
+    assert "HttpOnly" in cookie and "SameSite=strict" in cookie.replace("Strict", "strict")
+    name, value = cookie.split(";")[0].split("=", 1)
+    with httpx.Client(base_url=guarded.base, cookies={name: value}) as browser:
+        assert browser.get("/api/vehicles").status_code == 200
+        assert browser.get(f"/viz/v/{VIEWER}/").status_code == 200
+        assert browser.post("/api/vehicles/1/commands", json={"action": "rtl"}).status_code == 401  # still no
+    with ws_connect(ws_url(guarded, "/ws"), additional_headers={"Cookie": f"{name}={value}"}) as stream:
+        assert json.loads(stream.recv(timeout=5))["type"] == "vehicles"
+
+
+# ---- in the browser -------------------------------------------------------------------------------------------
+chromium_needed = pytest.mark.skipif(
+    not Path(CHROMIUM).exists(), reason="needs Debian's chromium at /usr/bin/chromium (scripts/test.sh installs it)")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        chromium = launch_chromium(playwright)
+        yield chromium
+        chromium.close()
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_script_a_viser_server_sends_does_not_run(station, browser):
+    server = station.station.view.server
+    page = browser.new_page()
+    try:
+        page.goto(f"{station.base}/viz/v/{VIEWER}/")
+        page.wait_for_selector("canvas", state="attached", timeout=30_000)
+        with server.gui.add_modal("Injected"):  # as a foreign viser server would: HTML with a handler in it
+            server.gui.add_html('<img id="injected" src="/no-such-image" onerror="window.__stolen = 1">')
+        page.wait_for_selector("#injected", state="attached", timeout=30_000)
+        page.wait_for_timeout(500)
+        assert page.evaluate("window.__stolen") is None
+    finally:
+        page.close()
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_the_view_cannot_open_a_socket_to_another_server(station, browser):
+    listener = socket.create_server(("127.0.0.1", 0))
+    listener.settimeout(2.0)
+    foreign = f"ws://127.0.0.1:{listener.getsockname()[1]}/"
+    page = browser.new_page()
+    try:
+        page.goto(f"{station.base}/viz/v/{VIEWER}/")
+        outcome = page.evaluate("""url => new Promise(resolve => {
+            document.addEventListener('securitypolicyviolation', e => resolve('blocked: ' + e.violatedDirective));
+            try { new WebSocket(url); } catch (error) { resolve('blocked: ' + error.name); }
+            setTimeout(() => resolve('not blocked'), 3000);
+        })""", foreign)
+        assert outcome.startswith("blocked"), outcome
+        with pytest.raises(TimeoutError):
+            listener.accept()  # and nothing ever knocked
+    finally:
+        page.close()
+        listener.close()
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_the_api_page_needs_nothing_from_the_internet(station, browser):
+    page = browser.new_page()
+    foreign = []
+    page.on("request", lambda request: foreign.append(request.url) if not request.url.startswith(station.base)
+            else None)
+    try:
+        page.goto(f"{station.base}/docs")
+        page.wait_for_selector(".opblock", timeout=30_000)
+        assert foreign == []
+    finally:
+        page.close()
+
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_the_page_asks_a_token_to_watch_and_a_viewer_token_only_watches(guarded, browser):
+    from playwright.sync_api import expect
+
+    context = browser.new_context()  # a browser of its own: no cookie from before
+    page = context.new_page()
+    try:
+        page.goto(guarded.base + "/")
+        expect(page.locator("#watch-hint")).to_be_visible()
+        expect(page.locator("#connection-text")).to_have_text("this station needs a token to watch: sign in")
+        assert page.locator("#view").get_attribute("src") is None  # no 3D view to refuse
+
+        page.fill("#token", "viewer-token-1234")
+        page.click("#sign-in")
+        expect(page.locator("#auth-status")).to_have_text("Watching (the viewer token cannot command)")
+        expect(page.locator("#watch-hint")).to_be_hidden()
+        expect(page.locator("#connection-text")).to_have_text("connected", timeout=15_000)
+        assert page.locator("#view").get_attribute("src").startswith("/viz/v/")
+        view = page.frame_locator("#view")
+        expect(view.locator("canvas").first).to_be_attached(timeout=30_000)  # viser's page, not a 401
+        expect(page.locator("#go-here")).to_be_disabled()
+
+        page.click("#sign-out")
+        page.fill("#token", TOKEN)
+        page.click("#sign-in")
+        expect(page.locator("#auth-status")).to_have_text("Signed in")
+    finally:
+        context.close()
