@@ -8,7 +8,7 @@ import socket
 import pytest
 from harness import free_tcp_port, free_udp_port, wait_wall
 
-from vehicle.protocol import links
+from vehicle.protocol import links, signing
 from vehicle.protocol.mav import mavlink
 
 
@@ -184,3 +184,304 @@ def test_a_stream_that_is_not_up_yet_reports_itself_down_then_comes_up(monkeypat
     finally:
         link.close()
         server.close()
+
+
+# ---- against the surviving mutants of issue 14 ------------------------------------------------------------
+KEY = bytes(range(32))
+
+
+class Clock:
+    """``links.time`` stand-in: monotonic() is what the test says it is."""
+
+    def __init__(self, now: float = 1000.0):
+        self.now = now
+
+    def monotonic(self) -> float:
+        return self.now
+
+
+def heard_as(socket_: socket.socket) -> tuple[int, int]:
+    """(system, component) of the first packet the socket receives."""
+    data, _ = socket_.recvfrom(65535)
+    message = mavlink.MAVLink(None).parse_buffer(data)[0]
+    return message.get_srcSystem(), message.get_srcComponent()
+
+
+@pytest.mark.parametrize(("ids", "expected"), [((), (255, 0)), ((42, 191), (42, 191))])
+def test_a_udpout_link_sends_to_its_one_address_as_the_system_and_component_it_is_given(ids, expected):
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(5)
+    port = receiver.getsockname()[1]
+    link = links.connect(f"udpout:127.0.0.1:{port}", *ids)
+    try:
+        assert (link.listen, link.destination, link.url) == (False, ("127.0.0.1", port), f"udpout:127.0.0.1:{port}")
+        assert link.peers() == [("127.0.0.1", port)]  # before hearing anyone
+        assert link.port.getsockname()[0] == "127.0.0.1"  # the interface towards the peer, not every one
+        link.mav.heartbeat_send(6, 8, 0, 0, 0)
+        assert heard_as(receiver) == expected
+    finally:
+        link.close()
+        receiver.close()
+
+
+@pytest.mark.parametrize("kind", ["udpin", "udp"])
+def test_udpin_and_udp_listen_on_the_address_they_name(kind):
+    port = free_udp_port()
+    link = links.connect(f"{kind}:127.0.0.1:{port}")
+    try:
+        assert (link.listen, link.destination) == (True, None)
+        assert link.port.getsockname() == ("127.0.0.1", port)
+        assert link.peers() == [] and link.up and link.error == ""
+    finally:
+        link.close()
+
+
+def test_every_garbage_datagram_is_counted_once_and_a_packet_behind_garbage_still_arrives(listening):
+    """Each datagram starts parsing afresh (no prefix error carried over to hide the next one's garbage), and
+    the parser is robust: bytes that are no packet are skipped, the packet after them in the datagram read."""
+    link, port = listening
+    a = Sender(port, 1)
+    try:
+        for _ in range(3):
+            a.send(b"\x00\x01\x02\x03")
+        a.send(b"\x00\x01" + a.packet("behind garbage"))
+        got = []
+        wait_wall(lambda: got.extend(iter(link.recv_msg, None)) or any(m.get_type() == "STATUSTEXT" for m in got), 5)
+        assert [m.text for m in got if m.get_type() != "BAD_DATA"] == ["behind garbage"]
+        assert link.stats == {"datagrams": 4, "bad": 4, "senders forgotten": 0}
+        assert sum(m.get_type() == "BAD_DATA" for m in got) == 4  # handed on too, with where they came from
+        assert all(m._peer == a.address for m in got)
+    finally:
+        a.close()
+
+
+def test_a_datagram_the_parser_chokes_on_counts_as_bad_and_spoils_nothing_else(listening, monkeypatch):
+    link, port = listening
+    choking = links._parser
+
+    def parser():
+        made = choking()
+        real = made.parse_buffer
+        made.parse_buffer = lambda data: real(data) if data != b"boom" else 1 / 0
+        return made
+
+    monkeypatch.setattr(links, "_parser", parser)
+    a = Sender(port, 1)
+    try:
+        a.send(b"boom")
+        a.send(a.packet("after"))
+        got = receive(link, 1)
+        assert [m.text for m in got] == ["after"]
+        assert link.stats["bad"] == 1 and link.stats["datagrams"] == 2
+    finally:
+        a.close()
+
+
+def test_the_sender_forgotten_first_is_the_one_heard_least_recently(listening, monkeypatch):
+    link, port = listening
+    monkeypatch.setattr(links, "MAX_SENDERS", 2)
+    a, b, c = Sender(port, 1), Sender(port, 2), Sender(port, 3)
+    try:
+        for sender in (a, b, a):
+            sender.send(sender.packet())
+            receive(link, 1)
+        c.send(c.packet())
+        receive(link, 1)
+        assert list(link.senders) == [a.address, c.address]  # b was heard before a's second packet
+    finally:
+        for sender in (a, b, c):
+            sender.close()
+
+
+def test_a_sender_is_a_peer_until_exactly_sender_idle_seconds_of_silence(listening, monkeypatch):
+    link, port = listening
+    clock = Clock()
+    monkeypatch.setattr(links, "time", clock)
+    a = Sender(port, 1)
+    try:
+        a.send(a.packet())
+        receive(link, 1)
+        clock.now += links.SENDER_IDLE
+        assert link.peers() == [a.address]
+        link._forget(clock.now)
+        assert a.address in link.senders
+        clock.now += 1e-6
+        assert link.peers() == []
+        link._forget(clock.now)
+        assert link.senders == {} and link.stats["senders forgotten"] == 1
+    finally:
+        a.close()
+
+
+def test_socket_errors_are_reported_not_raised(listening):
+    link, _port = listening
+    link.port.close()
+    assert link.recv_msg() is None
+    assert "Bad file descriptor" in link.error
+    link.error = ""
+    link.write(b"x", ("127.0.0.1", 9))
+    assert "Bad file descriptor" in link.error
+
+
+def test_a_signed_link_drops_an_unsigned_packet_and_keeps_the_signed_one_behind_it():
+    port = free_udp_port()
+    link = links.connect(f"udpin:127.0.0.1:{port}", key=KEY)
+    a = Sender(port, 4)
+    signer = mavlink.MAVLink(None, srcSystem=4, srcComponent=1)
+    signing.sign_outgoing(signer, KEY)
+    try:
+        a.send(a.packet("unsigned") + signer.statustext_encode(6, b"signed").pack(signer))
+        got = receive(link, 1)
+        assert [(m.text, m._verified) for m in got] == [("signed", True)]
+        assert link.refused == {4: 1}
+    finally:
+        a.close()
+        link.close()
+
+
+def test_a_link_with_a_key_signs_what_it_sends_and_by_default_requires_signatures():
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(5)
+    link = links.connect(f"udpout:127.0.0.1:{receiver.getsockname()[1]}", 9, 1, key=KEY)
+    try:
+        assert link.verifier.key == KEY and link.verifier.require is True
+        link.mav.heartbeat_send(6, 8, 0, 0, 0)
+        data, _ = receiver.recvfrom(65535)
+        assert signing.Verifier(KEY).check(mavlink.MAVLink(None).parse_buffer(data)[0]) == signing.SIGNED
+    finally:
+        link.close()
+        receiver.close()
+    lax = links.connect(f"udpin:127.0.0.1:{free_udp_port()}", key=KEY, require_signed=False)
+    try:
+        assert lax.verifier.require is False
+    finally:
+        lax.close()
+
+
+# ---- streams
+@pytest.fixture
+def clock(monkeypatch):
+    clock = Clock()
+    monkeypatch.setattr(links, "time", clock)
+    return clock
+
+
+def test_a_stream_retries_after_0_5_1_2_4_8_then_every_10_seconds(clock):
+    port = free_tcp_port()  # nobody listens
+    link = links.connect(f"tcp:127.0.0.1:{port}")
+    try:
+        pauses = []
+        for failures in range(1, 8):
+            assert link.failures == failures and not link.up and link.connection is None
+            assert link.error.startswith("ConnectionRefusedError: ")
+            pauses.append(link._retry_at - clock.now)
+            clock.now = link._retry_at - 1e-6
+            link._open()
+            assert link.failures == failures  # not yet
+            clock.now = link._retry_at  # exactly when it is due
+            link._open()
+        assert pauses == [0.5, 1.0, 2.0, 4.0, 8.0, 10.0, 10.0]
+    finally:
+        link.close()
+
+
+def test_opening_a_stream_never_waits(clock):
+    import time
+
+    started = time.monotonic()
+    link = links.connect(f"tcp:127.0.0.1:{free_tcp_port()}")
+    assert time.monotonic() - started < 0.5 and link.failures == 1
+    link.close()
+
+
+@pytest.mark.parametrize(("ids", "expected"), [((), (255, 0)), ((17, 191), (17, 191))])
+def test_a_stream_sends_what_it_is_given_as_its_system_and_component_and_closes(ids, expected):
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    link = links.connect(f"tcp:127.0.0.1:{server.getsockname()[1]}", *ids)
+    try:
+        assert link.up and link.error == "" and link.connection.mav.robust_parsing is True
+        peer, _ = server.accept()
+        peer.settimeout(5)
+        with peer:
+            link.mav.heartbeat_send(6, 8, 0, 0, 0)
+            message = mavlink.MAVLink(None).parse_buffer(peer.recv(1000))[0]
+            assert (message.get_srcSystem(), message.get_srcComponent()) == expected
+            link.close()
+            assert peer.recv(1000) == b""  # the stream was closed
+    finally:
+        server.close()
+
+
+def test_a_signed_stream_passes_only_signed_messages(monkeypatch):
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    link = links.connect(f"tcp:127.0.0.1:{server.getsockname()[1]}", key=KEY)
+    try:
+        peer, _ = server.accept()
+        with peer:
+            plain = mavlink.MAVLink(None, srcSystem=5, srcComponent=1)
+            signer = mavlink.MAVLink(None, srcSystem=5, srcComponent=1)
+            signing.sign_outgoing(signer, KEY)
+            peer.sendall(
+                plain.statustext_encode(6, b"unsigned").pack(plain)
+                + signer.statustext_encode(6, b"signed").pack(signer)
+            )
+            got = receive(link, 1)
+            assert [(m.text, m._verified) for m in got] == [("signed", True)]
+            assert link.refused == {5: 1} and link.up
+    finally:
+        link.close()
+        server.close()
+
+
+def test_a_stream_whose_write_fails_goes_down_and_says_why(clock):
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    link = links.connect(f"tcp:127.0.0.1:{server.getsockname()[1]}")
+    try:
+        assert link.up
+
+        class Broken:
+            def write(self, data):
+                raise BrokenPipeError(32, "Broken pipe")
+
+            def close(self):
+                pass
+
+        link.connection = Broken()
+        link.write(b"x")
+        assert (link.up, link.connection, link.failures) == (False, None, 1)
+        assert link.error == "BrokenPipeError: [Errno 32] Broken pipe"
+
+        class Failing(Broken):
+            def recv_msg(self):
+                raise ConnectionResetError(104, "Connection reset by peer")
+
+        link.connection = Failing()
+        link.up = True
+        assert link.recv_msg() is None
+        assert (link.up, link.connection, link.failures) == (False, None, 2)
+        assert link.error == "ConnectionResetError: [Errno 104] Connection reset by peer"
+    finally:
+        link.close()
+        server.close()
+
+
+def test_a_datagram_too_short_for_a_header_is_neither_a_message_nor_bad_data(listening):
+    """Two bytes that begin like a packet: nothing to parse yet, and since a datagram holds whole packets,
+    nothing carried into the next one either."""
+    link, port = listening
+    a = Sender(port, 1)
+    try:
+        a.send(bytes([mavlink.PROTOCOL_MARKER_V2, 9]))
+        a.send(a.packet("next"))
+        got = receive(link, 1)
+        assert [m.text for m in got] == ["next"] and link.stats["bad"] == 0 and link.stats["datagrams"] == 2
+    finally:
+        a.close()
