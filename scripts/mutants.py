@@ -1,0 +1,347 @@
+"""Mutation testing of the modules where a silent bug is dangerous (issue 14); ``scripts/mutants.sh`` runs it.
+
+For each module below: a scratch copy of the project in ``out/mutants/NAME/`` (so that
+runs never touch the work tree, and each module gets its own test selection), mutmut's
+settings written into the copy's pyproject.toml, then ``mutmut run`` there, and a
+score: the share of mutants some test kills (a timeout counts as killed: the mutant
+hung the code). Surviving mutants are written, as diffs, to
+``out/mutants/NAME/survivors.txt``; every one of them is either killed by a test or
+listed with the reason it is equivalent in ``scripts/equivalent-mutants.md``.
+
+Two things mutmut needs help with here:
+- mutmut mutates undecorated functions and methods only. The compiled loops carry
+  ``@numba.njit``, which ``NUMBA_DISABLE_JIT=1`` turns into a no-op anyway, so in the
+  copy those decorator lines are taken off and the loops run (and are mutated) as
+  plain Python.
+- Where only part of a file matters (the GCS
+  failsafe in the endpoint, the command ACK path), every line outside the named
+  functions gets a ``# pragma: no mutate`` in the copy.
+
+Usage: python scripts/mutants.py [NAME ...] [--jobs N]; no names runs every module.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import io
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+import tokenize
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+OUT = ROOT / "out" / "mutants"
+EQUIVALENT = ROOT / "scripts" / "equivalent-mutants.md"  # surviving mutants shown to be equivalent, with why
+COPIED = ["vehicle", "groundstation", "tests", "static", "scenes", "pyproject.toml"]
+NUMBA_DECORATOR = re.compile(r"^\s*@numba\.n?jit\b.*$")
+KILLED = {"killed", "timeout", "caught by type check", "segfault"}
+
+
+@dataclass
+class Module:
+    name: str
+    files: list[str]
+    tests: list[str]  # pytest arguments: the fast, relevant subset that is the runner's test command
+    focus: dict[str, list[str]] = field(default_factory=dict)  # file: the functions mutated (default: all)
+    jit: bool = True  # False: NUMBA_DISABLE_JIT=1 (the module's compiled loops run as Python)
+
+
+MODULES = [
+    Module("collision", ["vehicle/world/collision.py"], ["tests/test_collision.py"], jit=False),
+    Module(
+        "memory map",
+        ["vehicle/mapping/memory_map.py", "vehicle/mapping/tracing.py"],
+        ["tests/test_memory_map.py"],
+        jit=False,
+    ),
+    Module(
+        "map stream",
+        ["vehicle/protocol/mapstream.py"],
+        ["tests/test_mapstream.py", "tests/test_regressions_mapstream.py"],
+    ),
+    Module(
+        "planning",
+        ["vehicle/mapping/planning.py", "vehicle/mapping/planner.py"],
+        [
+            "tests/test_planning.py",
+            "tests/test_planner.py",
+            "tests/test_missions.py",
+            "-k",
+            "test_planning or test_planner or a_star",
+        ],
+        jit=False,
+    ),
+    Module(
+        "autopilot modes",
+        ["vehicle/sim/autopilot.py"],
+        ["tests/test_autopilot.py", "tests/test_regressions_autopilot.py"],
+    ),
+    Module(
+        "GCS failsafe",
+        ["vehicle/sim/endpoint.py"],
+        ["tests/test_vehicle_mavlink.py", "-k", "failsafe"],
+        focus={"vehicle/sim/endpoint.py": ["Endpoint._gcs_heard", "Endpoint._check_failsafe"]},
+    ),
+    Module(
+        "command ACK",
+        ["groundstation/link.py", "vehicle/agent/mavlink_controller.py"],
+        [
+            "tests/test_command_ack.py",
+            "tests/test_companion.py",
+            "-k",
+            "test_command_ack or refused or never_answered or in_progress or unsupported",
+        ],
+        focus={
+            "groundstation/link.py": ["Link.request", "Link.command", "Link.command_int"],
+            "vehicle/agent/mavlink_controller.py": ["MavlinkController._acknowledged"],
+        },
+    ),
+    Module(
+        "authentication",
+        ["groundstation/security.py"],
+        [
+            "tests/test_hostile_web.py",
+            "tests/test_groundstation_api.py",
+            "-m",
+            "not browser",
+            "-k",
+            "(token or auth or host or origin or loopback or session or body or nosniff or watching)"
+            " and not streams_leave and not racing_client",
+        ],
+    ),
+    Module(
+        "replay seek",
+        ["groundstation/replay.py"],
+        [
+            "tests/test_recording_replay.py",
+            "-k",
+            "experiment_log or backwards or after_a_seek or lost_snapshot "
+            "or truncated or cut_in or corrupt or is_refused or index_is_exact or foreign_plane",
+        ],
+    ),
+    Module(
+        "hostile-input guards",
+        ["vehicle/protocol/links.py"],
+        ["tests/test_links.py", "tests/test_hostile_mavlink.py", "-k", "not flood and not the_page"],
+    ),
+]
+
+
+# ---- the scratch copy --------------------------------------------------------------------------------
+def prepare(module: Module, python: str) -> Path:
+    work = OUT / slug(module.name)
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    for name in COPIED:
+        source = ROOT / name
+        if source.is_dir():
+            shutil.copytree(source, work / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        else:
+            shutil.copy2(source, work / name)
+    for name in module.files:
+        path = work / name
+        text = path.read_text()
+        if not module.jit:
+            text = "\n".join("" if NUMBA_DECORATOR.match(line) else line for line in text.split("\n"))
+        if name in module.focus:
+            text = only_mutate_in(text, module.focus[name])
+        path.write_text(text)
+    settings = {
+        "source_paths": ["vehicle", "groundstation"],
+        "only_mutate": module.files,
+        "pytest_add_cli_args": ["-p", "no:cacheprovider", "-q", "-p", "no:randomly"],
+        "pytest_add_cli_args_test_selection": module.tests,
+        "timeout_multiplier": 5.0,
+        "timeout_constant": 10.0,
+    }
+    with open(work / "pyproject.toml", "a") as handle:
+        handle.write("\n[tool.mutmut]\n")
+        for key, value in settings.items():
+            handle.write(f"{key} = {json.dumps(value)}\n")
+    return work
+
+
+def slug(name: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
+
+
+def only_mutate_in(text: str, functions: list[str]) -> str:
+    """``text`` with ``# pragma: no mutate`` on every line outside the named functions (``Class.method``,
+    ``outer.inner``) where a comment can go (not inside a string, not after a backslash)."""
+    spans = []
+
+    def visit(node, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                name = f"{prefix}{child.name}"
+                if name in functions:
+                    spans.append((child.lineno, child.end_lineno))
+                visit(child, f"{name}.")
+            else:
+                visit(child, prefix)
+
+    visit(ast.parse(text), "")
+    missing = len(functions) - len(spans)
+    if missing:
+        raise SystemExit(f"focus: {missing} of {functions} not found")
+    inside = {line for start, end in spans for line in range(start, end + 1)}
+    ends = set()  # lines where a logical or physical line ends outside a string
+    for token in tokenize.generate_tokens(io.StringIO(text).readline):
+        if token.type in (tokenize.NEWLINE, tokenize.NL) and token.start[0] not in inside:
+            ends.add(token.start[0])
+    lines = text.split("\n")
+    for number in ends:
+        line = lines[number - 1]
+        if line.strip() and "#" not in line:
+            lines[number - 1] = line + "  # pragma: no mutate"
+    return "\n".join(lines)
+
+
+# ---- running and scoring --------------------------------------------------------------------------------
+def run(module: Module, python: str, jobs: int) -> dict:
+    work = prepare(module, python)
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
+    env.pop("CI", None)  # skipped tests (castle.wrl is not beside the copy) are no failures here
+    if not module.jit:
+        env["NUMBA_DISABLE_JIT"] = "1"
+    mutmut = [python, "-c", "import sys; from mutmut.__main__ import cli; sys.argv[0] = 'mutmut'; cli()"]
+    started = time.monotonic()
+    with open(work / "mutmut.log", "w") as log:
+        subprocess.run(
+            mutmut + ["run", "--max-children", str(jobs)],
+            cwd=work,
+            env=env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            check=False,
+        )
+    seconds = time.monotonic() - started
+    statuses = results(work)
+    survivors = sorted(name for name, status in statuses.items() if status not in KILLED)
+    show = (
+        "import json, sys\nfrom mutmut.mutation.diff_apply import get_diff_for_mutant\n"
+        "for name, status in json.load(sys.stdin).items():\n"
+        "    print(f'## {name} ({status})'); print(get_diff_for_mutant(name)); print()\n"
+    )
+    with open(work / "survivors.txt", "w") as out:
+        subprocess.run(
+            [python, "-c", show],
+            cwd=work,
+            env=env,
+            input=json.dumps({n: statuses[n] for n in survivors}),
+            stdout=out,
+            text=True,
+            check=False,
+        )
+    killed = sum(status in KILLED for status in statuses.values())
+    listed = equivalent_names()
+    return {
+        "module": module.name,
+        "mutants": len(statuses),
+        "killed": killed,
+        "survivors": survivors,
+        "equivalent": [n for n in survivors if n in listed],
+        "open": [n for n in survivors if n not in listed],
+        "seconds": seconds,
+        "work": str(work),
+    }
+
+
+def report(module: Module) -> dict:
+    """The row of the module's last run, read back from its scratch copy (its time from mutmut.log's mtime)."""
+    work = OUT / slug(module.name)
+    if not (work / "mutants").is_dir():
+        raise SystemExit(f"{module.name}: not run yet (python scripts/mutants.py {slug(module.name)})")
+    statuses = results(work)
+    survivors = sorted(name for name, status in statuses.items() if status not in KILLED)
+    listed = equivalent_names()
+    log = work / "mutmut.log"
+    return {
+        "module": module.name,
+        "mutants": len(statuses),
+        "killed": sum(status in KILLED for status in statuses.values()),
+        "survivors": survivors,
+        "equivalent": [n for n in survivors if n in listed],
+        "open": [n for n in survivors if n not in listed],
+        "seconds": log.stat().st_mtime - (work / "pyproject.toml").stat().st_mtime,
+        "work": str(work),
+    }
+
+
+def equivalent_names() -> set[str]:
+    """The mutant names listed in scripts/equivalent-mutants.md (names change when their function does: a
+    listed mutant that no longer survives under its name shows up as open again)."""
+    if not EQUIVALENT.exists():
+        return set()
+    return set(re.findall(r"[\w.\u01c1]+__mutmut_\d+", EQUIVALENT.read_text()))
+
+
+def results(work: Path) -> dict[str, str]:
+    """Each mutant's status from mutmut's .meta files."""
+    sys.path.insert(0, str(Path(sys.executable).parent))
+    from mutmut.stats import status_by_exit_code
+
+    statuses = {}
+    for meta in (work / "mutants").rglob("*.meta"):
+        for name, code in json.loads(meta.read_text())["exit_code_by_key"].items():
+            statuses[name] = status_by_exit_code[code]
+    return statuses
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument(
+        "names", nargs="*", help="modules to run (default: all): " + ", ".join(slug(m.name) for m in MODULES)
+    )
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
+    parser.add_argument(
+        "--report", action="store_true", help="only print the table of the last run (out/mutants/), running nothing"
+    )
+    args = parser.parse_args()
+    by_slug = {slug(m.name): m for m in MODULES}
+    unknown = [name for name in args.names if name not in by_slug]
+    if unknown:
+        raise SystemExit(f"no such module: {', '.join(unknown)} (modules: {', '.join(by_slug)})")
+    chosen = [by_slug[name] for name in args.names] or MODULES
+    rows = []
+    for module in chosen:
+        row = report(module) if args.report else run(module, sys.executable, args.jobs)
+        rows.append(row)
+        print(f"{module.name}: {row['killed']}/{row['mutants']} killed in {row['seconds']:.0f} s", flush=True)
+    print("\n| module | mutants | killed | equivalent (listed) | open | score | time |")
+    print("|---|---|---|---|---|---|---|")
+    for row in rows:
+        score = row["killed"] / row["mutants"] if row["mutants"] else float("nan")
+        print(
+            f"| {row['module']} | {row['mutants']} | {row['killed']} | {len(row['equivalent'])} | "
+            f"{len(row['open'])} | {score:.1%} | {row['seconds'] / 60:.1f} min |"
+        )
+    total = sum(r["mutants"] for r in rows)
+    killed = sum(r["killed"] for r in rows)
+    print(
+        f"| all | {total} | {killed} | {sum(len(r['equivalent']) for r in rows)} | "
+        f"{sum(len(r['open']) for r in rows)} | {killed / max(total, 1):.1%} | "
+        f"{sum(r['seconds'] for r in rows) / 60:.1f} min |"
+    )
+    print(
+        "\nscore: killed / mutants; equivalent: survivors listed with a reason in scripts/equivalent-mutants.md;"
+        " open: survivors neither killed nor listed"
+    )
+    for row in rows:
+        if row["open"]:
+            print(f"\n{row['module']}: {len(row['open'])} open, diffs in {row['work']}/survivors.txt")
+            for name in row["open"]:
+                print(f"  {name}")
+    if not all(r["mutants"] for r in rows):
+        raise SystemExit("a module made no mutants (see its mutmut.log)")
+
+
+if __name__ == "__main__":
+    main()
