@@ -485,3 +485,21 @@ def test_a_datagram_too_short_for_a_header_is_neither_a_message_nor_bad_data(lis
         assert [m.text for m in got] == ["next"] and link.stats["bad"] == 0 and link.stats["datagrams"] == 2
     finally:
         a.close()
+
+
+def test_a_stream_whose_peer_goes_away_reports_itself_down(clock):
+    """An end of stream is not taken for silence: the link tries the peer again at once and, refused, is down."""
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    link = links.connect(f"tcp:127.0.0.1:{server.getsockname()[1]}")
+    try:
+        peer, _ = server.accept()
+        assert link.up
+        server.close()
+        peer.close()
+        wait_wall(lambda: link.recv_msg() is None and not link.up, 5, "the link down")
+        assert link.error.startswith("ConnectionRefusedError: ") and link.failures == 1
+    finally:
+        link.close()
+        server.close()

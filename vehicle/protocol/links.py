@@ -222,7 +222,7 @@ class StreamLink(_Signed):
         if self.connection is not None:
             try:
                 self.connection.close()
-            except OSError:
+            except Exception:  # noqa: BLE001 - pymavlink's close fails on the socket a failed reconnect dropped
                 pass
         self.connection, self.up, self.error = None, False, f"{type(error).__name__}: {error}"
         self.failures += 1
