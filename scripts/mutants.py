@@ -315,23 +315,26 @@ def main() -> None:
         row = report(module) if args.report else run(module, sys.executable, args.jobs)
         rows.append(row)
         print(f"{module.name}: {row['killed']}/{row['mutants']} killed in {row['seconds']:.0f} s", flush=True)
-    print("\n| module | mutants | killed | equivalent (listed) | open | score | time |")
-    print("|---|---|---|---|---|---|---|")
+    print("\n| module | mutants | killed | survived | equivalent (listed) | open | score | time |")
+    print("|---|---|---|---|---|---|---|---|")
     for row in rows:
         score = row["killed"] / row["mutants"] if row["mutants"] else float("nan")
         print(
-            f"| {row['module']} | {row['mutants']} | {row['killed']} | {len(row['equivalent'])} | "
+            f"| {row['module']} | {row['mutants']} | {row['killed']} | {len(row['survivors'])} | "
+            f"{len(row['equivalent'])} | "
             f"{len(row['open'])} | {score:.1%} | {row['seconds'] / 60:.1f} min |"
         )
     total = sum(r["mutants"] for r in rows)
     killed = sum(r["killed"] for r in rows)
     print(
-        f"| all | {total} | {killed} | {sum(len(r['equivalent']) for r in rows)} | "
+        f"| all | {total} | {killed} | {sum(len(r['survivors']) for r in rows)} | "
+        f"{sum(len(r['equivalent']) for r in rows)} | "
         f"{sum(len(r['open']) for r in rows)} | {killed / max(total, 1):.1%} | "
         f"{sum(r['seconds'] for r in rows) / 60:.1f} min |"
     )
     print(
-        "\nscore: killed / mutants; equivalent: survivors listed with a reason in scripts/equivalent-mutants.md;"
+        "\nscore: killed / mutants (a timeout counts as killed); survived: no test failed;"
+        " equivalent: survivors listed with a reason in scripts/equivalent-mutants.md;"
         " open: survivors neither killed nor listed"
     )
     for row in rows:
