@@ -465,3 +465,46 @@ def test_stepping_towards_a_wall_finds_contact_at_wall_minus_radius_despite_the_
         y += step
     assert skipped > 100  # the shortcut was in use all along the way
     assert contact.point[1] == pytest.approx(WALL_FACE_Y - RADIUS, abs=1e-3)
+
+
+# ---- against the surviving mutants of issue 14 ------------------------------------------------------------
+def test_a_point_over_a_triangle_whose_edges_mix_x_and_y_is_as_far_as_its_height():
+    """The face's normal has all three parts of the cross product: with one wrong, this triangle in the ground
+    plane (edges (1, 1, 0) and (1, 0, 0)) would look like one without area and be measured by its edges."""
+    triangle = np.array([[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, 0.0]]])
+    assert point_triangle_distance(np.array([0.7, 0.3, 0.5]), triangle)[0] == pytest.approx(0.5)
+
+
+def test_a_point_beyond_b_whose_closest_point_is_on_edge_bc_not_on_the_line_through_ab():
+    """c lies beyond b along ab (an obtuse corner at b): a point just past b below ab is nearest to edge bc,
+    where the line through ab, extended past b, would be nearer."""
+    triangle = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 1.0, 0.0]]])
+    assert point_triangle_distance(np.array([1.5, -0.25, 0.0]), triangle)[0] == pytest.approx(0.375 * math.sqrt(2))
+
+
+def test_colliders_share_the_grid_they_are_given_and_a_grid_keeps_walkable_faces_by_default(flat_scene):
+    from vehicle.world.collision import TriangleGrid
+
+    grid = TriangleGrid(flat_scene.mesh)
+    assert len(grid.triangles) == len(flat_scene.mesh.faces)  # the ground too, unless told to leave it out
+    assert Collider(grid, RADIUS).grid is grid
+    assert len(TriangleGrid(flat_scene.mesh, ignore_walkable=True).triangles) < len(grid.triangles)
+
+
+@pytest.mark.parametrize(("radius", "search"), [(0.5, 4.0), (3.0, 6.0)])
+def test_clearance_looks_as_far_as_search_and_at_least_twice_the_radius(flat_scene, radius, search):
+    collider = Collider(flat_scene.mesh, radius, ignore_walkable=True)  # a rover: the ground is nothing to hit
+    assert collider.search == search
+    assert collider.clearance((0.0, 0.0, 50.0)) == search  # nothing within reach
+
+
+def test_contact_is_found_to_a_millionth_of_the_step(wall_scene):
+    """Bisection over the step, from its start to its end, 20 times: the contact lies at most 2**-20 of the
+    step before the fraction reported (here just past a half, where 19 halvings would be twice as coarse)."""
+    collider = Collider(wall_scene.mesh, RADIUS)
+    touch_y = WALL_FACE_Y - RADIUS
+    exact = 0.5 + 1e-7
+    start = touch_y - 0.5
+    contact = collider.sweep((0.0, start, 4.0), (0.0, start + 0.5 / exact, 4.0))
+    assert contact is not None
+    assert 0.0 <= contact.fraction - exact <= 2.0**-20
