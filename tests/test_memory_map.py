@@ -602,3 +602,93 @@ def test_the_picture_of_the_map_is_drawn_from_its_own_cells_size_and_place(grid,
     with Image.open(tmp_path / "map.png") as a, Image.open(tmp_path / "direct.png") as b:
         assert a.size == b.size and np.array_equal(np.asarray(a), np.asarray(b))
     assert (tmp_path / "map.png").read_bytes() != (tmp_path / "moved.png").read_bytes()  # the origin is drawn
+
+
+# ---- against the surviving mutants of issue 14, after the merge ---------------------------------------------
+def test_detections_count_a_cell_at_exactly_the_occupied_threshold(grid):
+    from vehicle.mapping.memory_map import OCCUPIED_AT
+
+    grid.grid[5, 5] = OCCUPIED_AT - 1
+    assert grid.detections == 0
+    grid.grid[5, 5] = OCCUPIED_AT
+    assert grid.detections == 1 == int(grid.occupied.sum())
+
+
+def test_an_echo_exactly_on_the_maps_west_edge_is_in_its_first_column(grid):
+    assert grid.add_reading(np.array([-5.0, 0.5, 4.0]), -EAST, 5.0, 40.0)  # the echo at x = -10, the edge
+    assert grid.ever_hit[10, 0] and grid.cells_ever_hit == 1
+
+
+@pytest.mark.parametrize(("x", "y"), [(9.5, 9.5), (-9.5, 9.5), (9.5, -9.5), (-9.5, -9.5)])
+def test_the_body_at_a_corner_frees_only_the_cells_inside_the_map(grid, x, y):
+    grid.mark_body(x, y, 2.0)
+    freed = np.argwhere(grid.states() == FREE)
+    assert len(freed) and (np.abs(freed + 0.5 - (np.array([y, x]) + 10)).max(axis=1) <= 2.5).all()
+
+
+def test_occupied_version_moves_by_one_when_the_occupied_set_changes(grid):
+    steps = []
+    for _ in range(12):
+        before = grid.occupied_version
+        grid.add_reading(ORIGIN, EAST, 3.0, 40.0)
+        steps.append(grid.occupied_version - before)
+    assert sorted(set(steps)) == [0, 1] and sum(steps) == 1  # once, when the echo's cell became occupied
+    before = grid.occupied_version
+    grid.mark_body(3.5, 0.5, 0.6)  # over the echo's cell
+    assert grid.occupied_version == before + 1 and grid.detections == 0
+
+
+def test_readings_as_lists_or_in_single_precision_mark_the_map_as_float64_arrays_do():
+    def batch(kind):
+        origins = [[0.5, 0.5, 4.0], [-3.0, 2.0, 4.0]]
+        directions = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
+        distances, ranges, beams, free = [3.0, float("nan")], [40.0, 6.0], [0.2, 0.3], [True, True]
+        made = MemoryMap((0.0, 0.0), space_size=10.0, resolution=1.0)
+        if kind == "arrays":
+            made.add_readings(
+                np.array(origins),
+                np.array(directions),
+                np.array(distances),
+                np.array(ranges),
+                np.array(beams),
+                np.array(free),
+            )
+        elif kind == "float32":
+            f = np.float32
+            made.add_readings(
+                np.array(origins, f),
+                np.array(directions, f),
+                np.array(distances, f),
+                np.array(ranges, f),
+                np.array(beams, f),
+                np.array(free, np.uint8),
+            )
+        else:
+            made.add_readings(origins, directions, distances, ranges, beams, free)
+        return made.grid
+
+    expected = batch("arrays")
+    assert (expected != 0).sum() > 5
+    assert np.array_equal(batch("lists"), expected) and np.array_equal(batch("float32"), expected)
+
+
+def test_the_image_is_the_picture_of_the_states(grid):
+    from vehicle.mapping.memory_map import state_image
+
+    grid.add_reading(ORIGIN, EAST, 3.0, 40.0)
+    assert np.array_equal(grid.image(), state_image(grid.states()))
+
+
+@pytest.mark.parametrize("x", [-20.0, -19.0, -10.0])
+def test_an_absurdly_long_beam_along_or_near_an_edge_marks_what_a_shorter_one_across_the_map_does(x):
+    """A line longer than the map is cut to the map's square first (Liang-Barsky), exactly: along the west
+    edge itself, 1 m inside it, or through the middle, at 2 m per cell."""
+
+    def beam(distance):
+        made = MemoryMap((0.0, 0.0), space_size=20.0, resolution=0.5)  # 20 x 20 cells of 2 m
+        made.add_reading(np.array([x, -15.0, 4.0]), NORTH, distance, 2e6)
+        return made.states()
+
+    short = beam(50.0)  # ends beyond the north edge; short enough not to be cut
+    assert (short == FREE).sum() >= 17
+    assert np.array_equal(beam(1e6), short)
