@@ -7,6 +7,7 @@ time passed to ``tick`` by the test.
 
 import math
 import struct
+import zlib
 
 import numpy as np
 import pytest
@@ -405,3 +406,137 @@ def test_snapshots_that_lost_a_chunk_are_dropped_once_a_newer_one_gets_further()
     assert len(receiver._parts) == 5 and not receiver.synced
     feed(receiver, [(k, p) for k, p in stream.streamer.snapshot() if k == MAP_SNAPSHOT])
     assert receiver._parts == {} and receiver.synced
+
+
+# ---- against the surviving mutants of issue 14, after the merge ---------------------------------------------
+def _snapshot(size=4, resolution=1.0, origin=(0.0, 0.0), last=0, box=(0, 0, 1, 1), cells=b"\x05", ident=1):
+    from vehicle.protocol.mapstream import _SNAPSHOT, snapshot_chunks
+
+    head = _SNAPSHOT.pack(1, size, resolution, *origin, last, *box)
+    return snapshot_chunks(ident, head + zlib.compress(cells, 6))
+
+
+def _delta(seq, indices, values):
+    from vehicle.protocol.mapstream import _DELTA, _deflate, _varints
+
+    gaps = np.diff(np.asarray(indices, dtype=np.int64), prepend=0)
+    return MAP_DELTA, _DELTA.pack(seq, len(indices)) + _deflate(_varints(gaps) + bytes(np.int8(values).tobytes()))
+
+
+def _fed(*payloads) -> MapReceiver:
+    receiver = MapReceiver()
+    for kind, payload in payloads:
+        assert receiver.feed(kind, payload)
+    return receiver
+
+
+@pytest.mark.parametrize("number", [0, 1, 127, 128, 129, 255, 16383, 16384, 2**28 - 1, 2**28, 2**35 - 1])
+def test_one_varint_reads_back_as_its_number_at_every_length_boundary(number):
+    from vehicle.protocol.mapstream import _read_varints, _varint, _varints
+
+    assert _varint(number) == _varints(np.array([number]))
+    assert _read_varints(_varint(number) + b"\x07", 1) == (np.array([number]), len(_varint(number)))
+
+
+@pytest.mark.parametrize(
+    ("size", "resolution", "accepted"),
+    [
+        (1, 1.0, True),
+        (4000, 0.5, True),
+        (0, 1.0, False),
+        (4001, 1.0, False),
+        (4, 0.0, False),
+        (4, float("nan"), False),
+        (4, float("inf"), False),
+    ],
+)
+def test_a_snapshot_is_taken_from_1_to_4000_cells_a_side_at_any_finite_positive_resolution(size, resolution, accepted):
+    box = (0, 0, 1, 1) if size else (0, 0, 0, 0)
+    receiver = _fed(*_snapshot(size=size, resolution=resolution, box=box, cells=b"\x05" if size else b""))
+    assert receiver.synced is accepted and receiver.snapshots == int(accepted)
+    if accepted:
+        assert receiver.grid.shape == (size, size) and receiver.grid[0, 0] == 5
+        assert receiver.geometry.resolution == resolution
+
+
+@pytest.mark.parametrize(
+    "origin", [(float("nan"), 0.0), (0.0, float("nan")), (float("inf"), 0.0), (0.0, -float("inf"))]
+)
+def test_a_snapshot_placed_nowhere_is_refused(origin):
+    assert not _fed(*_snapshot(origin=origin)).synced
+
+
+@pytest.mark.parametrize("box", [(3, 0, 2, 1), (0, 3, 1, 2)])
+def test_a_snapshot_part_reaching_past_the_map_is_refused(box):
+    assert not _fed(*_snapshot(box=box, cells=b"\x05\x05")).synced
+
+
+def test_versions_and_gaps_count_one_by_one_and_an_empty_delta_is_applied():
+    receiver = _fed(*_snapshot(last=10))
+    assert (receiver.version, receiver.applied) == (1, 10)
+    receiver.feed(*_delta(11, [], []))  # nothing changed in that period: still the next number
+    assert (receiver.applied, receiver.synced) == (11, True)
+    receiver.feed(*_delta(12, [1, 2], [3, 4]))
+    assert receiver.version == 3 and receiver.grid[0, 1:3].tolist() == [3, 4]
+    receiver.feed(*_delta(14, [1], [1]))  # 13 lost
+    for chunk in _snapshot(last=20, ident=2):
+        receiver.feed(*chunk)
+    receiver.feed(*_delta(22, [1], [1]))  # 21 lost
+    assert receiver.gaps == 2 and receiver.version == 4 and not receiver.synced
+
+
+def test_a_delta_may_change_every_cell_but_not_one_more_nor_go_back():
+    whole = _fed(*_snapshot(size=2, box=(0, 0, 2, 2), cells=b"\x00" * 4))
+    whole.feed(*_delta(1, [0, 1, 2, 3], [1, 2, 3, 4]))
+    assert whole.grid.tolist() == [[1, 2], [3, 4]] and whole.applied == 1
+    back = _fed(*_snapshot(size=2, box=(0, 0, 2, 2), cells=b"\x00" * 4))
+    from vehicle.protocol.mapstream import _DELTA, _deflate, _varints
+
+    back.feed(MAP_DELTA, _DELTA.pack(1, 2) + _deflate(_varints(np.array([3, 0])) + b"\x01\x02"))  # 3, then 3 again
+    assert back.applied == 0 and not back.grid.any()
+
+
+def test_a_path_point_with_either_coordinate_not_finite_is_dropped():
+    from vehicle.protocol.mapstream import _PATH, _POINT
+
+    points = [(1.0, 2.0), (float("nan"), 3.0), (4.0, float("inf")), (5.0, 6.0)]
+    receiver = _fed((PATH, _PATH.pack(1, 0, 1) + b"".join(_POINT.pack(*p) for p in points)))
+    assert receiver.path == [(1.0, 2.0), (5.0, 6.0)]
+
+
+def test_a_snapshot_that_inflates_past_its_box_is_refused_without_inflating_it():
+    """A few kilobytes of deflate that claim one cell and hold 40 MB: refused, and inflation stops at the cell."""
+    import tracemalloc
+
+    chunks = _snapshot(cells=bytes(40_000_000))
+    tracemalloc.start()
+    try:
+        receiver = _fed(*chunks)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert not receiver.synced and peak < 5_000_000
+
+
+def test_delta_payloads_are_filled_before_another_is_started():
+    from vehicle.protocol.mapstream import DELTA_ROOM
+
+    grid = MemoryMap((0.0, 0.0), space_size=50.0, resolution=1.0)
+    streamer = MapStreamer(grid, (0.0, 0.0))
+    rng = np.random.default_rng(4)
+    cells = np.sort(rng.choice(grid.grid.size, 3000, replace=False))
+    grid.grid.reshape(-1)[cells] = rng.integers(-8, 8, 3000)
+    grid._note_changes(cells)
+    payloads = streamer.deltas()
+    sizes = [len(p) - 6 for _, p in payloads]
+    assert len(payloads) > 5 and max(sizes) <= DELTA_ROOM
+    assert min(sizes[1:-1]) >= 0.8 * DELTA_ROOM  # from a first guess on, all but the last nearly full
+
+
+def test_a_snapshot_is_cut_into_at_most_65535_chunks():
+    from vehicle.protocol.mapstream import _CHUNK, snapshot_chunks
+
+    room = PAYLOAD - _CHUNK.size
+    assert len(snapshot_chunks(1, bytes(65535 * room))) == 65535
+    with pytest.raises(ValueError, match="^map snapshot too large to chunk$"):
+        snapshot_chunks(1, bytes(65535 * room + 1))
