@@ -191,6 +191,7 @@ def prepare(module: Module, python: str) -> Path:
         path.write_text(text)
     settings = {
         "source_paths": ["vehicle", "groundstation"],
+        "also_copy": ["static", "scenes"],  # the page's files and the bundled scenes, which the station serves
         "only_mutate": module.files,
         "pytest_add_cli_args": ["-p", "no:cacheprovider", "-q", "-p", "no:randomly"],
         "pytest_add_cli_args_test_selection": module.tests,
