@@ -448,15 +448,18 @@ def test_a_stream_whose_write_fails_goes_down_and_says_why(clock):
         assert link.up
 
         class Broken:
+            closed = False
+
             def write(self, data):
                 raise BrokenPipeError(32, "Broken pipe")
 
             def close(self):
-                pass
+                self.closed = True
 
-        link.connection = Broken()
+        link.connection = broken = Broken()
         link.write(b"x")
         assert (link.up, link.connection, link.failures) == (False, None, 1)
+        assert broken.closed  # what is left of the dropped connection is closed
         assert link.error == "BrokenPipeError: [Errno 32] Broken pipe"
 
         class Failing(Broken):
