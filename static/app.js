@@ -679,6 +679,38 @@ function render(msg) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// The station's own health: a link down, a stalled link thread, a recording that fails, vehicles turned
+// away. Said at the top of the panel, since every number below may be stale or incomplete because of it.
+
+const HEALTH_PERIOD_MS = 5000;
+
+function healthProblems(health) {
+  const problems = [];
+  const link = health && health.link;
+  if (!link) return problems;
+  for (const port of link.links || []) {
+    if (!port.up) problems.push(`MAVLink ${port.url} is down${port.error ? `: ${port.error}` : ""}`);
+  }
+  if (link.thread !== "ok") problems.push("the MAVLink thread has stalled: nothing new is received");
+  if (link.recording_error) problems.push(`recording failed: ${link.recording_error}`);
+  const held = link.vehicles || {};
+  if (held.refused) problems.push(`${held.refused} new vehicles turned away: ${held.held} held, the most allowed`);
+  for (const refused of (link.signing && link.signing.refused) || []) {
+    problems.push(`system ${refused.sysid}: ${refused.messages} messages dropped, not signed with the key`);
+  }
+  return problems;
+}
+
+async function checkHealth() {
+  const { status, data } = await api("GET", "/api/health");
+  const banner = $("#health-banner");
+  const problems = status === 200 ? healthProblems(data) : [];
+  banner.hidden = problems.length === 0;
+  banner.replaceChildren(...problems.map((text) => el("li", "", text)));
+  banner.dataset.checked = String(status);  // when it last looked, and what the station answered
+}
+
+// ---------------------------------------------------------------------------------------------
 // WebSocket
 
 const viewerId = makeViewerId();
@@ -899,6 +931,8 @@ async function main() {
   setupAuth();
   connect();
   loadRecordings();
+  checkHealth();
+  setInterval(checkHealth, HEALTH_PERIOD_MS);
 }
 
 main();
