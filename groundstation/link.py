@@ -203,7 +203,9 @@ class Link:
             for port in self.ports:
                 port.write(packet)
         self.stats["sent"] += 1
-        self._record(packet, time.time())
+        now = time.time()
+        self._record(packet, now)
+        self.fleet.apply(message, now)  # what we command shows on the vehicle's timeline, as a replay shows it
 
     def request(self, sysid: int, message, accepts: Callable[[object], bool], timeout: float = 1.0,
                 retries: int = 3, resend: Callable[[int], object] | None = None):

@@ -187,6 +187,22 @@ class Replay:
             return None
         return message
 
+    def message(self, i: int):
+        """Record ``i`` decoded (None if it is damaged)."""
+        return self._decode(i)
+
+    def chunk_header(self, i: int) -> tuple[int, int, int]:
+        """Snapshot id, chunk index and chunk count of a map snapshot chunk (record ``i``), undecoded."""
+        return self._chunk_header(i)
+
+    def sensor_id(self, i: int) -> int:
+        """The sensor id of a DISTANCE_SENSOR record, undecoded (its 12th payload byte; MAVLink 2 drops
+        trailing zero bytes, so a short payload means 0)."""
+        start = int(self.index.offsets[i])
+        v2 = self._data[start] == V2
+        length, body = self._data[start + 1], start + (10 if v2 else 6)
+        return self._data[body + 11] if length > 11 else 0
+
     def _apply(self, indices) -> None:
         for i in indices:
             message = self._decode(int(i))
