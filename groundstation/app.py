@@ -12,7 +12,6 @@ in worker threads so the event loop keeps serving the page and the stream.
 from __future__ import annotations
 
 import asyncio
-import io
 import json
 import logging
 import time
@@ -32,17 +31,15 @@ from fastapi.responses import (
     StreamingResponse,
 )
 from fastapi.staticfiles import StaticFiles
-from PIL import Image
 from pydantic import BaseModel, ConfigDict, Field
 
 from groundstation.commands import Command, execute, outside_space
-from groundstation.export import export_html
 from groundstation.link import LinkError
 from groundstation.proxy import VIEWER_ID
 from groundstation.replay import ReplayError
 from groundstation.security import SESSION_COOKIE, BodyTooLarge, Gate
 from vehicle import __version__
-from vehicle.mapping.memory_map import FREE_AT, OCCUPIED_AT, state_image, states_of
+from vehicle.mapping.memory_map import FREE_AT, OCCUPIED_AT
 from vehicle.protocol.waypoints import WaypointError, mission_text, parse_mission
 
 if TYPE_CHECKING:
@@ -189,13 +186,7 @@ def create_app(station: GroundStation) -> FastAPI:
                     "occupied": int(np.count_nonzero(values >= OCCUPIED_AT)),
                     "window": {"row": r0, "col": c0, "rows": r1 - r0, "cols": c1 - c0},
                     "values": values[r0:r1, c0:c1].tolist()}
-        rgba = state_image(states_of(values))
-        background = np.full(rgba.shape, (40, 42, 48, 255), dtype=np.uint8)
-        alpha = rgba[..., 3:4] / 255.0
-        picture = (rgba * alpha + background * (1 - alpha)).astype(np.uint8)
-        buffer = io.BytesIO()
-        Image.fromarray(picture[..., :3]).save(buffer, "PNG")
-        return Response(buffer.getvalue(), media_type="image/png")
+        return Response(station.map_picture(v, grid), media_type="image/png")
 
     @app.post("/api/vehicles/{sysid}/commands", tags=["commands"], dependencies=[Depends(operator)],
               responses={401: {"description": "no or wrong operator token"}, 404: {"description": "no such vehicle"},
@@ -328,8 +319,7 @@ def create_app(station: GroundStation) -> FastAPI:
         replay = station.replay
         if replay is None:
             raise HTTPException(409, "nothing is being replayed")
-        html = await asyncio.to_thread(export_html, replay.index.path, station.scene, station.datum,
-                                       station.live.ground_height)
+        html = await asyncio.to_thread(station.export_replay, replay)
         name = Path(replay.name).stem + ".html"
         return Response(html, media_type="text/html",
                         headers={"Content-Disposition": f'attachment; filename="{name}"'})

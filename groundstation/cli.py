@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import os
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from vehicle import __version__
@@ -16,6 +18,21 @@ from vehicle.world.bundled import default_scene
 
 DEFAULT_SCENE = default_scene()
 DEFAULT_LINK = "udpin:127.0.0.1:14550"
+
+
+def _signing_key(value: str) -> bytes:
+    from vehicle.protocol.signing import key_option  # pymavlink loads only when the option is given
+
+    return key_option(value)
+
+
+def _signing_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--signing-key", type=_signing_key, metavar="FILE|PASSPHRASE",
+                        help="MAVLink 2 signing key: a file (32 bytes, or one line of 64 hex digits or of base64) "
+                             "or a passphrase (its SHA-256 is the key, as QGroundControl and MAVProxy make one); "
+                             "the station signs what it sends and shows which vehicles sign")
+    parser.add_argument("--require-signing", action="store_true",
+                        help="drop every message not signed with --signing-key: unsigned vehicles are not shown")
 
 
 def _server_options(parser: argparse.ArgumentParser) -> None:
@@ -31,6 +48,9 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
                              "always work; names guard against DNS rebinding)")
     parser.add_argument("--tls-cert", help="certificate file for HTTPS")
     parser.add_argument("--tls-key", help="private key file for HTTPS")
+    parser.add_argument("--scene-dir", action="append", default=[], metavar="DIR",
+                        help="a folder where replays look for the scene a recording names, repeatable (besides "
+                             "the bundled scenes and the recording's own folder)")
     parser.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
                         help="where the scene origin lies on Earth (default: the scene's datum hint, else "
                              "ArduPilot's simulator home; without a scene, the first vehicle's home)")
@@ -40,8 +60,12 @@ def _station(args, urls: list[str], scene_path: str | None):
     from groundstation.server import GroundStation
     from vehicle.world.scene import load_scene
 
+    if args.require_signing and args.signing_key is None:
+        raise ValueError("--require-signing needs --signing-key")
     scene = load_scene(scene_path) if scene_path else None
-    return GroundStation(urls, scene, args.token, args.record_dir or None, datum=args.datum)
+    return GroundStation(urls, scene, args.token, args.record_dir or None, datum=args.datum,
+                         scene_dirs=args.scene_dir, signing_key=args.signing_key,
+                         require_signing=args.require_signing)
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
@@ -72,6 +96,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     station = _station(args, [f"udpin:127.0.0.1:{port}"], args.scene)
     vehicle = [sys.executable, "-m", "vehicle.cli"]
     datum = [f"--datum={args.datum.lat},{args.datum.lon},{args.datum.alt}"] if args.datum is not None else []
+    common = [*datum, *_key_for_children(args.signing_key)]  # what both vehicle processes are told
     output = subprocess.DEVNULL if args.quiet else None
     processes = []
     for index, (x, y) in enumerate(demo_starts(args.vehicles)):
@@ -80,9 +105,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         processes.append(_child([*vehicle, "sim", "--role", "autopilot", "--scene", args.scene, "--vehicle",
                                  args.vehicle, f"--start={x},{y}", "--sysid", sysid, "--speedup", str(args.speedup),
                                  "--mavlink", f"udpout:127.0.0.1:{port}", "--mavlink",
-                                 f"udpout:127.0.0.1:{agent_port}", *datum], output))
+                                 f"udpout:127.0.0.1:{agent_port}", *common], output))
         processes.append(_child([*vehicle, "agent", "--connect", f"udpin:127.0.0.1:{agent_port}", "--mission",
-                                 args.mission, "--vehicle", args.vehicle, "--scene", args.scene, "--stay", *datum],
+                                 args.mission, "--vehicle", args.vehicle, "--scene", args.scene, "--stay", *common],
                                 output))
 
     def stop_vehicles() -> None:
@@ -104,6 +129,18 @@ def cmd_demo(args: argparse.Namespace) -> int:
     finally:
         stop_vehicles()
     return 0
+
+
+def _key_for_children(key: bytes | None) -> list[str]:
+    """The vehicles' --signing-key: the station's key in a file only this user reads (a passphrase on their
+    command lines would show in every process list), removed when the station exits."""
+    if key is None:
+        return []
+    handle, path = tempfile.mkstemp(prefix="scanstation-key-")  # created 0600
+    with os.fdopen(handle, "w") as file:
+        file.write(key.hex() + "\n")
+    atexit.register(lambda: Path(path).unlink(missing_ok=True))
+    return ["--signing-key", path]
 
 
 def _free_udp_port() -> int:
@@ -141,9 +178,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if index.warning:
         print(f"warning: {index.warning}", file=sys.stderr)
     scene = load_scene(args.scene) if args.scene else None
-    station = GroundStation([], scene, args.token, record_dir=path.parent, datum=args.datum)
-    station.start_replay(path)
-    print(f"replaying {path.name}: {len(index)} messages, {index.duration:.1f} s", flush=True)
+    station = GroundStation([], scene, args.token, record_dir=path.parent, datum=args.datum,
+                            scene_dirs=args.scene_dir)
+    replay = station.start_replay(path)
+    print(f"replaying {path.name}: {len(index)} messages, {index.duration:.1f} s; scene: {replay.scene['note']}",
+          flush=True)
     _serve(station, args)
     return 0
 
@@ -158,6 +197,7 @@ def main(argv: list[str] | None = None) -> int:
                        help=f"pymavlink connection string, repeatable (default {DEFAULT_LINK})")
     serve.add_argument("--scene", help="VRML scene to show (default: none, vehicles over a ground grid)")
     _server_options(serve)
+    _signing_options(serve)
     serve.set_defaults(run=cmd_serve)
 
     demo = commands.add_parser("demo", help="the ground station and simulated vehicles flying a mission")
@@ -169,12 +209,14 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--mavlink-port", type=int, default=14550, help="UDP port the vehicles send to")
     demo.add_argument("--quiet", action="store_true", help="hide the vehicles' own output")
     _server_options(demo)
+    _signing_options(demo)
     demo.set_defaults(run=cmd_demo)
 
     replay = commands.add_parser("replay", help="replay a recorded .tlog in the page")
     replay.add_argument("file", help="a telemetry log (.tlog): recorded here, by vehicle experiment --log, "
                         "or by any MAVLink tool")
-    replay.add_argument("--scene", help="VRML scene to show it in")
+    replay.add_argument("--scene", help="VRML scene to show it in when the recording names none, or names "
+                        "this file (default: the scene the recording names, looked up by name and hash)")
     _server_options(replay)
     replay.set_defaults(run=cmd_replay)
 

@@ -4,10 +4,17 @@ The recording is played into a private 3D view (its own loopback viser
 server, never served) while the serializer records every scene change with
 the time between frames; viser then packs its client and the recording into
 a single page with play, pause, scrub and speed controls.
+
+The serializer keeps the 3D scene only (viser leaves its GUI panels out of
+the file), so the telemetry panel goes into the scene: a label above each
+vehicle, rewritten every frame, says what the page's panel says as of that
+moment of the log (mode, armed, altitude, speed, battery, the onboard agent's
+state and the latest message), with the log's clock.
 """
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 from groundstation.replay import Replay
@@ -18,6 +25,8 @@ from vehicle.world.scene import Scene
 
 MAX_FRAMES = 600
 MIN_FRAME = 0.25  # s of log time between frames
+LABEL_HEIGHT = 1.4  # m above the vehicle
+MESSAGE_CHARS = 60  # of the latest message shown
 
 
 def export_html(path: str | Path, scene: Scene | None, datum: Datum | None, ground_height=None) -> str:
@@ -27,11 +36,72 @@ def export_html(path: str | Path, scene: Scene | None, datum: Datum | None, grou
     try:
         serializer = view.server.get_scene_serializer()
         frame = max(MIN_FRAME, replay.duration / MAX_FRAMES)
+        telemetry = TelemetryLabels(view, replay)
         view.draw()
+        telemetry.draw()
         while replay.clock < replay.duration:
             replay.advance(frame)
             view.draw()
+            telemetry.draw()
             serializer.insert_sleep(frame)
         return serializer.as_html(dark_mode=True)
     finally:
         view.close()
+
+
+class TelemetryLabels:
+    """A label per vehicle in a 3D view, with its telemetry as of the replay's clock."""
+
+    def __init__(self, view: SceneView, replay: Replay):
+        self.view = view
+        self.replay = replay
+        self.labels: dict[int, object] = {}  # sysid -> viser's label handle
+        self.texts: dict[int, str] = {}
+
+    def draw(self) -> None:
+        fleet, scene = self.replay.fleet, self.view.server.scene
+        with fleet.lock:
+            now = self.replay.now
+            shown = {v.sysid: (fleet.describe(v, now), fleet.height(v)) for v in fleet.vehicles.values()
+                     if v.x is not None}
+        clock = f"{time.strftime('%H:%M:%S', time.gmtime(now))} UTC, +{self.replay.clock:.1f} s"
+        for sysid in set(self.labels) - set(shown):
+            self.labels.pop(sysid).remove()
+            self.texts.pop(sysid)
+        for sysid, (described, height) in shown.items():
+            text = telemetry_text(described, clock)
+            position = (described["position"]["x"], described["position"]["y"], height + LABEL_HEIGHT)
+            label = self.labels.get(sysid)
+            if label is None:
+                self.labels[sysid] = scene.add_label(f"/telemetry/{sysid}", text, position=position,
+                                                     anchor="bottom-left", font_screen_scale=0.9)
+            else:
+                label.position = position
+                if self.texts[sysid] != text:
+                    label.text = text
+            self.texts[sysid] = text
+
+
+def telemetry_text(v: dict, clock: str) -> str:
+    """The page's panel for one vehicle (``Fleet.describe``'s dict), as lines of text."""
+    agent = v["agent"]
+    battery = v["battery"]
+    position = v["position"]
+    lines = [
+        f"{v['sysid']} {v['type']}  {v['mode']}  {'ARMED' if v['armed'] else 'disarmed'}",
+        f"alt {_number(position['alt'])} m  {_number(v['speed'])} m/s  heading {_number(v['heading'], 0)}°",
+        "battery " + ("-" if battery is None else f"{battery['voltage']:.1f} V"
+                      + (f" {battery['remaining']}%" if battery["remaining"] is not None else "")),
+    ]
+    if agent is not None:
+        why = f" ({agent['reason']})" if agent["reason"] and agent["state"] != "RUNNING" else ""
+        lines.append(f"agent {agent['state'].upper()} {agent['mission'] or ''}".rstrip() + why)
+    if v["status"]:
+        message = v["status"]
+        lines.append(message if len(message) <= MESSAGE_CHARS else message[:MESSAGE_CHARS - 1] + "…")
+    lines.append(clock)
+    return "\n".join(lines)
+
+
+def _number(value: float | None, digits: int = 1) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"

@@ -13,6 +13,12 @@ attitude only on links where someone asked. Commands are retried
 run out, as MAVLink asks of a sender. Nothing a peer sends or the disk does
 stops the thread: a failure is counted, kept for the health report, and the
 loop goes on.
+
+With a signing key the station signs everything it sends and shows, per
+vehicle, whether its messages carry a valid signature; with
+``require_signing`` it drops what is not signed with its key (such a vehicle
+is never shown; its system id and the messages dropped are in the health
+report).
 """
 
 from __future__ import annotations
@@ -25,8 +31,8 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from groundstation.state import LINK_LOST_AFTER, Fleet
-from vehicle.protocol import links, mission
+from groundstation.state import FORGET_AFTER, LINK_LOST_AFTER, Fleet
+from vehicle.protocol import links, mission, signing
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.mission import MissionItem
 
@@ -62,14 +68,23 @@ class _Waiter:
 
 
 class Link:
-    def __init__(self, urls: list[str], fleet: Fleet, recorder=None, sysid: int = GCS_SYSID):
+    def __init__(self, urls: list[str], fleet: Fleet, recorder=None, sysid: int = GCS_SYSID,
+                 signing_key: bytes | None = None, require_signing: bool = False):
+        if require_signing and signing_key is None:
+            raise ValueError("requiring signed vehicles needs a signing key")
         self.fleet = fleet
+        fleet.own_sysid = sysid  # so that it tells this station's orders from another station's
         self.recorder = recorder
         self.urls = urls
-        self.ports = [links.connect(url, sysid, GCS_COMPID) for url in urls]
+        self.signing_key, self.require_signing = signing_key, require_signing
+        self.ports = [links.connect(url, sysid, GCS_COMPID, signing_key, require_signing) for url in urls]
         self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=GCS_COMPID)
-        self.route: dict[int, tuple] = {}  # sysid -> (the port it was last heard on, its address there)
+        if signing_key is not None:
+            signing.sign_outgoing(self.packer, signing_key)
+        # keyed by the 8-bit system id (so at most 255 entries), and pruned after FORGET_AFTER of silence:
+        self.route: dict[int, tuple] = {}  # sysid -> (the port it was last heard on, its address there, when)
         self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
+        self._pruned = 0.0
         self._waiters: list[_Waiter] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -92,9 +107,22 @@ class Link:
     def health(self) -> dict:
         """How the link side is doing, for /api/health: the thread, each link, and the recording."""
         stalled = not self._thread.is_alive() or time.monotonic() - self.turned > STALLED_AFTER
+        fleet, now = self.fleet, time.time()
         return {"thread": "stalled" if stalled else "ok", "errors": self.stats["errors"],
                 "last_error": self.last_error or None, "recording_error": self.recording_error or None,
-                "links": [{"url": port.url, "up": port.up, "error": port.error or None} for port in self.ports]}
+                "links": [{"url": port.url, "up": port.up, "error": port.error or None} for port in self.ports],
+                "vehicles": {"held": len(fleet.vehicles), "limit": fleet.max_vehicles, "refused": fleet.refused,
+                             "forgotten": fleet.forgotten},
+                "signing": self._signing_health(),
+                "other_stations": [{"sysid": sysid, "age": round(now - heard, 1)}
+                                   for sysid, heard in list(fleet.stations.items())]}
+
+    def _signing_health(self) -> dict:
+        """Whether the station signs, whether it requires signed vehicles, and the systems whose messages it
+        dropped for their signature (with how many)."""
+        refused = sum((port.refused for port in self.ports), Counter())
+        return {"key": self.signing_key is not None, "required": self.require_signing,
+                "refused": [{"sysid": sysid, "messages": count} for sysid, count in sorted(refused.items())]}
 
     # ---- the loop ---------------------------------------------------------------------------------
     def _run(self) -> None:
@@ -104,11 +132,11 @@ class Link:
             try:
                 now = time.time()
                 if now >= next_beat:
-                    self.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID,
-                                                                0, 0, mavlink.MAV_STATE_ACTIVE, 3))
+                    self.send(_gcs_heartbeat())
                     next_beat = now + 1.0
                 busy = self._read()
                 self._record_tick()
+                self._prune(now)
             except Exception as error:  # noqa: BLE001 - nothing may stop reception; counted and reported
                 self._failed(error)
                 busy = False
@@ -141,8 +169,10 @@ class Link:
         self.stats["received"] += 1
         self._record(message.get_msgbuf(), now)
         sysid = message.get_srcSystem()
-        self.route[sysid] = (port, getattr(message, "_peer", None))
-        if message.get_type() == "HEARTBEAT" and message.get_srcComponent() == AUTOPILOT:
+        self.route[sysid] = (port, getattr(message, "_peer", None), now)
+        self.fleet.apply(message, now)
+        if message.get_type() == "HEARTBEAT" and message.get_srcComponent() == AUTOPILOT and sysid in \
+                self.fleet.vehicles:  # a vehicle the fleet holds (a refused one gets no answer, so no flood of them)
             self._ask_for_telemetry(sysid, now)
         if hasattr(message, "time_boot_ms") and sysid in self._asked:
             heard, boot = self._asked[sysid]
@@ -150,12 +180,20 @@ class Link:
                 del self._asked[sysid]
             else:
                 self._asked[sysid] = (heard, max(boot, message.time_boot_ms / 1000.0))
-        self.fleet.apply(message, now)
         with self._lock:
             waiters = list(self._waiters)
         for waiter in waiters:
             if waiter.sysid == sysid and waiter.accepts(message):
                 waiter.replies.put(message)
+
+    def _prune(self, now: float) -> None:
+        """Once a second: forget the routes to systems not heard for FORGET_AFTER (as the fleet forgets them)."""
+        if now - self._pruned < 1.0:
+            return
+        self._pruned = now
+        for sysid in [s for s, (_, _, heard) in self.route.items() if now - heard > FORGET_AFTER]:
+            del self.route[sysid]
+            self._asked.pop(sysid, None)
 
     def _ask_for_telemetry(self, sysid: int, now: float) -> None:
         """Ask a vehicle heard for the first time, or again after its link was lost, for what the page shows."""
@@ -163,6 +201,7 @@ class Link:
         self._asked[sysid] = (now, boot)
         if heard is not None and now - heard <= LINK_LOST_AFTER:
             return
+        self.send(_gcs_heartbeat(), sysid)  # first: a vehicle takes orders only from a ground station it heard
         for message_id, rate in TELEMETRY.items():
             self.send(mavlink.MAVLink_command_long_message(sysid, AUTOPILOT, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
                                                            0, message_id, 1e6 / rate, 0, 0, 0, 0, 0), sysid)
@@ -196,8 +235,9 @@ class Link:
         """Send to where the vehicle was heard (to every link and peer if it is unknown or None)."""
         with self._lock:
             packet = pack(message, self.packer)
+        self.fleet.apply(message, time.time())  # the fleet tells this station's orders from another's
         if sysid in self.route:
-            port, peer = self.route[sysid]
+            port, peer, _ = self.route[sysid]
             port.write(packet, peer)
         else:
             for port in self.ports:
@@ -258,3 +298,8 @@ class Link:
             return mission.upload(self, sysid, items, timeout=timeout)
         except mission.MissionError as error:
             raise LinkError(str(error)) from None
+
+
+def _gcs_heartbeat():
+    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
+                                             mavlink.MAV_STATE_ACTIVE, 3)

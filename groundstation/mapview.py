@@ -113,7 +113,8 @@ def merge(grids: list[Grid]) -> Grid | None:
     north = max(o[1] + w[1] / r for _, r, o, w in parts)
     resolution = max(r for _, r, _, _ in parts)
     resolution = min(resolution, MERGED_CELLS / max(east - west, north - south, 1e-6))
-    rows, cols = max(1, int(math.ceil((north - south) * resolution))), max(1, int(math.ceil((east - west) * resolution)))
+    rows = max(1, int(math.ceil((north - south) * resolution)))
+    cols = max(1, int(math.ceil((east - west) * resolution)))
     total = np.zeros((rows, cols), dtype=np.int32)
     ys = south + (np.arange(rows) + 0.5) / resolution  # cell centres of the merged grid
     xs = west + (np.arange(cols) + 0.5) / resolution

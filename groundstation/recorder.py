@@ -1,8 +1,9 @@
 """Session recordings: every MAVLink packet the ground station hears or sends, in one .tlog per session.
 
-Files are standard telemetry logs (see ``vehicle.flightlog``), flushed at
+Files are standard telemetry logs (see ``vehicle.protocol.tlog``), flushed at
 least once a second so that a server that is killed loses at most the last
-second.
+second. Each names the scene the station shows (``vehicle.protocol.scene_note``)
+at its start and every minute, so that its replay finds that scene again.
 """
 
 from __future__ import annotations
@@ -11,13 +12,15 @@ import threading
 import time
 from pathlib import Path
 
+from vehicle.protocol.scene_note import SceneNotes
 from vehicle.protocol.tlog import TlogWriter
 
 FLUSH_EVERY = 1.0  # s
 
 
 class Recorder:
-    def __init__(self, directory: str | Path):
+    def __init__(self, directory: str | Path, scene_note: str | None = None):
+        """``scene_note``: the note naming the station's scene (``scene_note.note_text``), None for none."""
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -33,6 +36,8 @@ class Recorder:
         self.packets = 0
         self._first: float | None = None
         self._last: float | None = None
+        self._notes = SceneNotes(scene_note) if scene_note else None
+        self._write_note(time.time())
 
     def write(self, packet: bytes, timestamp: float) -> None:
         with self._lock:
@@ -47,8 +52,15 @@ class Recorder:
         """Seconds recorded so far."""
         return None if self._first is None else round(self._last - self._first, 1)
 
+    def _write_note(self, now: float) -> None:
+        if self._notes is not None:
+            for packet in self._notes.take(now):
+                self.write(packet, now)
+
     def tick(self, now: float | None = None) -> None:
-        """Flush if a second has passed since the last flush (called by the link's loop)."""
+        """Write the scene's note when due and flush if a second has passed since the last flush (called by
+        the link's loop)."""
+        self._write_note(time.time() if now is None else now)
         if time.monotonic() - self._flushed >= FLUSH_EVERY:
             with self._lock:
                 self._writer.flush()

@@ -149,6 +149,7 @@ class Replay:
     name: str = ""
     speed: float = 1.0
     playing: bool = False
+    scene: dict | None = None  # the scene it is shown in and how it was found (``replay_scene``)
     position: int = 0  # index of the next record to apply
     clock: float = 0.0  # seconds from the start of the log
     _data: bytes = field(default=b"", repr=False)
@@ -157,6 +158,7 @@ class Replay:
     @classmethod
     def open(cls, path: str | Path, fleet: Fleet) -> Replay:
         index = index_tlog(path)
+        fleet.forget_after = None  # a vehicle silent for a while in the log is still the log's
         replay = cls(index, fleet, Path(path).name)
         replay._data = Path(path).read_bytes()
         replay._decoder = mavlink.MAVLink(None)
@@ -170,7 +172,8 @@ class Replay:
 
     def status(self) -> dict:
         return {"name": self.name, "time": round(self.clock, 3), "duration": round(self.duration, 3),
-                "playing": self.playing, "speed": self.speed, "warning": self.index.warning or None}
+                "playing": self.playing, "speed": self.speed, "warning": self.index.warning or None,
+                "scene": self.scene}
 
     @property
     def now(self) -> float:
@@ -178,7 +181,8 @@ class Replay:
         return self.index.start + self.clock
 
     # ---- decoding ---------------------------------------------------------------------------------
-    def _decode(self, i: int):
+    def decode(self, i: int):
+        """The message of record ``i`` (None if it does not decode)."""
         start = int(self.index.offsets[i])
         packet = self._data[start:start + int(self.index.lengths[i])]
         try:
@@ -205,7 +209,7 @@ class Replay:
 
     def _apply(self, indices) -> None:
         for i in indices:
-            message = self._decode(int(i))
+            message = self.decode(int(i))
             if message is not None:
                 self.fleet.apply(message, float(self.index.times[i]))
 

@@ -12,31 +12,45 @@ import secrets
 import sys
 import threading
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 import uvicorn
 
 from groundstation.app import create_app
+from groundstation.export import export_html
 from groundstation.link import Link
 from groundstation.proxy import VizProxy
 from groundstation.recorder import Recorder
 from groundstation.replay import Player, Replay, ReplayError, index_tlog
+from groundstation.replay_scene import find_scene, logged_scene
 from groundstation.security import Access, is_loopback
-from groundstation.state import Fleet
+from groundstation.state import Fleet, VehicleState
 from groundstation.viz import SceneView
+from vehicle.mapping.picture import draw_map
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mission import MissionItem
+from vehicle.protocol.scene_note import note_text, scene_digest
 from vehicle.protocol.waypoints import positions
+from vehicle.world.bundled import scenes_dir
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
 
 
 class GroundStation:
     def __init__(self, urls: list[str], scene: Scene | None = None, token: str | None = None,
-                 record_dir: str | Path | None = "recordings", datum: Datum | None = None, viser_port: int = 0):
+                 record_dir: str | Path | None = "recordings", datum: Datum | None = None, viser_port: int = 0,
+                 scene_dirs: Iterable[str | Path] = (), signing_key: bytes | None = None,
+                 require_signing: bool = False):
+        """``scene_dirs``: folders where replays look for the scenes their recordings name (besides the
+        bundled scenes and the recording's own folder)."""
         self.token = token or secrets.token_urlsafe(16)
         self.access = Access(self.token)  # serving beyond loopback makes it stricter (see app_config)
         self.scene = scene
+        self.scene_dirs = [Path(folder) for folder in scene_dirs]
+        scene_file = scene.path if scene is not None and scene.path is not None and scene.path.is_file() else None
+        self.scene_digest = scene_digest(scene_file) if scene_file else None  # recordings name the scene by it
+        self.given_datum = datum
         ground = None
         if scene is not None:
             datum = Datum.of_scene(scene.hints, datum)
@@ -45,13 +59,16 @@ class GroundStation:
         self.datum = datum  # None (no scene, none given): the first home heard becomes the origin
         self.live = Fleet(datum, ground)
         self.record_dir = Path(record_dir) if record_dir else None
-        self.recorder = Recorder(record_dir) if record_dir and urls else None
+        self.recorder = Recorder(record_dir, note_text(scene_file) if scene_file else None) \
+            if record_dir and urls else None
         self.link_urls = list(urls)
-        self.link = Link(urls, self.live, self.recorder) if urls else None
+        self.link = Link(urls, self.live, self.recorder, signing_key=signing_key,
+                         require_signing=require_signing) if urls else None
         self.view = SceneView(self.live, scene, viser_port, clock=self.now)
         self.proxy = VizProxy(self.view.port)
         self.view.on_target(self._target)
         self.replay: Replay | None = None  # set while a recording is replayed
+        self._replay_world: tuple = (scene, self.datum, self.live.ground_height)  # its scene, datum, ground
         self._player: Player | None = None
         self._replay_lock = threading.Lock()
         self._durations: dict[tuple, float | None] = {}
@@ -139,27 +156,80 @@ class GroundStation:
         return path if path.is_file() else None
 
     def start_replay(self, path: Path) -> Replay:
-        """Show a recording instead of the live vehicles (the live link goes on in the background)."""
+        """Show a recording instead of the live vehicles (the live link goes on in the background), in the
+        scene it names (see ``replay_scene``)."""
         with self._replay_lock:
             replay = Replay.open(path, Fleet(self.datum, self.live.ground_height))
+            folders = [("the bundled scenes", scenes_dir()), ("the recording's folder", path.parent),
+                       *((f"--scene-dir {folder}", folder) for folder in self.scene_dirs)]
+            chosen = find_scene(logged_scene(replay), self.scene, self.scene_digest, folders)
+            replay.scene = chosen.status
+            world = self._world(chosen.scene)
+            if chosen.scene is not self.scene:  # placed by that scene's datum, on its ground
+                replay.fleet = Fleet(world[1], world[2])
+                replay.seek(0.0)
             self._stop_player()
             self.replay = replay
+            self._replay_world = world
+            if self.view.scene is not chosen.scene:
+                self.view.set_scene(chosen.scene)
             self._player = Player(replay).start()
             self.view.show(replay.fleet)
             replay.playing = True
             return replay
+
+    def _world(self, scene: Scene | None) -> tuple:
+        """(scene, datum, ground height) a replay in ``scene`` is shown with."""
+        if scene is self.scene:
+            return scene, self.datum, self.live.ground_height
+        if scene is None:
+            return None, self.given_datum, None
+        try:
+            datum = Datum.of_scene(scene.hints, self.given_datum)
+        except ValueError:  # a broken datum hint: the default datum, as the simulator would refuse it
+            datum = self.given_datum or Datum()
+        return scene, datum, RayCaster(scene).ground_height if len(scene.faces) else None
 
     def stop_replay(self) -> None:
         with self._replay_lock:
             self._stop_player()
             if self.replay is not None:
                 self.replay = None
+                if self.view.scene is not self.scene:
+                    self.view.set_scene(self.scene)
                 self.view.show(self.live)
+
+    def export_replay(self, replay: Replay) -> str:
+        """The replay as one HTML file that plays offline (see ``export``), in the scene it is shown in."""
+        scene, datum, ground = self._replay_world if replay is self.replay else (self.scene, self.datum,
+                                                                                  self.live.ground_height)
+        return export_html(replay.index.path, scene, datum, ground)
 
     def _stop_player(self) -> None:
         if self._player is not None:
             self._player.stop()
             self._player = None
+
+    def map_picture(self, vehicle: VehicleState, grid: tuple) -> bytes:
+        """A PNG of the vehicle's memory map ``grid`` (values, resolution, origin) for people, with its trail,
+        home, planned path and waypoints (``vehicle.mapping.picture``)."""
+        with self.fleet.lock:
+            trail, path, waypoints = list(vehicle.trail), vehicle.planned_path(), list(vehicle.waypoints)
+            home = vehicle.home
+            position = (vehicle.x, vehicle.y) if vehicle.x is not None else None
+            described = self.fleet.describe(vehicle, self.now())
+        replay = self.replay
+        scene = self._replay_world[0] if replay is not None else self.scene
+        agent = described["agent"]
+        title = (f"vehicle {vehicle.sysid} ({vehicle.kind})" + (f", {agent['mission']} mission" if agent else "")
+                 + (f" in {scene.path.name}" if scene is not None and scene.path is not None else "")
+                 + f": {vehicle.mode}" + (f", agent {agent['state'].upper()}" if agent else ""))
+        when = f"replay of {replay.name} at +{replay.clock:.1f} s" if replay is not None else \
+            time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
+        subtitle = f"{described['map']['occupied']} occupied cells, map from the {vehicle.map_source}, {when}"
+        values, resolution, origin = grid
+        return draw_map(values, resolution, origin, f"{title}\n{subtitle}", home, trail, path, waypoints,
+                        position).png()
 
     def note_waypoints(self, sysid: int, items: list[MissionItem]) -> None:
         vehicle = self.fleet.get(sysid)

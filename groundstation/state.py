@@ -13,13 +13,26 @@ height above the vehicle's home). As it goes the Fleet keeps each vehicle's
 history (``groundstation.history``): sampled telemetry and the events the
 page marks on its timeline, including the commands a ground station sent
 (the link hands its own messages in too, and a recording holds them).
+
+Anyone on a link can claim to be a vehicle, so the fleet holds at most
+``MAX_VEHICLES`` (a new system id is refused, and counted, until one is
+forgotten) and forgets a vehicle not heard for ``FORGET_AFTER`` seconds of the
+receiver's clock; a replayed log forgets nothing (``forget_after=None``). A
+peer's non-finite numbers are ignored (the last good value stays).
+
+Another ground station in command shows on the vehicle (``other_gcs``): the
+fleet notes the other stations it hears (GCS heartbeats from system ids but
+ours), a COMMAND_ACK or MISSION_ACK of the vehicle addressed to another system
+than ours or its own, and a mode change this station did not order while
+another station is heard. This station's own messages (``apply`` gets them
+too: the link's and a replayed recording's) tell which orders were ours.
 """
 
 from __future__ import annotations
 
 import math
 import threading
-from collections import deque
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -51,6 +64,15 @@ COLOURS = [(64, 156, 255), (255, 140, 40), (80, 210, 110), (230, 90, 220), (70, 
 # commands a station sends on its own account (telemetry requests): not events worth marking
 QUIET_COMMANDS = {mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE}
 SEVERE = mavlink.MAV_SEVERITY_WARNING  # this severity or worse is shown as a banner on the page
+OWN_SYSID = 255  # this station's system id (the link's)
+ORDERED_WITHIN = 5.0  # s after this station's order (or the companion's) a mode change is taken as its doing
+# (a mode other than the one it named is not)
+MAX_STATIONS = 16  # other ground stations remembered
+MODE_ORDERS = {mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_NAV_LAND,
+               mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_MISSION_START, mavlink.MAV_CMD_DO_REPOSITION,
+               mavlink.MAV_CMD_COMPONENT_ARM_DISARM}  # commands after which a vehicle may change its mode
+MAX_VEHICLES = 64  # vehicles held at once; each may hold a map of up to 16 MB
+FORGET_AFTER = 600.0  # s of the receiver's clock without a message before a vehicle is forgotten
 
 TYPES = {
     mavlink.MAV_TYPE_GROUND_ROVER: "rover", mavlink.MAV_TYPE_SURFACE_BOAT: "boat",
@@ -94,6 +116,7 @@ class VehicleState:
     custom_mode: int = -1
     armed: bool = False
     mavlink_version: int = 2
+    signed: bool | None = None  # its heartbeat carried a valid signature (None: this station has no key)
     lat: float | None = None
     lon: float | None = None
     alt: float | None = None  # m above home
@@ -128,6 +151,9 @@ class VehicleState:
     unmapped: deque = field(default_factory=lambda: deque(maxlen=HITS_KEPT))  # readings waiting for own_map
     first_heard: float = 0.0  # receiver clock
     waypoints: list[tuple[float, float]] = field(default_factory=list)  # the AUTO mission, scene x, y
+    other_gcs: tuple[int, str, float] | None = None  # another station in command: its sysid, what showed it, when
+    ordered: tuple[float, int | None] = (-math.inf, None)  # when this station or the companion last ordered a
+    # mode change, and the mode (custom_mode) if the order named one
     version: int = 0  # bumps on every change, for views that redraw
 
     @property
@@ -174,7 +200,8 @@ class VehicleState:
 class Fleet:
     """Every vehicle heard, by system id. Thread-safe: the link writes, views read snapshots."""
 
-    def __init__(self, datum: Datum | None = None, ground_height=None, own_maps: bool = True,
+    def __init__(self, datum: Datum | None = None, ground_height=None, forget_after: float | None = FORGET_AFTER,
+                 max_vehicles: int = MAX_VEHICLES, own_sysid: int = OWN_SYSID, own_maps: bool = True,
                  history: History | None = None):
         """``own_maps``: build a map from DISTANCE_SENSOR for a vehicle that streams none (a replay's quick scan
         of its whole log, which skips most readings, does not)."""
@@ -187,10 +214,18 @@ class Fleet:
         self.texts = Reassembler()
         self.history = history or History()
         self._occupied: dict[int, tuple[tuple, int]] = {}  # sysid -> (map version, occupied cells)
+        self.forget_after = forget_after  # None: never (a replayed log)
+        self.max_vehicles = max_vehicles
+        self.refused = 0  # heartbeats of new vehicles turned away while the fleet was full
+        self.forgotten = 0
+        self._swept = -math.inf  # when silent vehicles were last looked for
+        self.own_sysid = own_sysid
+        self.stations: OrderedDict[int, float] = OrderedDict()  # other ground stations: sysid -> last heartbeat
 
     def clear(self) -> None:
         with self.lock:
             self.vehicles.clear()
+            self.stations.clear()
             self.texts = Reassembler()
             self.history.clear()
             self._occupied.clear()
@@ -210,6 +245,13 @@ class Fleet:
             return
         sysid = message.get_srcSystem()
         with self.lock:
+            if now - self._swept >= 1.0:
+                self._forget_silent(now)
+            if sysid == self.own_sysid:
+                self._ours(message, now)
+                return
+            if kind == "HEARTBEAT" and message.type == mavlink.MAV_TYPE_GCS:
+                self._station_heard(sysid, now)
             vehicle = self.vehicles.get(sysid)
             if vehicle is None and kind in ("COMMAND_LONG", "COMMAND_INT"):
                 self._command_sent(message, now)  # a ground station's (ours, or another's) to a vehicle
@@ -218,6 +260,9 @@ class Fleet:
                 if kind != "HEARTBEAT" or message.type in NOT_VEHICLES or message.autopilot == \
                         mavlink.MAV_AUTOPILOT_INVALID:
                     return  # only a vehicle's heartbeat makes a vehicle
+                if len(self.vehicles) >= self.max_vehicles:
+                    self.refused += 1
+                    return
                 vehicle = self.vehicles[sysid] = VehicleState(sysid, first_heard=now)
             handler = getattr(self, f"_{kind.lower()}", None)
             vehicle.last_message = now
@@ -238,6 +283,69 @@ class Fleet:
             values[f"sonar {ident}"] = sonar.distance
         return values
 
+    def _forget_silent(self, now: float) -> None:
+        """Drop the vehicles not heard for ``forget_after`` seconds (never while a log replays)."""
+        self._swept = now
+        if self.forget_after is None:
+            return
+        silent = [sysid for sysid, v in self.vehicles.items() if now - (v.last_message or v.first_heard) >
+                  self.forget_after]
+        for sysid in silent:
+            del self.vehicles[sysid]
+        if silent:
+            self.forgotten += len(silent)
+            self.version += 1
+
+    # ---- ground stations -------------------------------------------------------------------------
+    def _ours(self, message, now: float) -> None:
+        """A message this station sent: an order that may change a vehicle's mode is ours, not another's; a
+        command is an event on the vehicle's timeline."""
+        kind = message.get_type()
+        vehicle = self.vehicles.get(getattr(message, "target_system", 0))
+        if vehicle is None:
+            return
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
+            self._command_sent(message, now)
+        if kind == "SET_MODE":
+            vehicle.ordered = (now, message.custom_mode)
+        elif kind in ("COMMAND_LONG", "COMMAND_INT") and message.command in MODE_ORDERS:
+            named = message.command == mavlink.MAV_CMD_DO_SET_MODE
+            vehicle.ordered = (now, int(message.param2) if named else None)
+
+    def _station_heard(self, sysid: int, now: float) -> None:
+        self.stations.pop(sysid, None)
+        self.stations[sysid] = now
+        while len(self.stations) > MAX_STATIONS:
+            self.stations.popitem(last=False)
+
+    def _command_ack(self, vehicle, m, now) -> None:
+        if m.command not in QUIET_COMMANDS:
+            result = RESULTS.get(m.result, f"result {m.result}")
+            self.history.event(vehicle.sysid, now, "ack", f"{_command_name(m.command)}: {result}")
+        target = getattr(m, "target_system", 0)
+        if target == vehicle.sysid:  # the companion's order
+            vehicle.ordered = (now, None)
+        elif target not in (0, self.own_sysid):
+            name = mavlink.enums["MAV_CMD"][m.command].name if m.command in mavlink.enums["MAV_CMD"] else m.command
+            result = mavlink.enums["MAV_RESULT"][m.result].name.removeprefix("MAV_RESULT_").lower() \
+                if m.result in mavlink.enums["MAV_RESULT"] else f"result {m.result}"
+            vehicle.other_gcs = (target, f"COMMAND_ACK {name} {result.replace('_', ' ')}", now)
+
+    def _mission_ack(self, vehicle, m, now) -> None:
+        if m.target_system not in (0, self.own_sysid, vehicle.sysid):
+            name = mavlink.enums["MAV_MISSION_RESULT"][m.type].name if m.type in \
+                mavlink.enums["MAV_MISSION_RESULT"] else m.type
+            vehicle.other_gcs = (m.target_system, f"MISSION_ACK {name}", now)
+
+    def _mode_changed(self, vehicle, mode: str, now: float) -> None:
+        """Neither this station nor the companion ordered it: another station heard lately may have."""
+        when, wanted = vehicle.ordered
+        if now - when <= ORDERED_WITHIN and wanted in (None, vehicle.custom_mode):
+            return
+        heard = [sysid for sysid, when in self.stations.items() if now - when <= LINK_LOST_AFTER]
+        if heard:
+            vehicle.other_gcs = (heard[-1], f"mode {mode}, not ordered by this station", now)
+
     def _boot(self, vehicle: VehicleState, message) -> None:
         if hasattr(message, "time_boot_ms"):
             vehicle.time_boot_s = message.time_boot_ms / 1000.0
@@ -248,6 +356,7 @@ class Fleet:
             return
         if m.type in NOT_VEHICLES:
             return
+        changed = vehicle.custom_mode not in (-1, m.custom_mode)
         vehicle.mav_type = m.type
         vehicle.autopilot = m.autopilot
         vehicle.custom_mode = m.custom_mode
@@ -262,7 +371,10 @@ class Fleet:
                 self.history.event(vehicle.sysid, now, "armed", "armed" if armed else "disarmed")
         vehicle.armed = armed
         vehicle.mode = mode
+        if changed:
+            self._mode_changed(vehicle, vehicle.mode, now)
         vehicle.mavlink_version = 2 if m.get_msgbuf()[:1] == b"\xfd" else 1
+        vehicle.signed = getattr(m, "_verified", None)  # set by a link with a signing key
         vehicle.last_heartbeat = now
 
     def _ensure_datum(self, lat: float, lon: float) -> Datum:
@@ -272,8 +384,8 @@ class Fleet:
 
     def _global_position_int(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)
-        if m.lat == 0 and m.lon == 0:
-            return  # no fix
+        if m.lat == 0 and m.lon == 0 or not _on_earth(m.lat, m.lon):
+            return  # no fix, or no place on Earth
         lat, lon = m.lat * 1e-7, m.lon * 1e-7
         datum = self._ensure_datum(lat, lon)
         vehicle.lat, vehicle.lon, vehicle.alt = lat, lon, m.relative_alt / 1000.0
@@ -288,13 +400,14 @@ class Fleet:
 
     def _local_position_ned(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)
-        if vehicle.lat is not None:
-            return  # the global position is better
+        if vehicle.lat is not None or not _finite(m.x, m.y, m.z):
+            return  # the global position is better; a broken one keeps the last good one
         home = vehicle.home or (0.0, 0.0)
         vehicle.home = home
         vehicle.x, vehicle.y, vehicle.alt = home[0] + m.y, home[1] + m.x, -m.z
-        vehicle.speed = math.hypot(m.vx, m.vy)
-        vehicle.climb = -m.vz
+        if _finite(m.vx, m.vy, m.vz):
+            vehicle.speed = math.hypot(m.vx, m.vy)
+            vehicle.climb = -m.vz
         self._extend_trail(vehicle)
 
     def _extend_trail(self, vehicle) -> None:
@@ -309,12 +422,14 @@ class Fleet:
 
     def _attitude(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)
-        vehicle.roll, vehicle.pitch = m.roll, m.pitch
-        vehicle.yaw = m.yaw % (2 * math.pi)
+        if _finite(m.roll, m.pitch, m.yaw):  # a broken estimate keeps the last good attitude
+            vehicle.roll, vehicle.pitch = m.roll, m.pitch
+            vehicle.yaw = m.yaw % (2 * math.pi)
 
     def _vfr_hud(self, vehicle, m, now) -> None:
-        vehicle.speed = m.groundspeed
-        vehicle.climb = m.climb
+        if _finite(m.groundspeed, m.climb):
+            vehicle.speed = m.groundspeed
+            vehicle.climb = m.climb
 
     def _sys_status(self, vehicle, m, now) -> None:
         vehicle.voltage = m.voltage_battery / 1000.0 if m.voltage_battery not in (0, 65535) else None
@@ -322,6 +437,8 @@ class Fleet:
         vehicle.remaining = m.battery_remaining if m.battery_remaining >= 0 else None
 
     def _home_position(self, vehicle, m, now) -> None:
+        if not _on_earth(m.latitude, m.longitude):
+            return
         lat, lon = m.latitude * 1e-7, m.longitude * 1e-7
         datum = self._ensure_datum(lat, lon)
         vehicle.home_latlon = (lat, lon)
@@ -340,11 +457,6 @@ class Fleet:
         if vehicle is None or m.command in QUIET_COMMANDS or getattr(m, "confirmation", 0):
             return
         self.history.event(vehicle.sysid, now, "command", f"sent {_command_text(vehicle, m)}")
-
-    def _command_ack(self, vehicle, m, now) -> None:
-        result = RESULTS.get(m.result, f"result {m.result}")
-        if m.command not in QUIET_COMMANDS:
-            self.history.event(vehicle.sysid, now, "ack", f"{_command_name(m.command)}: {result}")
 
     def _mission_current(self, vehicle, m, now) -> None:
         vehicle.mission_current = m.seq
@@ -394,8 +506,8 @@ class Fleet:
         age = None if v.last_heartbeat is None else round(now - v.last_heartbeat, 2)
         position = None
         if v.x is not None:
-            position = {"lat": v.lat, "lon": v.lon, "alt": _round(v.alt), "x": _round(v.x), "y": _round(v.y),
-                        "z": _round(self.height(v))}
+            position = {"lat": _round(v.lat, 7), "lon": _round(v.lon, 7), "alt": _round(v.alt), "x": _round(v.x),
+                        "y": _round(v.y), "z": _round(self.height(v))}
         return {
             "sysid": v.sysid, "type": v.kind, "colour": hex_colour(colour_of(v.sysid)), "mode": v.mode,
             "armed": v.armed, "position": position,
@@ -405,14 +517,14 @@ class Fleet:
             "battery": None if v.voltage is None else {"voltage": _round(v.voltage), "remaining": v.remaining,
                                                        "current": _round(v.current)},
             "link": {"state": v.link_state(now), "heartbeat_age": age, "messages": v.messages_received,
-                     "mavlink": v.mavlink_version},
+                     "mavlink": v.mavlink_version, "signed": v.signed},
             "mission": {"current": v.mission_current, "total": v.mission_total, "reached": v.mission_reached},
             "status": v.status,
             "agent": None if v.agent is None else {
                 "state": v.agent.state, "phase": v.agent.phase, "paused": v.agent.paused, "outcome": v.agent.outcome,
                 "mission": v.agent.mission, "reason": v.agent.reason, "companion": v.has_companion(now)},
             "home": None if v.home is None else {"x": _round(v.home[0]), "y": _round(v.home[1])},
-            "time_boot_s": v.time_boot_s,
+            "time_boot_s": _round(v.time_boot_s, 3),
             "messages": list(v.messages)[-20:],
             "map": {"occupied": self.occupied(v), "source": v.map_source},
             "path": [[_round(x), _round(y)] for x, y in v.planned_path()],
@@ -420,6 +532,8 @@ class Fleet:
             "sonar": [{"id": ident, "distance": _round(s.distance), "max_range": _round(s.max_range),
                        "bearing": _round(s.yaw_offset % 360, 1), "beam": _round(s.beam, 1),
                        "age": _round(max(0.0, now - s.time))} for ident, s in sorted(v.sonar.items())],
+            "other_gcs": None if v.other_gcs is None else {"sysid": v.other_gcs[0], "last": v.other_gcs[1],
+                                                           "age": _round(now - v.other_gcs[2], 1)},
         }
 
     def occupied(self, v: VehicleState) -> int | None:
@@ -436,6 +550,7 @@ class Fleet:
 
 
 def _round(value: float | None, digits: int = 2) -> float | None:
+    """A number for JSON: rounded, and None where there is none or it is not finite (JSON has no NaN)."""
     if value is None or not math.isfinite(value):
         return None
     return round(float(value), digits)
@@ -468,3 +583,12 @@ def _command_text(vehicle: VehicleState, m) -> str:
 def _agent_text(status: agent_status.AgentStatus) -> str:
     text = f"{status.mission or 'agent'} {status.state} ({status.phase})"
     return f"{text}: {status.reason}" if status.reason else text
+
+
+def _finite(*values: float) -> bool:
+    return all(math.isfinite(v) for v in values)
+
+
+def _on_earth(lat_e7: int, lon_e7: int) -> bool:
+    """Latitude and longitude (degrees * 1e7) that name a place: a peer may send any 32-bit number."""
+    return abs(lat_e7) <= 900_000_000 and abs(lon_e7) <= 1_800_000_000

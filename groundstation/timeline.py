@@ -60,7 +60,9 @@ class Timeline:
         try:
             replay = self.replay
             history = History(self.every, capacity=SAMPLES + 10)
-            fleet = Fleet(replay.fleet.datum, replay.fleet.ground_height, own_maps=False, history=history)
+            fleet = Fleet(replay.fleet.datum, replay.fleet.ground_height, forget_after=None, own_maps=False,
+                          own_sysid=replay.fleet.own_sysid,
+                          history=history)
             for i in records(replay, self.every):
                 message = replay.message(int(i))
                 if message is not None:

@@ -97,6 +97,15 @@ class SceneView:
             if self._on_target is not None:
                 self._on_target(event.client_id, point[0], point[1])
 
+    def set_scene(self, scene: Scene | None) -> None:
+        """Show another scene's mesh, or none: a replay's own while it plays, the live one after."""
+        with self._draw_lock:
+            self.scene = scene
+            self.caster = RayCaster(scene) if scene is not None and len(scene.faces) else None
+            self.server.scene.remove_by_name("/scene")
+            if self.caster is not None:
+                self.server.scene.add_mesh_trimesh("/scene", scene.mesh)
+
     def show(self, fleet: Fleet) -> None:
         """Draw this fleet from now on (the live one, or a replay's), starting from a clean slate."""
         with self._draw_lock:

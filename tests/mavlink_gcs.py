@@ -80,6 +80,7 @@ class Gcs:
         """COMMAND_LONG with retries (confirmation += 1); returns the ACK's result."""
         values = (list(params) + [0.0] * 7)[:7]
         for confirmation in range(retries):
+            self.heartbeat()  # a vehicle obeys ground stations it heard from lately
             self.conn.mav.command_long_send(self.target, 1, command, confirmation, *values)
             try:
                 ack = self.wait("COMMAND_ACK", lambda m: m.command == command, sim_timeout=1.0 * self.speedup)

@@ -2,9 +2,12 @@
 
 One pathfind run in a small scene is logged twice (and its final map saved with
 ``--map-out``); the log is read back with pymavlink's own ``mavlink_connection``.
-The autopilot's messages come from component 1, the agent's from component 191.
+The autopilot's messages come from component 1, the agent's from component 191;
+the note naming the scene from the ground station's system id and the logging
+component.
 """
 
+import hashlib
 from collections import defaultdict
 
 import numpy as np
@@ -47,7 +50,7 @@ def messages(logged):
         if message.get_type() == "BAD_DATA":
             pytest.fail(f"undecodable data in the log: {message}")
         component = message.get_srcComponent()
-        assert component in (1, 191)
+        assert (message.get_srcSystem(), component) in ((1, 1), (1, 191), (255, mavlink.MAV_COMP_ID_LOG))
         key = message.get_type() if component == 1 else f"{message.get_type()}@{component}"
         by_type[key].append((message._timestamp, message))
         order.append(message._timestamp)
@@ -253,3 +256,10 @@ def test_a_writer_in_the_same_process_writes_the_same_log(logged, monkeypatch, t
                  "--json", "--log", str(tmp_path / "same.tlog")])
     assert code == 0
     assert (tmp_path / "same.tlog").read_bytes() == (logged / "a.tlog").read_bytes()
+
+
+def test_the_log_names_its_scene_at_its_start(logged, messages):
+    notes = messages[f"STATUSTEXT@{mavlink.MAV_COMP_ID_LOG}"]
+    digest = hashlib.sha256((logged / "yard.wrl").read_bytes()).hexdigest()[:16]
+    assert notes and all(m.text == f"scene yard.wrl sha256 {digest}" for _, m in notes)
+    assert notes[0][0] == pytest.approx(LOG_EPOCH, abs=0.1)  # before anything else that happened

@@ -7,6 +7,7 @@ import pytest
 from PIL import Image
 
 from vehicle.mapping.memory_map import FREE, OCCUPIED, UNKNOWN, MemoryMap
+from vehicle.mapping.picture import draw_map
 
 ORIGIN = np.array([0.5, 0.5, 4.0])  # the centre of cell (10, 10) in the maps below, at the operating height
 EAST = np.array([1.0, 0.0, 0.0])
@@ -218,16 +219,23 @@ def test_save_npy_round_trips(grid, tmp_path):
 
 
 def test_save_png_writes_a_picture_north_up(grid, tmp_path):
-    grid.add_reading(ORIGIN, NORTH, 8.0, 40.0)  # occupied cell (18, 10): near the top of a north-up picture
-    grid.save_png(tmp_path / "map.png")
+    grid.add_reading(ORIGIN, NORTH, 8.0, 40.0)  # occupied cell (18, 10): north of the start
+    grid.save_png(tmp_path / "map.png", home=(0.5, 0.5))
+    picture = draw_map(grid.grid, grid.resolution, grid.origin, home=(0.5, 0.5))  # the same picture, and its layout
     with Image.open(tmp_path / "map.png") as image:
-        assert image.format == "PNG" and image.size == (20, 20)
+        assert image.format == "PNG"
         pixels = np.asarray(image.convert("RGB")).astype(int)
-    occupied = pixels[20 - 1 - 18, 10]
-    unknown = pixels[0, 0]
+    assert np.array_equal(pixels, np.asarray(picture.image))
+
+    def at(x: float, y: float) -> np.ndarray:
+        column, row = picture.pixel(x, y)
+        return pixels[int(row), int(column)]
+
+    occupied, free, unknown = at(*grid.center_of(18, 10)), at(*grid.center_of(14, 10)), at(*grid.center_of(14, 8))
+    assert picture.pixel(*grid.center_of(18, 10))[1] < picture.pixel(0.5, 0.5)[1]  # north is up
     assert occupied[0] > 150 and occupied[0] > occupied[1] + 100  # dark red
     assert tuple(unknown) == (60, 60, 66)  # the background shows through unknown cells
-    assert tuple(pixels[20 - 1 - 12, 10]) not in (tuple(unknown), tuple(occupied))  # free: pale
+    assert tuple(free) not in (tuple(unknown), tuple(occupied)) and free.min() > unknown.max()  # free: pale
 
 
 def test_occupied_version_changes_only_when_the_occupied_set_changes(grid):

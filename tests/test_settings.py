@@ -7,6 +7,8 @@ import pytest
 from pydantic import ValidationError
 
 from vehicle.agent.settings import Settings, SettingsError, load_settings, scene_defaults
+from vehicle.lab.presets import PRESETS
+from vehicle.protocol.mapstream import MAX_SIDE
 from vehicle.world.scene import parse_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -67,6 +69,25 @@ def test_a_later_set_wins():
 def test_bad_values_are_refused_with_the_setting_named(assignment, message):
     with pytest.raises(SettingsError, match=message):
         Settings().with_assignments([assignment])
+
+
+def test_a_map_bigger_than_a_ground_station_takes_is_refused_both_ways():
+    """A station refuses map streams over MAX_SIDE cells a side; the settings never make one."""
+    with pytest.raises(SettingsError, match=f"at most {MAX_SIDE}"):
+        Settings().with_assignments(["space_size=1000"])  # 20,000 cells a side at 10 cells/m
+    settings = Settings().with_assignments(["space_size=1000", "resolution=2"])  # 4000: the largest
+    assert round(2 * settings.space_size * settings.resolution) == MAX_SIDE
+    with pytest.raises(ValidationError):
+        settings.resolution = 2.5  # checked on assignment too (a PARAM_SET)
+
+
+def test_the_defaults_and_every_preset_sweep_fit_the_map_stream():
+    assert round(2 * Settings().space_size * Settings().resolution) <= MAX_SIDE
+    for preset in PRESETS.values():
+        grid = preset["grid"]
+        for space in grid.get("space_size", [Settings().space_size]):
+            for resolution in grid.get("resolution", [Settings().resolution]):
+                assert Settings(space_size=space, resolution=resolution)
 
 
 def test_an_unknown_name_is_refused_and_the_known_ones_listed():

@@ -54,6 +54,7 @@ def fly(scene):
         sim = runner.__enter__()
         running.append((runner, gcs))
         gcs.wait("HEARTBEAT")
+        gcs.heartbeat()  # now that it knows where the vehicle is: the vehicle obeys ground stations it heard
         return gcs, sim
 
     yield start
@@ -268,6 +269,7 @@ def test_parameters_list_read_and_set(fly):
 
 def upload(gcs, items):
     """Upload (lat, lon, alt) waypoints with the mission protocol; returns the final MISSION_ACK type."""
+    gcs.heartbeat()
     gcs.conn.mav.mission_count_send(1, 1, len(items) + 1, 0)
     while True:
         message = gcs.wait(None, lambda m: m.get_type() in ("MISSION_REQUEST_INT", "MISSION_ACK"))

@@ -15,6 +15,7 @@ from vehicle.world.bundled import default_scene
 from vehicle.world.suites import DEFAULT_SUITE, SENSOR_SUITES
 
 DEFAULT_SCENE = default_scene()
+DEFAULT_SIM_LINK = "udpout:127.0.0.1:14550"  # a ground station on this machine; the vehicle's port is loopback only
 
 
 def _point(text: str) -> tuple[float, ...]:
@@ -26,6 +27,17 @@ def _point(text: str) -> tuple[float, ...]:
     if len(point) not in (2, 3) or not all(map(math.isfinite, point)):
         raise argparse.ArgumentTypeError(f"expected X,Y or X,Y,Z (write --start=X,Y for a negative X), not {text!r}")
     return point
+
+
+def _signing_key(value: str) -> bytes:
+    from vehicle.protocol.signing import key_option  # pymavlink loads only when the option is given
+
+    return key_option(value)
+
+
+SIGNING_HELP = ("MAVLink 2 signing key: a file (32 bytes, or one line of 64 hex digits or of base64) or a "
+                "passphrase (its SHA-256 is the key, as QGroundControl and MAVProxy make one); then everything sent "
+                "is signed and whatever is not signed with it (but RADIO_STATUS) is refused")
 
 
 def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = True) -> None:
@@ -105,7 +117,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     if args.log:
         from vehicle.lab.log import ExperimentLog
 
-        log = ExperimentLog(args.log)
+        log = ExperimentLog(args.log, scene=args.scene)
     try:
         result = run_experiment(experiment, scene=scene, map_out=args.map_out, on_step=log)
     finally:
@@ -154,8 +166,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     world = stepper.simulation
     if items:
         world.autopilot.set_mission(items)
-    options = SimOptions(args.mavlink or ["udpout:127.0.0.1:14550"], args.sysid, args.speedup,
-                         args.failsafe_timeout, args.log, sim_clock=autopilot)
+    options = SimOptions(args.mavlink or [DEFAULT_SIM_LINK], args.sysid, args.speedup,
+                         args.failsafe_timeout, args.log, sim_clock=autopilot, signing_key=args.signing_key)
     sim = SimVehicle(stepper, options)
     if autopilot:
         start = "a plain autopilot: an onboard agent flies it over MAVLink"
@@ -193,7 +205,8 @@ def cmd_agent(args: argparse.Namespace) -> int:
     waypoints = load_positions(args.waypoints, datum) if args.waypoints else (
         parse_points(hints["waypoints"]) if "waypoints" in hints else None)
     options = AgentOptions(args.connect, args.mission, args.vehicle, settings, waypoints, scene, args.sensors,
-                           args.suite, args.gcs, datum, args.log, args.wait, args.stay, args.connect_timeout)
+                           args.suite, args.gcs, datum, args.log, args.wait, args.stay, args.connect_timeout,
+                           args.signing_key)
     result = run_agent(options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps(result))
@@ -255,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
                      help="vehicle: the autopilot and its onboard agent in one (default); autopilot: a plain "
                           "ArduPilot-like flight controller, for `vehicle agent` to fly")
     sim.add_argument("--mavlink", action="append", metavar="URL",
-                     help="pymavlink connection string, repeatable (default udpout:127.0.0.1:14550)")
+                     help=f"pymavlink connection string, repeatable (default {DEFAULT_SIM_LINK})")
     sim.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
     sim.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
     sim.add_argument("--autostart", action="store_true", help="arm and start the mission without a GCS")
@@ -263,6 +276,7 @@ def main(argv: list[str] | None = None) -> int:
                      help="wall seconds without a GCS heartbeat before the GCS failsafe (default 5)")
     sim.add_argument("--log", metavar="FILE.tlog", help="record the vehicle's own MAVLink traffic")
     sim.add_argument("--duration", type=float, help="stop after this many wall seconds")
+    sim.add_argument("--signing-key", type=_signing_key, metavar="FILE|PASSPHRASE", help=SIGNING_HELP)
     sim.set_defaults(run=cmd_sim)
 
     agent = commands.add_parser("agent", help="the onboard agent on a companion computer, flying an autopilot "
@@ -300,6 +314,7 @@ def main(argv: list[str] | None = None) -> int:
                        help="wall seconds to wait for the autopilot's heartbeat, home and position (default 60)")
     agent.add_argument("--duration", type=float, help="stop after this many wall seconds")
     agent.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    agent.add_argument("--signing-key", type=_signing_key, metavar="FILE|PASSPHRASE", help=SIGNING_HELP)
     agent.set_defaults(run=cmd_agent)
 
     from vehicle.lab.presets import PRESETS

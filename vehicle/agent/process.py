@@ -62,14 +62,16 @@ class AgentOptions:
     wait: bool = False  # wait for a ground station's MISSION_START before starting
     stay: bool = False  # after the mission, stay (a ground station's MISSION_START flies it again)
     connect_timeout: float = 60.0
+    signing_key: bytes | None = None  # MAVLink 2 signing on every link: sign everything, refuse what is not signed
 
 
 class OnboardAgent:
     def __init__(self, options: AgentOptions):
         self.options = options
         self.log = TlogWriter(options.log) if options.log else None
-        self.conn = links.connect(options.connect, 1, COMPONENT)  # the system id is the autopilot's, once heard
-        self.gcs = [links.connect(url, 1, COMPONENT) for url in options.gcs]
+        key = options.signing_key
+        self.conn = links.connect(options.connect, 1, COMPONENT, key)  # the system id is the autopilot's, once heard
+        self.gcs = [links.connect(url, 1, COMPONENT, key) for url in options.gcs]
         self.sonars = self.collider = None
         ground = None
         servo = None

@@ -9,7 +9,9 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from vehicle.protocol.mapstream import MAX_SIDE
 
 
 def _setting(default: float, unit: str, help: str, param_id: str, **bounds) -> float:
@@ -35,6 +37,16 @@ class Settings(BaseModel):
                                      ge=0.05, le=5)
     time_limit: float = _setting(600.0, "s", "simulated time limit of a headless run", "SCN_TIME_LIMIT",
                                  gt=0, le=86400)
+
+    @model_validator(mode="after")
+    def _map_fits_the_stream(self) -> Settings:
+        """A ground station refuses maps over MAX_SIDE cells a side (what a hostile stream could claim), so the
+        vehicle never makes one."""
+        side = round(2 * self.space_size * self.resolution)
+        if side > MAX_SIDE:
+            raise ValueError(f"space_size {self.space_size:g} m at resolution {self.resolution:g} cells/m makes a "
+                             f"map {side} cells a side; at most {MAX_SIDE} (2 * space_size * resolution)")
+        return self
 
     @classmethod
     def describe(cls) -> list[tuple[str, float, str, str, str]]:
@@ -88,6 +100,9 @@ def _explain(error: ValidationError) -> str:
     parts = []
     for item in error.errors():
         where = ".".join(str(p) for p in item["loc"])
+        if not where:  # a rule across settings: its message names them
+            parts.append(item["msg"].removeprefix("Value error, "))
+            continue
         parts.append(f"{where}: {item['msg']} (got {item.get('input')!r})")
     return "; ".join(parts)
 

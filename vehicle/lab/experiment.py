@@ -6,6 +6,7 @@ everything in it but ``wall_time_s`` is a function of the arguments and seed.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from vehicle.world.scene import Scene, load_scene
 from vehicle.world.suites import DEFAULT_SUITE, sensor_suite
 
 OUTCOMES = ("finished", "stopped", "collision", "timeout", "error")
+TRAIL_SPACING = 0.3  # m between the points of the trail drawn on the map's picture
 
 
 @dataclass
@@ -55,6 +57,7 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
         "resolution": settings.resolution,
     }
     stepper = None
+    trail = _Trail(on_step) if map_out else None  # for the map's picture
     try:
         scene = scene or load_scene(experiment.scene)
         waypoints = experiment.waypoints
@@ -64,7 +67,7 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
                            experiment.heading, waypoints, seed=experiment.seed,
                            sensors=sensor_suite(experiment.sensors),
                            datum=Datum.of_scene(scene.hints, experiment.datum))
-        outcome, reason = _fly(stepper, on_step)
+        outcome, reason = _fly(stepper, trail or on_step)
     except Exception as error:  # noqa: BLE001 - any failure is an outcome of the run, reported, not raised
         outcome, reason = "error", f"{type(error).__name__}: {error}"
     result.update(outcome=outcome, reason=reason)
@@ -83,11 +86,46 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
             out.mkdir(parents=True, exist_ok=True)
             stem = f"{Path(experiment.scene).stem}-{experiment.mission}-{experiment.seed}"
             agent.map.save_npy(out / f"{stem}.npy")
-            agent.map.save_png(out / f"{stem}.png")
+            agent.map.save_png(out / f"{stem}.png", title=map_title(result, settings), home=world.home[:2],
+                               trail=trail.points, planned_path=agent.ctx.planned_path, waypoints=_waypoints(agent),
+                               position=(pose.x, pose.y))
     result.setdefault("detections", 0)
     result.setdefault("cells_ever_hit", 0)
     result["wall_time_s"] = round(time.perf_counter() - started, 3)
     return result
+
+
+class _Trail:
+    """Notes where the vehicle went (a point every TRAIL_SPACING metres), then calls ``on_step`` if any."""
+
+    def __init__(self, on_step: Callable[[Stepper, list[Reading]], None] | None):
+        self.on_step = on_step
+        self.points: list[tuple[float, float]] = []
+
+    def __call__(self, stepper: Stepper, readings: list[Reading]) -> None:
+        pose = stepper.simulation.pose
+        if not self.points or math.dist(self.points[-1], (pose.x, pose.y)) >= TRAIL_SPACING:
+            self.points.append((pose.x, pose.y))
+        if self.on_step is not None:
+            self.on_step(stepper, readings)
+
+
+def _waypoints(agent) -> list[tuple[float, float]]:
+    """The points the agent's mission flies to: Pathfind's waypoints, Square's corners (none for the others)."""
+    mission = agent.mission
+    return list(getattr(mission, "waypoints", None) or getattr(mission, "corners", None) or ())
+
+
+def map_title(result: dict, settings: Settings) -> str:
+    """Two lines saying which run a map's picture is of: mission, vehicle, scene, outcome; then the figures
+    and the settings that differ from the defaults."""
+    changed = {k: v for k, v in settings.model_dump().items()
+               if v != Settings.model_fields[k].default and k != "resolution"}
+    tuned = "".join(f", {name} {value:g}" for name, value in changed.items())
+    return (f"{result['mission']} mission, {result['vehicle']} in {result['scene']}: {result['outcome']}\n"
+            f"{result.get('detections', 0)} occupied cells, {result.get('sim_time_s', 0):.0f} s simulated, "
+            f"{result.get('distance_m', 0):.0f} m travelled, seed {result['seed']}, "
+            f"{settings.resolution:g} cells/m{tuned}")
 
 
 def _fly(stepper: Stepper, on_step) -> tuple[str, str]:

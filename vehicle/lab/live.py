@@ -41,6 +41,7 @@ class SimOptions:
     failsafe_timeout: float = 5.0
     log: str | None = None
     sim_clock: bool = False  # telemetry rates in simulated time, as ArduPilot's SITL keeps them (a plain autopilot)
+    signing_key: bytes | None = None  # MAVLink 2 signing: sign everything, refuse what is not signed
 
 
 class SimVehicle:
@@ -55,7 +56,7 @@ class SimVehicle:
         self.companion = Companion(self.agent, options.sysid, start=now) if self.agent is not None else None
         self.log = TlogWriter(options.log) if options.log else None
         self.endpoint = Endpoint(options.urls, self.world, self.telemetry, options.sysid, options.failsafe_timeout,
-                                 self.log, onboard=self.companion)
+                                 self.log, onboard=self.companion, signing_key=options.signing_key)
         self.stop_event = threading.Event()
         self.lagging = 0.0  # simulated seconds dropped because the machine could not keep up
         self._crash_reported = False

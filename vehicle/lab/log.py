@@ -26,6 +26,8 @@ note, and a writer process (forked, on the other core) makes the messages:
   framing is most of its cost.
 
 Where no process can be forked, the same writer works in the run's process.
+The log names the run's scene as a station's recording does
+(``vehicle.protocol.scene_note``), at its start and every simulated minute.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mapstream import MapStreamer, snapshot_chunks
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.rangefinder import Reading, orientation_of
+from vehicle.protocol.scene_note import SceneNotes, note_text
 from vehicle.protocol.tlog import LOG_EPOCH, TlogWriter
 from vehicle.sim.telemetry import Telemetry
 
@@ -57,6 +60,7 @@ COMPONENTS = (AUTOPILOT, COMPONENT)  # each has its own sequence numbers
 SNAPSHOT_PERIOD = 10.0  # s of simulated time between map snapshots, at least
 SNAPSHOT_BUDGET = 15000.0  # bytes of map part compressed per simulated second, at most (a bigger map: less often)
 BATCH_STEPS = 100  # steps noted before they go to the writer
+_STAMP = struct.Struct(">Q")  # a tlog record's timestamp
 
 _GLOBAL_POSITION = mavlink.MAVLink_global_position_int_message
 _LOCAL_POSITION = mavlink.MAVLink_local_position_ned_message
@@ -89,8 +93,11 @@ assert _TUNNEL.unpacker.format == "<HBBB128B"
 class ExperimentLog:
     """Pass it as ``on_step`` to ``run_experiment``; ``close`` writes the final state."""
 
-    def __init__(self, path: str | Path, sysid: int = 1):
+    def __init__(self, path: str | Path, sysid: int = 1, scene: str | Path | None = None):
+        """``scene``: the scene file the run flies in, named in the log."""
         self.file = TlogWriter(path)
+        text = note_text(scene) if scene else None
+        self._notes = SceneNotes(text) if text else None
         self.sysid = sysid
         self.telemetry: Telemetry | None = None
         self.companion: Companion | None = None
@@ -129,6 +136,8 @@ class ExperimentLog:
         simulation = self.simulation
         now = self.time = simulation.time
         stamp = int((LOG_EPOCH + now) * 1e6)
+        if self._notes is not None and now >= self._notes.due:
+            self._note(now, stamp)
         batch = self._batch
         if now >= self._telemetry_due or simulation.autopilot.events:
             self._add(self.telemetry.tick(now), stamp, 0)
@@ -172,6 +181,11 @@ class ExperimentLog:
                 self._batch.add(stamp, component, _TUNNEL, _TUNNEL_HEAD.pack(kind, 0, 0, len(payload)) + payload)
             else:  # pymavlink's packet less its framing
                 self._batch.add(stamp, component, type(message), message.pack(self._scratch)[10:-2])
+
+    def _note(self, now: float, stamp: int) -> None:
+        """The scene's note where it falls in the log: after all noted so far (sent on), before what follows."""
+        self._send()
+        self._batch.notes = [_STAMP.pack(stamp) + packet for packet in self._notes.take(now)]
 
     def _map(self, stamp: int, now: float, final: bool = False) -> None:
         """The cells changed since the last time and their values: the writer's copy of the map takes them and
@@ -234,6 +248,7 @@ class _Batch:
         self.huds = array("d")  # HUD_FIELDS a VFR_HUD
         self.ranges = array("d")  # RANGE_FIELDS a DISTANCE_SENSOR
         self.map_updates: list[tuple] = []  # (key, stamp, time, cells, their values, final or not)
+        self.notes: list[bytes] = []  # log records made already (the scene's note), written before the rest
 
     def add(self, stamp: int, component: int, message, payload: bytes) -> None:
         self.rows.append((self.key, stamp, component, message.id, message.crc_extra, payload))
@@ -257,6 +272,9 @@ class _Writer:
         self.next_snapshot = 0.0  # one at the start, as a live vehicle's
 
     def write(self, batch: _Batch) -> None:
+        if batch.notes:
+            self.file.write_records(b"".join(batch.notes))
+            self.messages += len(batch.notes)
         rows = batch.rows
         for key, stamp, now, cells, values, final in batch.map_updates:
             payloads = self._map(now, cells, values, final or now >= self.next_snapshot)
@@ -271,9 +289,12 @@ class _Writer:
         poses = np.frombuffer(batch.poses).reshape(-1, POSE_FIELDS)
         huds = np.frombuffer(batch.huds).reshape(-1, HUD_FIELDS)
         ranges = np.frombuffer(batch.ranges).reshape(-1, RANGE_FIELDS)
-        for numbers, messages, blocks in ((poses, POSES, self._poses(poses)), (huds, (_VFR_HUD,), self._huds(huds)),
-                                          (ranges, (_DISTANCE_SENSOR,), self._ranges(ranges))):
+        for numbers, messages, payloads_of in ((poses, POSES, self._poses), (huds, (_VFR_HUD,), self._huds),
+                                               (ranges, (_DISTANCE_SENSOR,), self._ranges)):
             count = len(numbers)
+            if not count:  # a batch cut short (before a scene note) may have none
+                continue
+            blocks = payloads_of(numbers)
             stamps_us = ((LOG_EPOCH + numbers[:, 1]) * 1e6).astype(np.int64)  # int(), as for every record
             for index, (message, block) in enumerate(zip(messages, blocks, strict=True)):
                 for column, values in zip(columns, (numbers[:, 0] + index, stamps_us, 0, message.id,

@@ -193,15 +193,12 @@ class MemoryMap:
     def save_npy(self, path: str | Path) -> None:
         np.save(path, self.grid)
 
-    def save_png(self, path: str | Path) -> None:
-        from PIL import Image
+    def save_png(self, path: str | Path, **decorations) -> None:
+        """A picture of the map for people (``picture.draw_map``: cropped to what was explored, with a legend,
+        scale and north; ``decorations`` are its title, home, trail, path, waypoints and position)."""
+        from vehicle.mapping.picture import save_map_picture
 
-        rgba = self.image()
-        background = np.full(rgba.shape, (60, 60, 66, 255), dtype=np.uint8)
-        alpha = rgba[..., 3:4].astype(np.float32) / 255
-        blended = (rgba * alpha + background * (1 - alpha)).astype(np.uint8)
-        blended[..., 3] = 255
-        Image.fromarray(blended).save(path)
+        save_map_picture(path, self.grid, self.resolution, self.origin, **decorations)
 
 
 def _loops():

@@ -17,6 +17,13 @@ cannot be trusted:
   is not up yet, or that drops, is retried with a growing pause while the link
   reports itself down (``up``, ``error``).
 
+With a signing key (``vehicle.protocol.signing``) a link signs what it sends
+and checks what it receives, one table of stream timestamps for all its
+senders: what the key's policy refuses (unsigned or wrongly signed messages
+where signing is required, replays always) is dropped here and counted per
+system id (``refused``); what passes carries ``_verified`` (True: signed with
+the key).
+
 No maintained library does either (pymavlink's own UDP links are shared-stream
 by design), hence this module.
 """
@@ -25,8 +32,9 @@ from __future__ import annotations
 
 import socket
 import time
-from collections import OrderedDict, deque
+from collections import Counter, OrderedDict, deque
 
+from vehicle.protocol import signing
 from vehicle.protocol.mav import mavlink, mavutil
 
 MAX_SENDERS = 64  # UDP peers remembered (parsers, and where broadcasts go)
@@ -35,16 +43,51 @@ MAX_DATAGRAMS = 2000  # read at most this many per call, so one flood cannot sta
 RETRY = (0.5, 10.0)  # s: first and longest pause between attempts to open a stream
 
 
-def connect(url: str, source_system: int = 255, source_component: int = 0) -> UdpLink | StreamLink:
-    """A link for a pymavlink-style URL (see the module's docstring)."""
+def connect(url: str, source_system: int = 255, source_component: int = 0, key: bytes | None = None,
+            require_signed: bool = True) -> UdpLink | StreamLink:
+    """A link for a pymavlink-style URL (see the module's docstring); with ``key``, signed both ways
+    (``require_signed``: refuse what is not signed with it, as a vehicle does)."""
     kind, _, rest = url.partition(":")
     if kind in ("udpin", "udp", "udpout"):
         host, _, port = rest.rpartition(":")
         if not host or not port.isdigit():
             raise ValueError(f"a UDP link is {kind}:HOST:PORT, not {url!r}")
-        return UdpLink(url, host, int(port), listen=kind != "udpout", source_system=source_system,
+        link = UdpLink(url, host, int(port), listen=kind != "udpout", source_system=source_system,
                        source_component=source_component)
-    return StreamLink(url, source_system, source_component)
+    else:
+        link = StreamLink(url, source_system, source_component)
+    if key is not None:
+        link.verifier = signing.Verifier(key, require_signed)
+        signing.sign_outgoing(link.mav, key)
+    return link
+
+
+class _Signed:
+    """What both kinds of link do with a signing key: check each message received, drop what may not pass."""
+
+    verifier: signing.Verifier | None = None
+    refused: Counter  # system id -> messages dropped for their signature
+
+    def _admit(self, message) -> bool:
+        if self.verifier is None or message.get_type() == "BAD_DATA":
+            return True
+        verdict = self.verifier.check(message)
+        message._verified = verdict == signing.SIGNED
+        if self.verifier.admits(message, verdict):
+            return True
+        self.refused[message.get_srcSystem()] += 1
+        return False
+
+
+def _interface_towards(host: str, port: int) -> str:
+    """The address of the interface that reaches ``host`` (loopback for a peer on this machine): a ``udpout``
+    port answers on that one interface, not on every one (0.0.0.0 only where no route is known)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect((host, port))
+            return probe.getsockname()[0]
+        except OSError:
+            return "0.0.0.0"
 
 
 def _parser() -> mavlink.MAVLink:
@@ -61,7 +104,7 @@ def _restart(parser: mavlink.MAVLink) -> None:
     parser.have_prefix_error = False
 
 
-class UdpLink:
+class UdpLink(_Signed):
     """A UDP socket, parsed per datagram and per sender (see the module's docstring)."""
 
     def __init__(self, url: str, host: str, port: int, listen: bool, source_system: int = 255,
@@ -74,12 +117,13 @@ class UdpLink:
             self.port.bind((host, port))
             self.destination = None
         else:
-            self.port.bind(("0.0.0.0" if host not in ("127.0.0.1", "localhost") else "127.0.0.1", 0))
+            self.port.bind((_interface_towards(host, port), 0))
             self.destination = (host, port)
         self.port.setblocking(False)
         self.mav = mavlink.MAVLink(self, srcSystem=source_system, srcComponent=source_component)  # writes here
         self.senders: OrderedDict[tuple, list] = OrderedDict()  # address -> [parser, last heard (monotonic)]
         self.stats = {"datagrams": 0, "bad": 0, "senders forgotten": 0}
+        self.refused = Counter()
         self._ready: deque = deque()
         self.up = True
         self.error = ""
@@ -114,6 +158,8 @@ class UdpLink:
             for message in messages:
                 if message.get_type() == "BAD_DATA":
                     self.stats["bad"] += 1
+                elif not self._admit(message):
+                    continue
                 message._peer = address
                 self._ready.append(message)
             self._forget(now)
@@ -144,7 +190,7 @@ class UdpLink:
         self.port.close()
 
 
-class StreamLink:
+class StreamLink(_Signed):
     """pymavlink's TCP or serial link, opened without blocking and reopened whenever it drops."""
 
     def __init__(self, url: str, source_system: int = 255, source_component: int = 0):
@@ -152,6 +198,7 @@ class StreamLink:
         self.source = (source_system, source_component)
         self.mav = mavlink.MAVLink(self, srcSystem=source_system, srcComponent=source_component)  # writes here
         self.connection = None
+        self.refused = Counter()
         self.up = False
         self.error = "not connected yet"
         self.failures = 0
@@ -187,7 +234,11 @@ class StreamLink:
             if self.connection is None:
                 return None
         try:
-            return self.connection.recv_msg()
+            for _ in range(MAX_DATAGRAMS):
+                message = self.connection.recv_msg()
+                if message is None or self._admit(message):
+                    return message
+            return None
         except Exception as error:  # noqa: BLE001 - a dropped peer shows as many kinds; retry it later
             self._down(error)
             return None

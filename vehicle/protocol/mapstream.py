@@ -26,10 +26,18 @@ A receiver that joins late, or misses a delta (a gap in the numbers), waits for
 the next snapshot and then applies the deltas numbered after it, so its copy
 equals the onboard map cell for cell. Snapshots go out every few seconds, less
 often when they are big, so that they use at most a set share of the link.
+
+A receiver believes nothing a stream claims beyond what a vehicle can send: a
+map is at most ``MAX_SIDE`` cells a side (the mission settings refuse bigger
+ones, so both ends agree), a snapshot's part is inflated no further than the
+claimed geometry holds (a zlib bomb stops there), and a delta that names more
+cells than its map has, or a cell twice, is dropped. Non-finite numbers (geometry, path points)
+are no map and no path.
 """
 
 from __future__ import annotations
 
+import math
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -49,6 +57,8 @@ _POINT = struct.Struct("<ff")
 DELTA_ROOM = PAYLOAD - _DELTA.size
 POINTS_PER_CHUNK = (PAYLOAD - _PATH.size) // _POINT.size
 FORMAT_VERSION = 1
+MAX_SIDE = 4000  # cells a side: 16 M cells (16 MB of int8 on each end), twice the default map's 2000
+VARINT_MAX = 5  # bytes of one LEB128 gap (gaps stay below 2**35)
 
 
 @dataclass
@@ -151,10 +161,21 @@ class MapStreamer:
 
 
 def _unpack_cells(body: bytes, count: int) -> tuple[np.ndarray, np.ndarray]:
-    raw = zlib.decompress(body, -15)
+    raw = _inflate(zlib.decompressobj(-15), body, count * (VARINT_MAX + 1))
     gaps, offset = _read_varints(raw, count)
+    if count > 1 and int(gaps[1:].min()) < 1:
+        raise ValueError("cell indices that do not increase")
     values = np.frombuffer(raw, dtype=np.int8, count=count, offset=offset)
     return np.cumsum(gaps), values
+
+
+def _inflate(inflater, data: bytes, most: int) -> bytes:
+    """``data`` decompressed, refused (ValueError) if it holds more than ``most`` bytes: inflation stops there, so
+    a few bytes that claim gigabytes cost nothing."""
+    raw = inflater.decompress(data, max(most, 1))  # (0 would mean no limit)
+    if inflater.unconsumed_tail or not inflater.eof or len(raw) > most:
+        raise ValueError("compressed data that holds more than its header claims, or is cut short")
+    return raw
 
 
 def _deflate(data: bytes) -> bytes:
@@ -282,6 +303,8 @@ class MapReceiver:
 
     def _apply(self, payload: bytes) -> None:
         seq, count = _DELTA.unpack_from(payload)
+        if count > self.grid.size:
+            raise ValueError("a delta with more cells than its map")
         indices, values = _unpack_cells(payload[_DELTA.size:], count)
         flat = self.grid.reshape(-1)
         if count and int(indices.max()) >= flat.size:
@@ -306,8 +329,12 @@ class MapReceiver:
         version, size, resolution, ox, oy, last_delta, r0, c0, nr, nc = _SNAPSHOT.unpack_from(blob)
         if version != FORMAT_VERSION:
             raise ValueError(f"unknown map format {version}")
-        part = np.frombuffer(zlib.decompress(blob[_SNAPSHOT.size:]), dtype=np.int8)
-        if part.size != nr * nc or r0 + nr > size or c0 + nc > size:
+        if not 0 < size <= MAX_SIDE or r0 + nr > size or c0 + nc > size:
+            raise ValueError(f"a map of {size} cells a side (at most {MAX_SIDE}), or a part outside it")
+        if not (math.isfinite(resolution) and resolution > 0 and math.isfinite(ox) and math.isfinite(oy)):
+            raise ValueError("a map geometry that is not a number")
+        part = np.frombuffer(_inflate(zlib.decompressobj(), blob[_SNAPSHOT.size:], nr * nc), dtype=np.int8)
+        if part.size != nr * nc:
             raise ValueError("snapshot size mismatch")
         grid = np.zeros((size, size), dtype=np.int8)
         grid[r0:r0 + nr, c0:c0 + nc] = part.reshape(nr, nc)
@@ -329,6 +356,7 @@ class MapReceiver:
             raise ValueError("chunk index past the chunk count")
         body = payload[_PATH.size:]
         points = [_POINT.unpack_from(body, i * _POINT.size) for i in range(len(body) // _POINT.size)]
+        points = [p for p in points if math.isfinite(p[0]) and math.isfinite(p[1])]
         parts = self._path_parts.setdefault(ident, {})
         parts[index] = points
         for other in [k for k in self._path_parts if k != ident]:

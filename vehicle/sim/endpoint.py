@@ -13,6 +13,20 @@ it are its to answer, and it serves the vehicle's parameters and takes a
 MISSION_START in AUTO when its mission waits or is paused. A GUIDED target or
 a yaw from anyone but the vehicle's own companion is recorded as an override,
 which an onboard agent takes as an operator taking over.
+
+Only a ground station or the vehicle's own companion computer is obeyed: a
+sender whose system id sent a HEARTBEAT of type GCS within the failsafe
+timeout, or component 191 of the vehicle's own system. Anyone else's command
+gets COMMAND_ACK DENIED (so it knows), its other orders (modes, GUIDED
+targets, mission and parameter writes, manual control) are dropped, and one
+STATUSTEXT per sender says why. Reading (parameters, the mission, telemetry
+requests after a heartbeat) is for anyone who asks as a ground station.
+(ArduPilot obeys anyone on its links; a real vehicle relies on signing.)
+
+With a signing key it signs everything it sends and refuses every message
+not signed with that key but RADIO_STATUS, as ArduPilot does once signing is
+set up (``vehicle.protocol.signing``); a refused message is dropped before it
+is handled or routed.
 """
 
 from __future__ import annotations
@@ -21,7 +35,7 @@ import math
 from collections import Counter
 from typing import Protocol
 
-from vehicle.protocol import links
+from vehicle.protocol import links, signing
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, Kind, mode_name
 from vehicle.protocol.tlog import TlogWriter
@@ -40,6 +54,11 @@ COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 GCS = mavlink.MAV_TYPE_GCS
 MISSION_MESSAGES = {"MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_COUNT",
                     "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT"}
+COMMANDS = {"COMMAND_LONG", "COMMAND_INT"}
+ORDERS = {"SET_MODE", "SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT", "SET_ATTITUDE_TARGET",
+          "MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT",
+          "MISSION_WRITE_PARTIAL_LIST", "PARAM_SET", "MANUAL_CONTROL", "RC_CHANNELS_OVERRIDE"}  # obeyed, not asked
+MAX_TOLD = 256  # strangers remembered as told why they are not obeyed
 POSITION_IGNORED = (mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE)
 VELOCITY_IGNORED = (mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_VY_IGNORE)
 
@@ -79,7 +98,8 @@ class Onboard(Protocol):
 
 class Endpoint:
     def __init__(self, urls: list[str], world: Simulation, telemetry: Telemetry, sysid: int = 1,
-                 failsafe_timeout: float = 5.0, log: TlogWriter | None = None, onboard: Onboard | None = None):
+                 failsafe_timeout: float = 5.0, log: TlogWriter | None = None, onboard: Onboard | None = None,
+                 signing_key: bytes | None = None):
         self.world = world
         self.autopilot = world.autopilot
         self.onboard = onboard
@@ -87,12 +107,17 @@ class Endpoint:
         self.sysid = sysid
         self.failsafe_timeout = failsafe_timeout
         self.log = log
-        self.links = [links.connect(url, sysid, AUTOPILOT) for url in urls]
+        self.links = [links.connect(url, sysid, AUTOPILOT, signing_key) for url in urls]
         self.packers = {component: mavlink.MAVLink(None, srcSystem=sysid, srcComponent=component)
                         for component in {AUTOPILOT, onboard.component if onboard else AUTOPILOT}}
+        if signing_key is not None:
+            for packer in self.packers.values():
+                signing.sign_outgoing(packer, signing_key)
         self.missions = MissionServer(self.autopilot)
         self.stats: Counter[str] = Counter()
         self.gcs_seen: float | None = None  # wall time of the last GCS heartbeat
+        self.stations: dict[int, float] = {}  # system id -> wall time of its last GCS heartbeat (at most 255)
+        self._told: set[tuple[int, int]] = set()  # strangers told once that they are not obeyed
         self.in_failsafe = False
 
     def close(self) -> None:
@@ -122,16 +147,17 @@ class Endpoint:
                 message = link.recv_msg()
                 if message is None:
                     break
-                self._route(message, link)
+                self._route(message, link, now)
                 self._receive(message, now)
         self.send(self.missions.poll(now), now)
         self._check_failsafe(now)
 
-    def _route(self, message, source) -> None:
+    def _route(self, message, source, now: float) -> None:
         """Pass on what is not for the autopilot alone to the other links, as ArduPilot routes: a companion's map
-        reaches the ground stations, a ground station's command for the companion reaches it."""
+        reaches the ground stations, a ground station's command for the companion reaches it (a stranger's
+        orders go nowhere)."""
         if len(self.links) < 2 or message.get_type() == "BAD_DATA" or message.get_srcSystem() == self.sysid and \
-                message.get_srcComponent() == AUTOPILOT:
+                message.get_srcComponent() == AUTOPILOT or self._stranger_orders(message, now):
             return
         if (getattr(message, "target_system", 0), getattr(message, "target_component", 0)) == (self.sysid, AUTOPILOT):
             return
@@ -152,6 +178,10 @@ class Endpoint:
         if target not in (0, self.sysid):
             self.stats["for other systems"] += 1
             return
+        if self._stranger_orders(message, now):
+            self.stats["refused strangers"] += 1
+            self.send(self._refuse(message), now)
+            return
         component = getattr(message, "target_component", 0)
         onboard = self.onboard
         if onboard is not None and component == onboard.component:
@@ -169,6 +199,33 @@ class Endpoint:
             replies = self._text(f"Refused {kind}: {type(error).__name__}", mavlink.MAV_SEVERITY_WARNING)
         self.send(replies, now)
 
+    def _stranger_orders(self, message, now: float) -> bool:
+        """An order (a command, a mode, a target, a write) from neither a ground station nor the companion."""
+        kind = message.get_type()
+        return (kind in COMMANDS or kind in ORDERS) and not self._obeys(message, now)
+
+    def _obeys(self, message, now: float) -> bool:
+        """The sender is a ground station (its system's GCS heartbeat within the failsafe timeout) or the
+        vehicle's own companion computer."""
+        sender = message.get_srcSystem()
+        if (sender, message.get_srcComponent()) == (self.sysid, COMPANION):
+            return True
+        return now - self.stations.get(sender, -math.inf) <= self.failsafe_timeout
+
+    def _refuse(self, message) -> list:
+        """COMMAND_ACK DENIED for a command (nothing for other orders), and once per sender a STATUSTEXT why."""
+        sender = (message.get_srcSystem(), message.get_srcComponent())
+        replies = []
+        if message.get_type() in COMMANDS:
+            replies.append(mavlink.MAVLink_command_ack_message(message.command, DENIED, 0, 0, *sender))
+        if sender not in self._told:
+            if len(self._told) >= MAX_TOLD:
+                self._told.clear()
+            self._told.add(sender)
+            replies += self._text(f"Not obeying {sender[0]}/{sender[1]}: no GCS heartbeat from it",
+                                  mavlink.MAV_SEVERITY_WARNING)
+        return replies
+
     def _ask_onboard(self, message) -> list | None:
         try:
             return self.onboard.handle(message)
@@ -181,6 +238,7 @@ class Endpoint:
         kind = message.get_type()
         if kind == "HEARTBEAT":
             if message.type == GCS:
+                self.stations[message.get_srcSystem()] = now
                 self._gcs_heard(now)
             return []
         if kind in ("COMMAND_LONG", "COMMAND_INT"):

@@ -1,0 +1,600 @@
+"""Hostile MAVLink peers against the ground station and the simulated vehicle: real UDP sockets, real bytes.
+
+Each test plays an attacker (or a broken peer) on its own socket (``mavlink_peer.Peer``):
+non-finite numbers, zlib bombs and absurd map sizes in the map stream, floods
+of fake vehicles and of two-byte datagrams, commands from strangers, and
+unsigned or wrongly signed messages; then checks that the station still
+answers, shows only finite numbers and keeps tracking the real vehicle, and
+that the vehicle obeys only its ground stations.
+"""
+
+from __future__ import annotations
+
+import base64
+import errno
+import hashlib
+import json
+import math
+import os
+import re
+import socket
+import struct
+import threading
+import time
+import tracemalloc
+import zlib
+from collections import Counter
+from pathlib import Path
+from unittest import mock
+
+import pytest
+from harness import (
+    CHROMIUM,
+    HEARTBEAT_WAIT,
+    SPEEDUP,
+    RunningSim,
+    RunningStation,
+    command_ok,
+    free_udp_port,
+    launch_chromium,
+    make_vehicle,
+    small_scene,
+    start_sim,
+    wait_mode,
+    wait_wall,
+)
+from mavlink_gcs import Gcs
+from mavlink_peer import Peer, acked, command, gcs_heartbeat, non_finite_messages, position, vehicle_heartbeat
+
+from groundstation.link import Link
+from groundstation.replay import Replay
+from groundstation.state import FORGET_AFTER, MAX_VEHICLES, Fleet
+from vehicle.agent.companion import tunnel
+from vehicle.cli import DEFAULT_SIM_LINK
+from vehicle.protocol import links, signing
+from vehicle.protocol.mapstream import MAP_DELTA, MAX_SIDE, MapReceiver, snapshot_chunks
+from vehicle.protocol.mav import mavlink, pack
+from vehicle.protocol.statustext import Reassembler, statustexts
+from vehicle.protocol.tlog import TlogWriter
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return small_scene()
+
+
+def strict_json(text: str):
+    """JSON as a browser's JSON.parse reads it: NaN and Infinity are no JSON."""
+    def refuse(constant):
+        raise ValueError(f"{constant} in JSON")
+    return json.loads(text, parse_constant=refuse)
+
+
+def station_address(station: RunningStation) -> tuple[str, int]:
+    return "127.0.0.1", station.mavlink_port
+
+
+def ws_frame(station: RunningStation) -> str:
+    import websockets.sync.client
+
+    with websockets.sync.client.connect(f"ws://127.0.0.1:{station.http_port}/ws", open_timeout=5) as socket_:
+        while True:
+            frame = socket_.recv(timeout=5)
+            if '"vehicles"' in frame:
+                return frame
+
+
+# ---- 1. non-finite numbers ------------------------------------------------------------------------------
+def test_non_finite_numbers_from_a_fake_vehicle_reach_neither_the_api_nor_the_status_stream(tmp_path):
+    with RunningStation(None, tmp_path) as station, Peer(station_address(station), sysid=7) as peer:
+        peer.send(vehicle_heartbeat(), position(alt=3.0))
+        wait_wall(lambda: (station.http.vehicle(7) or {}).get("position"), 10, "the fake vehicle tracked")
+        peer.send(*non_finite_messages())
+        wait_wall(lambda: station.station.live.get(7).messages_received >= 9, 10, "the broken messages applied")
+        response = station.http.get("/api/vehicles")
+        assert response.status_code == 200
+        shown = strict_json(response.text)[0]
+        assert shown["attitude"] == {"roll": 0.0, "pitch": 0.0, "yaw": 0.0}  # the last good values
+        assert shown["speed"] == 0.0 and shown["position"]["alt"] == 3.0
+        assert shown["position"]["lat"] == pytest.approx(-35.363261)
+        strict_json(ws_frame(station))
+
+
+def test_describe_gives_none_for_any_number_that_is_not_finite():
+    fleet = Fleet()
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=3), 0.0)
+    vehicle = fleet.get(3)
+    vehicle.x, vehicle.y, vehicle.alt, vehicle.roll, vehicle.speed = math.nan, math.inf, -math.inf, math.nan, math.nan
+    vehicle.voltage, vehicle.current, vehicle.home = math.nan, math.inf, (math.nan, 0.0)
+    shown = fleet.describe(vehicle, 1.0)
+    strict_json(json.dumps(shown))
+    assert shown["position"]["x"] is None and shown["attitude"]["roll"] is None and shown["speed"] is None
+
+
+def test_a_crafted_tlog_with_non_finite_numbers_replays_to_finite_json(tmp_path):
+    path = tmp_path / "crafted.tlog"
+    log = TlogWriter(path)
+    packer = mavlink.MAVLink(None, srcSystem=9, srcComponent=1)
+    for k, message in enumerate([vehicle_heartbeat(), position(), *non_finite_messages(), vehicle_heartbeat()]):
+        log.write(pack(message, packer), 1_700_000_000.0 + k * 0.1)
+    log.close()
+    replay = Replay.open(path, Fleet())
+    replay.seek(replay.duration)
+    for at in (0.0, 0.35, replay.duration):
+        replay.seek(at)
+        shown = [replay.fleet.describe(v, replay.now) for v in replay.fleet.vehicles.values()]
+        strict_json(json.dumps(shown))
+    replay.seek(0.0)
+    replay.advance(replay.duration)  # played forward message by message, as a live link feeds it
+    assert replay.fleet.get(9).roll == 0.0
+    strict_json(json.dumps([replay.fleet.describe(v, replay.now) for v in replay.fleet.vehicles.values()]))
+
+
+def _decoded(message, sysid: int, compid: int = 1):
+    packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+    return mavlink.MAVLink(None).decode(bytearray(message.pack(packer)))
+
+
+# ---- 2. what a map stream claims ------------------------------------------------------------------------
+def snapshot_blob(size: int, part: tuple[int, int, int, int], compressed: bytes, resolution: float = 10.0) -> bytes:
+    """A map snapshot blob (see vehicle.protocol.mapstream) with any geometry it likes to claim."""
+    return struct.pack("<BHfffIHHHH", 1, size, resolution, -20.0, -20.0, 0, *part) + compressed
+
+
+def zlib_bomb(megabytes: int) -> bytes:
+    """``megabytes`` MB of zeros, zlib-compressed about a thousand to one, made without holding them."""
+    packer = zlib.compressobj(9)
+    block = bytes(1 << 20)
+    return b"".join(packer.compress(block) for _ in range(megabytes)) + packer.flush()
+
+
+def peak_memory(run) -> int:
+    """Bytes Python allocated at the peak while ``run()`` ran (numpy's arrays included)."""
+    tracemalloc.start()
+    try:
+        run()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def feed_all(receiver: MapReceiver, payloads: list[tuple[int, bytes]]) -> None:
+    for kind, payload in payloads:
+        receiver.feed(kind, payload)
+
+
+def test_a_zlib_bomb_in_a_map_snapshot_is_inflated_no_further_than_its_claim():
+    bomb = snapshot_chunks(1, snapshot_blob(100, (0, 0, 10, 10), zlib_bomb(200)))  # 200 MB in ~1,700 chunks
+    receiver = MapReceiver()
+    assert peak_memory(lambda: feed_all(receiver, bomb)) < 20e6
+    assert receiver.grid is None and receiver.snapshots == 0
+
+
+@pytest.mark.parametrize("side", [MAX_SIDE + 1, 30_000, 65_535])
+def test_a_snapshot_claiming_a_huge_map_in_one_packet_is_refused_before_any_grid_exists(side):
+    claim = snapshot_chunks(1, snapshot_blob(side, (0, 0, 0, 0), zlib.compress(b"")))
+    assert len(claim) == 1 and len(claim[0][1]) < 64  # one small TUNNEL message
+    receiver = MapReceiver()
+    assert peak_memory(lambda: feed_all(receiver, claim)) < 5e6
+    assert receiver.grid is None and receiver.geometry is None
+
+
+def test_a_snapshot_with_a_geometry_that_is_no_number_is_refused():
+    for resolution in (math.nan, math.inf, 0.0, -1.0):
+        receiver = MapReceiver()
+        feed_all(receiver, snapshot_chunks(1, snapshot_blob(4, (0, 0, 0, 0), zlib.compress(b""), resolution)))
+        assert receiver.grid is None
+
+
+def test_the_largest_map_a_vehicle_may_stream_is_received():
+    receiver = MapReceiver()
+    feed_all(receiver, snapshot_chunks(1, snapshot_blob(MAX_SIDE, (5, 5, 2, 2), zlib.compress(bytes([9] * 4)))))
+    assert receiver.grid.shape == (MAX_SIDE, MAX_SIDE) and int(receiver.grid.sum()) == 36
+
+
+def test_a_delta_naming_more_cells_than_its_map_or_a_cell_twice_is_dropped():
+    receiver = MapReceiver()
+    feed_all(receiver, snapshot_chunks(1, snapshot_blob(4, (0, 0, 0, 0), zlib.compress(b""))))
+    assert receiver.synced and receiver.grid.shape == (4, 4)
+    twice = _raw_deflate(bytes([0] * 100) + bytes([20] * 100))  # cell 0, a hundred times over
+    receiver.feed(MAP_DELTA, struct.pack("<IH", 1, 100) + twice)
+    assert receiver.applied == 0 and not receiver.grid.any()
+    good = _raw_deflate(bytes([3, 1]) + bytes([20, 21]))  # cells 3 and 4
+    receiver.feed(MAP_DELTA, struct.pack("<IH", 1, 2) + good)
+    assert receiver.applied == 1 and receiver.grid.reshape(-1)[3:5].tolist() == [20, 21]
+
+
+def _raw_deflate(data: bytes) -> bytes:
+    packer = zlib.compressobj(9, zlib.DEFLATED, -15)
+    return packer.compress(data) + packer.flush()
+
+
+def test_a_station_keeps_tracking_its_vehicle_through_map_bombs_and_huge_claims(scene, tmp_path):
+    with RunningStation(scene, tmp_path) as station, start_sim(station, scene), \
+            Peer(station_address(station), sysid=1, compid=191) as spoofer:
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["map"]["source"] == "vehicle", what="the vehicle's own map")
+        before = resident_bytes()
+        for side in (30_000, 65_535):
+            claim = snapshot_chunks(7, snapshot_blob(side, (0, 0, 0, 0), zlib.compress(b"")))
+            spoofer.send(*(tunnel(kind, payload) for kind, payload in claim))
+        spoofer.send(*(tunnel(kind, payload) for kind, payload in
+                       snapshot_chunks(8, snapshot_blob(400, (0, 0, 10, 10), zlib_bomb(50)))))
+        spoofer.send(tunnel(MAP_DELTA, struct.pack("<IH", 10**6, 65535) + zlib_bomb(1)[:120]))
+        command_ok(api, 1, action="set_mode", mode="LOITER")
+        shown = api.wait_vehicle(1, lambda v: v["mode"] == "LOITER", sim_timeout=HEARTBEAT_WAIT, what="LOITER")
+        assert shown["link"]["heartbeat_age"] < 3 and shown["map"]["source"] == "vehicle"
+        assert station.station.live.get(1).map_stream.grid.shape == (400, 400)  # the vehicle's map, still
+        assert resident_bytes() - before < 100e6
+        assert api.get("/api/health").json()["status"] == "ok"
+
+
+def resident_bytes() -> int:
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * 4096
+
+
+# ---- 3. fake vehicles ------------------------------------------------------------------------------------
+def test_a_flood_of_fake_vehicles_fills_the_fleet_only_to_its_limit_and_the_real_one_still_answers(scene, tmp_path):
+    with RunningStation(scene, tmp_path) as station, start_sim(station, scene):
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok", what="the real vehicle")
+        fakes = [Peer(station_address(station), sysid=2 + k % 254) for k in range(300)]  # each from its own port
+        for fake in fakes:
+            fake.send(vehicle_heartbeat(), position())
+        health = wait_wall(lambda: (h := api.get("/api/health").json())["link"]["vehicles"]["refused"] > 0 and h,
+                           10, "fake vehicles refused")
+        held = health["link"]["vehicles"]
+        assert held["held"] == held["limit"] == MAX_VEHICLES and len(api.vehicles()) == MAX_VEHICLES
+        assert 1 in api.vehicles()  # heard first, kept
+        command_ok(api, 1, action="set_mode", mode="LOITER")
+        shown = api.wait_vehicle(1, lambda v: v["mode"] == "LOITER", sim_timeout=HEARTBEAT_WAIT, what="LOITER")
+        assert shown["link"]["heartbeat_age"] < 3
+        asked = {m.target_system for fake in fakes for m in fake.receive(0.005) if m.get_type() == "COMMAND_LONG"}
+        assert 0 < len(asked) <= MAX_VEHICLES - 1  # only the vehicles the fleet holds are asked for telemetry
+        for fake in fakes:
+            fake.close()
+
+
+def test_a_vehicle_not_heard_for_ten_minutes_is_forgotten_and_makes_room():
+    fleet = Fleet(max_vehicles=2)
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=3), 0.0)
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=4), 0.0)
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=5), 1.0)
+    assert fleet.ids() == [3, 4] and fleet.refused == 1  # full: the newcomer is refused
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=4), FORGET_AFTER - 10)
+    fleet.apply(_decoded(vehicle_heartbeat(), sysid=5), FORGET_AFTER + 1)
+    assert fleet.ids() == [4, 5] and fleet.forgotten == 1  # 3 was silent for ten minutes: forgotten
+
+
+def test_a_replayed_log_forgets_no_vehicle_however_long_it_was_silent(tmp_path):
+    path = tmp_path / "quiet.tlog"
+    log = TlogWriter(path)
+    first, second = (mavlink.MAVLink(None, srcSystem=s, srcComponent=1) for s in (9, 10))
+    log.write(pack(vehicle_heartbeat(), first), 1_700_000_000.0)
+    log.write(pack(vehicle_heartbeat(), second), 1_700_000_000.0 + 2 * FORGET_AFTER)
+    log.close()
+    replay = Replay.open(path, Fleet())
+    replay.advance(replay.duration)
+    assert replay.fleet.ids() == [9, 10]
+    replay.seek(replay.duration)
+    assert replay.fleet.ids() == [9, 10]
+
+
+def test_the_links_routes_and_unfinished_texts_stay_bounded():
+    link = Link([], Fleet())
+    for sysid in range(1, 256):
+        link.route[sysid] = (None, None, 0.0 if sysid > 1 else FORGET_AFTER)
+        link._asked[sysid] = (0.0, 0.0)
+    link._prune(FORGET_AFTER + 1)
+    assert list(link.route) == [1] and list(link._asked) == [1]  # only the one heard within ten minutes
+    texts = Reassembler()
+    for k in range(300):  # chunk 0 of a long text each, never finished, from many senders
+        texts.feed(_decoded(statustexts("x" * 120, 6, k + 1)[0], sysid=1 + k % 255, compid=1 + k // 255), 0.0)
+    assert len(texts._partial) <= texts.limit
+
+
+# ---- 4. who the simulated vehicle obeys --------------------------------------------------------------------
+ARM, TAKEOFF, SET_MODE = (mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_CMD_NAV_TAKEOFF,
+                          mavlink.MAV_CMD_DO_SET_MODE)
+
+
+def sim_for(peer: Peer, scene, **options) -> RunningSim:
+    """A simulated copter sending to ``peer``, which sends back to it once started."""
+    runner = RunningSim(make_vehicle(scene), [peer.url], **options)
+    peer.address = runner.sim.endpoint.links[0].port.getsockname()
+    return runner
+
+
+def test_the_sim_denies_a_sender_that_is_no_ground_station_and_obeys_one_that_is(scene):
+    with Peer(None, sysid=66) as stranger, sim_for(stranger, scene) as sim:
+        pilot = sim.world.autopilot
+        for number, params in ((SET_MODE, (1, 5)), (ARM, (1,)), (TAKEOFF, (0, 0, 0, 0, 0, 0, 4))):
+            stranger.send(command(number, *params))
+            ack = acked(stranger, number)
+            assert ack.result == mavlink.MAV_RESULT_DENIED and ack.target_system == 66  # told, not ignored
+        stranger.send(mavlink.MAVLink_set_mode_message(1, 1, 5),
+                      mavlink.MAVLink_mission_count_message(1, 1, 3, 0))
+        assert stranger.wait(lambda m: m.get_type() == "MISSION_REQUEST_INT", 1.0) is None
+        assert not pilot.armed and pilot.mode == "GUIDED"  # as it booted
+        assert [t for t in stranger.texts if "Not obeying 66/1" in t] == ["Not obeying 66/1: no GCS heartbeat from it"]
+        stranger.send(gcs_heartbeat())  # now it is a ground station
+        for number, params in ((ARM, (1,)), (TAKEOFF, (0, 0, 0, 0, 0, 0, 4))):
+            stranger.send(command(number, *params))
+            assert acked(stranger, number).result == mavlink.MAV_RESULT_ACCEPTED
+        assert pilot.armed and pilot.mode == "GUIDED"
+
+
+def test_the_sim_obeys_its_own_companion_without_a_gcs_heartbeat(scene):
+    with Peer(None, sysid=1, compid=191) as companion, sim_for(companion, scene) as sim:
+        companion.send(command(SET_MODE, 1, 5))
+        assert acked(companion, SET_MODE).result == mavlink.MAV_RESULT_ACCEPTED
+        assert sim.world.autopilot.mode == "LOITER"
+        companion.as_system(1, 190).send(command(SET_MODE, 1, 4))  # the same system, another component
+        assert acked(companion, SET_MODE).result == mavlink.MAV_RESULT_DENIED
+
+
+def test_a_strangers_orders_are_not_routed_on_to_the_companion(scene):
+    with Peer(None, sysid=66) as stranger, Peer(None, sysid=1, compid=191) as agent:
+        runner = RunningSim(make_vehicle(scene, mission=None), [stranger.url, agent.url], sim_clock=True)
+        stranger.address = runner.sim.endpoint.links[0].port.getsockname()
+        agent.address = runner.sim.endpoint.links[1].port.getsockname()
+        with runner:
+            agent.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                                                         mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+            stranger.send(command(mavlink.MAV_CMD_MISSION_START, component=191))
+            assert acked(stranger, mavlink.MAV_CMD_MISSION_START).result == mavlink.MAV_RESULT_DENIED
+            assert agent.wait(lambda m: m.get_type() == "COMMAND_LONG", 1.0) is None
+            stranger.send(gcs_heartbeat(), command(mavlink.MAV_CMD_MISSION_START, component=191))
+            assert agent.wait(lambda m: m.get_type() == "COMMAND_LONG", 2.0) is not None  # a ground station's is
+
+
+def test_vehicle_sim_answers_on_loopback_only_unless_told_otherwise():
+    link = links.connect(DEFAULT_SIM_LINK)  # what ``vehicle sim`` talks on without --mavlink
+    try:
+        assert link.port.getsockname()[0] == "127.0.0.1"
+    finally:
+        link.close()
+
+
+# ---- 5. a flood of two-byte datagrams ------------------------------------------------------------------------
+class Flooder:
+    """Sends ``\\xfd\\xff`` (the start of a MAVLink 2 packet of 255 bytes that never comes) to some addresses, at
+    ``rate`` datagrams a second each, from its own socket, until stopped."""
+
+    def __init__(self, addresses: list[tuple[str, int]], rate: float = 150.0):
+        self.addresses, self.rate, self.sent = addresses, rate, 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> Flooder:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as flood:
+            while not self._stop.wait(1.0 / self.rate):
+                for address in self.addresses:
+                    flood.sendto(b"\xfd\xff", address)
+                    self.sent += 1
+
+
+@pytest.mark.parametrize("target", ["station", "vehicle"])
+def test_a_two_byte_datagram_flood_neither_hides_the_vehicle_nor_trips_its_failsafe(scene, tmp_path, target):
+    """Against the station's port, or the vehicle's: with one parser for all senders the flood swallowed the
+    real packets that followed it (commands went unanswered, the vehicle's GCS failsafe tripped)."""
+    with RunningStation(scene, tmp_path) as station, start_sim(station, scene, failsafe_timeout=2.0) as sim:
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok" and v["position"], what="the vehicle")
+        port = station_address(station) if target == "station" else sim.endpoint.links[0].port.getsockname()
+        with Flooder([port]) as flood:
+            deadline = time.monotonic() + 3.0  # longer than the vehicle's failsafe timeout
+            results = []
+            while time.monotonic() < deadline:
+                mode = "LOITER" if len(results) % 2 == 0 else "GUIDED"
+                results.append(api.result(1, action="set_mode", mode=mode))
+                assert api.vehicle(1)["link"]["heartbeat_age"] < 3
+                time.sleep(0.2)
+        assert flood.sent > 300 and len(results) >= 5 and set(results) == {"accepted"}
+        assert not sim.endpoint.in_failsafe
+        assert not [m for m in api.vehicle(1)["messages"] if "failsafe" in m["text"]]
+
+
+# ---- 6. signing ----------------------------------------------------------------------------------------------
+KEY = signing.load_key("correct horse battery staple")
+WRONG_KEY = signing.load_key("not the key")
+
+
+def test_a_signing_key_is_a_file_of_32_bytes_or_of_hex_or_base64_or_a_passphrase(tmp_path):
+    raw = bytes(range(32))
+    for name, content in (("raw", raw), ("hex", raw.hex().encode() + b"\n"), ("b64", base64.b64encode(raw))):
+        (tmp_path / name).write_bytes(content)
+        assert signing.load_key(str(tmp_path / name)) == raw
+    assert KEY == hashlib.sha256(b"correct horse battery staple").digest()  # as MAVProxy's signing setup
+    (tmp_path / "short").write_bytes(b"0123")
+    for bad in (str(tmp_path / "short"), str(tmp_path / "missing.key"), ""):
+        with pytest.raises(signing.SigningKeyError):
+            signing.load_key(bad)
+
+
+def _signed(message, key: bytes, sysid: int = 1, compid: int = 1, packer=None):
+    packer = packer or mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+    if key is not None and not packer.signing.sign_outgoing:
+        signing.sign_outgoing(packer, key)
+    return mavlink.MAVLink(None).decode(bytearray(pack(message, packer)))
+
+
+def test_the_verifier_takes_each_signed_message_once_and_nothing_else():
+    verifier = signing.Verifier(KEY)
+    beat = _signed(vehicle_heartbeat(), KEY)
+    assert verifier.check(beat) == signing.SIGNED
+    assert verifier.check(beat) == signing.REPLAYED  # the same packet again (from anyone): a replay
+    assert verifier.check(_signed(vehicle_heartbeat(), WRONG_KEY)) == signing.BAD
+    assert verifier.check(_decoded(vehicle_heartbeat(), 1)) == signing.UNSIGNED
+    radio = _decoded(mavlink.MAVLink_radio_status_message(200, 190, 90, 80, 70, 0, 0), 51, 68)
+    assert verifier.admits(radio, verifier.check(radio))  # radios do not sign
+    assert not verifier.admits(beat, signing.UNSIGNED) and not verifier.admits(beat, signing.BAD)
+    assert signing.Verifier(KEY, require=False).admits(beat, signing.UNSIGNED)
+
+
+def test_a_forged_packet_with_a_future_timestamp_does_not_silence_the_genuine_stream():
+    """pymavlink's own check records the timestamp before it checks the signature."""
+    verifier = signing.Verifier(KEY)
+    genuine = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    signing.sign_outgoing(genuine, KEY)
+    forger = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    signing.sign_outgoing(forger, WRONG_KEY)
+    forger.signing.link_id = genuine.signing.link_id
+    forger.signing.timestamp = genuine.signing.timestamp + 10**9
+    assert verifier.check(_signed(vehicle_heartbeat(), KEY, packer=forger)) == signing.BAD
+    assert verifier.check(_signed(vehicle_heartbeat(), KEY, packer=genuine)) == signing.SIGNED
+
+
+def test_a_signed_sim_obeys_only_signed_commands_and_signs_what_it_sends(scene):
+    with Peer(None, sysid=66) as unsigned, Peer(None, sysid=67, key=WRONG_KEY) as forger, \
+            Peer(None, sysid=68, key=KEY) as operator:
+        runner = RunningSim(make_vehicle(scene), [unsigned.url, forger.url, operator.url], signing_key=KEY)
+        for k, peer in enumerate((unsigned, forger, operator)):
+            peer.address = runner.sim.endpoint.links[k].port.getsockname()
+        with runner as sim:
+            for peer in (unsigned, forger):
+                peer.send(gcs_heartbeat(), command(ARM, 1))
+                assert acked(peer, ARM, timeout=1.5) is None  # dropped unheard: not even denied
+            assert not sim.world.autopilot.armed
+            operator.send(gcs_heartbeat(), command(ARM, 1))
+            assert acked(operator, ARM).result == mavlink.MAV_RESULT_ACCEPTED and sim.world.autopilot.armed
+            unsigned.as_system(51, 68).send(mavlink.MAVLink_radio_status_message(200, 190, 90, 80, 70, 0, 0))
+            beat = unsigned.wait(lambda m: m.get_type() == "HEARTBEAT")
+            assert signing.Verifier(KEY).check(beat) == signing.SIGNED
+            refused = sum((link.refused for link in sim.endpoint.links), Counter())
+            assert refused[66] >= 2 and refused[67] >= 2 and 51 not in refused and 68 not in refused
+
+
+@pytest.mark.parametrize(("vehicle_key", "signed"), [(KEY, True), (None, False)])
+def test_a_station_with_a_key_shows_whether_each_vehicle_signs(scene, tmp_path, vehicle_key, signed):
+    with RunningStation(scene, tmp_path, signing_key=KEY) as station, \
+            start_sim(station, scene, signing_key=vehicle_key):
+        shown = station.http.wait_vehicle(1, lambda v: v["link"]["signed"] is not None, what="its link")
+        assert shown["link"]["signed"] is signed
+        command_ok(station.http, 1, action="set_mode", mode="LOITER")  # what the station sends is signed
+
+
+def test_a_station_that_requires_signing_shows_no_unsigned_vehicle(scene, tmp_path):
+    with RunningStation(scene, tmp_path, signing_key=KEY, require_signing=True) as station, \
+            start_sim(station, scene), start_sim(station, scene, sysid=2, signing_key=KEY):
+        station.http.wait_vehicle(2, lambda v: v["link"]["signed"], what="the signed vehicle")
+        health = wait_wall(lambda: (h := station.http.get("/api/health").json())["link"]["signing"]["refused"] and h,
+                           10, "the unsigned vehicle refused")
+        assert 1 not in station.http.vehicles()
+        assert health["link"]["signing"] == {"key": True, "required": True,
+                                             "refused": [{"sysid": 1, "messages": mock.ANY}]}
+
+
+# ---- 7. another ground station in command ------------------------------------------------------------------
+def test_the_station_shows_when_another_ground_station_commands_its_vehicle(scene, tmp_path):
+    other_port = free_udp_port()
+    other = Gcs(f"udpin:127.0.0.1:{other_port}", sysid=254, speedup=SPEEDUP)
+    with RunningStation(scene, tmp_path) as station, \
+            RunningSim(make_vehicle(scene), [station.vehicle_url(), f"udpout:127.0.0.1:{other_port}"]):
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok", what="the vehicle")
+        assert api.vehicle(1)["other_gcs"] is None
+        other.wait("HEARTBEAT")  # and its own heartbeats reach the vehicle, which routes them to the station
+        assert other.set_mode(5) == mavlink.MAV_RESULT_ACCEPTED  # LOITER, by station 254
+        shown = api.wait_vehicle(1, lambda v: v["other_gcs"] is not None, what="the other station")
+        assert shown["other_gcs"]["sysid"] == 254
+        assert shown["other_gcs"]["last"] == "COMMAND_ACK MAV_CMD_DO_SET_MODE accepted"
+        assert 0 <= shown["other_gcs"]["age"] < 3
+        health = api.get("/api/health").json()["link"]
+        assert [s["sysid"] for s in health["other_stations"]] == [254]
+
+        command_ok(api, 1, action="set_mode", mode="GUIDED")  # this station's own order: not another's doing
+        wait_mode(api, 1, "GUIDED")
+        assert api.vehicle(1)["other_gcs"]["last"] == "COMMAND_ACK MAV_CMD_DO_SET_MODE accepted"
+
+        other.heartbeat()
+        other.conn.mav.set_mode_send(1, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 17)  # BRAKE, unacknowledged
+        other.wait_mode(17)
+        shown = api.wait_vehicle(1, lambda v: v["mode"] == "BRAKE", sim_timeout=HEARTBEAT_WAIT, what="BRAKE")
+        assert shown["other_gcs"] == {"sysid": 254, "last": "mode BRAKE, not ordered by this station",
+                                      "age": mock.ANY}
+    other.close()
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="needs Debian's chromium at /usr/bin/chromium")
+@pytest.mark.browser
+def test_the_page_shows_another_ground_station_and_a_signed_link(scene, tmp_path):
+    from playwright.sync_api import expect, sync_playwright
+
+    other_port = free_udp_port()
+    other = Gcs(f"udpin:127.0.0.1:{other_port}", sysid=254, speedup=SPEEDUP)
+    other.conn.setup_signing(KEY, sign_outgoing=True)  # the other station has the key too
+    with RunningStation(scene, tmp_path, signing_key=KEY) as station, \
+            RunningSim(make_vehicle(scene), [station.vehicle_url(), f"udpout:127.0.0.1:{other_port}"],
+                       signing_key=KEY), sync_playwright() as playwright:
+        station.http.wait_vehicle(1, lambda v: v["link"]["signed"], what="the signed vehicle")
+        browser = launch_chromium(playwright)
+        try:
+            page = browser.new_page()
+            page.goto(station.base + "/")
+            card = page.locator(".vehicle-card[data-sysid='1']")
+            expect(card.locator(".link")).to_have_text(re.compile(r"^link ok · .* · signed$"))
+            banner = card.locator(".other-gcs-banner")
+            expect(banner).to_be_hidden()
+            other.wait("HEARTBEAT")
+            assert other.set_mode(5) == mavlink.MAV_RESULT_ACCEPTED  # LOITER, by station 254
+            expect(banner).to_have_text(re.compile(
+                r"^Another ground station \(system 254\) is commanding this vehicle: "
+                r"COMMAND_ACK MAV_CMD_DO_SET_MODE accepted, [\d.]+ s ago$"), timeout=15_000)
+            expect(banner).to_be_visible()
+        finally:
+            browser.close()
+    other.close()
+
+
+# ---- 8. a full disk, and a message that breaks the fleet ----------------------------------------------------
+class FullDisk:
+    """A file on a disk with no room left: every write and flush fails as a full disk does."""
+
+    def write(self, data) -> int:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def flush(self) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_full_disk_degrades_the_health_report_but_the_vehicle_stays_tracked(scene, tmp_path):
+    with RunningStation(scene, tmp_path) as station, start_sim(station, scene):
+        api = station.http
+        api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok", what="the vehicle")
+        assert api.get("/api/health").json()["status"] == "ok"
+        station.station.recorder._writer._file = FullDisk()
+        health = wait_wall(lambda: (h := api.get("/api/health").json())["status"] == "degraded" and h, 10,
+                           "the health report degraded")
+        assert "No space left on device" in health["recording"]["error"] == health["link"]["recording_error"]
+        assert health["link"]["thread"] == "ok"
+        command_ok(api, 1, action="set_mode", mode="LOITER")
+        shown = api.wait_vehicle(1, lambda v: v["mode"] == "LOITER", sim_timeout=HEARTBEAT_WAIT, what="LOITER")
+        assert shown["link"]["heartbeat_age"] < 3
+
+
+def test_a_message_that_breaks_the_fleet_is_counted_and_the_link_thread_goes_on(tmp_path, monkeypatch):
+    def exhausted(*args):
+        raise MemoryError("a VFR_HUD too many")
+
+    with RunningStation(None, tmp_path) as station, Peer(station_address(station), sysid=7) as peer:
+        monkeypatch.setattr(station.station.live, "_vfr_hud", exhausted)
+        peer.send(vehicle_heartbeat(), mavlink.MAVLink_vfr_hud_message(1.0, 1.0, 0, 0, 0, 0), position(alt=2.0))
+        link = wait_wall(lambda: (h := station.http.get("/api/health").json()["link"])["errors"] and h, 10,
+                         "the error counted")
+        assert link["errors"] == 1 and link["last_error"] == "MemoryError: a VFR_HUD too many"
+        assert link["thread"] == "ok" and station.station.link._thread.is_alive()
+        shown = wait_wall(lambda: station.http.vehicle(7)["position"], 10, "the next message applied")
+        assert shown["alt"] == 2.0
