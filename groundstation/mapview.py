@@ -18,6 +18,7 @@ from __future__ import annotations
 import base64
 import io
 import math
+import threading
 
 import numpy as np
 from PIL import Image
@@ -133,3 +134,73 @@ def legend() -> dict[str, str]:
     names = ("unknown", "free", "occupied")
     return {name: "rgba({}, {}, {}, {:.2f})".format(*c[:3], c[3] / 255) for name, c in zip(names, STATE_COLOURS,
                                                                                           strict=True)}
+
+
+MAX_TRAIL_POINTS = 1000  # per vehicle in a trails answer (evenly thinned)
+
+
+class MapPictures:
+    """The 2D map's pictures for one station, each made again only when what it shows has changed (the page
+    asks every few seconds; a merged map of several large maps takes a while)."""
+
+    def __init__(self):
+        self._scene: tuple[object, dict | None] | None = None
+        self._maps: dict[tuple, dict | None] = {}
+        self._lock = threading.Lock()
+
+    def scene(self, scene: Scene | None) -> dict | None:
+        with self._lock:
+            if self._scene is None or self._scene[0] is not scene:
+                self._scene = (scene, scene_picture(scene))
+            return self._scene[1]
+
+    def vehicle(self, fleet, sysid: int) -> dict | None:
+        """One vehicle's memory map (None: no such vehicle, or nothing explored)."""
+        with fleet.lock:
+            v = fleet.get(sysid)
+            grid = None if v is None else v.map_grid()
+            if grid is None:
+                return None
+            key = (id(fleet), sysid, fleet.map_version(v))
+            if key in self._maps:
+                return self._maps[key]
+            grid = (grid[0].copy(), grid[1], grid[2])
+        return self._keep(key, lambda: overlay(grid))
+
+    def merged(self, fleet) -> dict | None:
+        """Every vehicle's evidence in one map (None: no maps yet)."""
+        with fleet.lock:
+            chosen = [(sysid, v) for sysid, v in sorted(fleet.vehicles.items()) if v.map_grid() is not None]
+            key = (id(fleet), "merged", tuple((sysid, fleet.map_version(v)) for sysid, v in chosen))
+            if key in self._maps:
+                return self._maps[key]
+            grids = [(g[0].copy(), g[1], g[2]) for g in (v.map_grid() for _, v in chosen)]
+
+        def make():
+            grid = merge(grids)
+            found = None if grid is None else overlay(grid)
+            if found is not None:
+                found["vehicles"] = [sysid for sysid, _ in chosen]
+            return found
+        return self._keep(key, make)
+
+    def _keep(self, key: tuple, make) -> dict | None:
+        made = make()
+        with self._lock:
+            if len(self._maps) > 64:
+                self._maps.clear()
+            self._maps[key] = made
+        return made
+
+
+def trails(fleet) -> dict[str, list[list[float]]]:
+    """Each vehicle's trail, at most MAX_TRAIL_POINTS points (scene x, y)."""
+    found = {}
+    with fleet.lock:
+        for sysid, v in sorted(fleet.vehicles.items()):
+            points = list(v.trail)
+            if len(points) > MAX_TRAIL_POINTS:
+                pick = np.linspace(0, len(points) - 1, MAX_TRAIL_POINTS).round().astype(int)
+                points = [points[i] for i in pick]
+            found[str(sysid)] = [[round(float(p[0]), 2), round(float(p[1]), 2)] for p in points]
+    return found

@@ -193,7 +193,7 @@ class Replay:
 
     def message(self, i: int):
         """Record ``i`` decoded (None if it is damaged)."""
-        return self._decode(i)
+        return self.decode(i)
 
     def chunk_header(self, i: int) -> tuple[int, int, int]:
         """Snapshot id, chunk index and chunk count of a map snapshot chunk (record ``i``), undecoded."""

@@ -536,13 +536,18 @@ class Fleet:
                                                            "age": _round(now - v.other_gcs[2], 1)},
         }
 
+    @staticmethod
+    def map_version(v: VehicleState) -> tuple:
+        """Changes whenever the vehicle's map does."""
+        return v.map_source, v.map_stream.version, v.own_map.version if v.own_map is not None else 0
+
     def occupied(self, v: VehicleState) -> int | None:
         """Occupied cells of the vehicle's map (counted again only when the map changed: a 2000 x 2000 map
         takes milliseconds, and every status frame and history sample asks)."""
         grid = v.map_grid()
         if grid is None:
             return None
-        version = (v.map_source, v.map_stream.version, v.own_map.version if v.own_map is not None else 0)
+        version = self.map_version(v)
         cached = self._occupied.get(v.sysid)
         if cached is None or cached[0] != version:
             cached = self._occupied[v.sysid] = (version, int(np.count_nonzero(grid[0] >= OCCUPIED_AT)))
