@@ -143,6 +143,8 @@
       `${Math.round(s.bearing ?? 0)}°: ${isNum(s.distance) && isNum(s.max_range) && s.distance < s.max_range
         ? `${fmt(s.distance)} m` : "clear"}`).join(" · ") : "none heard";
     const att = v.attitude || {};
+    $("#readout-attitude").textContent = isNum(att.roll) && isNum(att.pitch)
+      ? `roll ${fmt(att.roll)}°, pitch ${fmt(att.pitch)}°` : "–";
     drawAttitude($("#attitude"), isNum(att.roll) ? att.roll : 0, isNum(att.pitch) ? att.pitch : 0);
     drawCompass($("#compass"), isNum(v.heading) ? v.heading : null, colourOf(v));
     drawProximity($("#proximity"), sonars, colourOf(v));
@@ -197,11 +199,6 @@
     ctx.stroke();
     ctx.fillStyle = "#ffd23f";
     ctx.fillRect(r - 2, r - 2, 4, 4);
-    ctx.fillStyle = "#ffffff";
-    ctx.font = "11px system-ui, sans-serif";
-    ctx.textAlign = "center";
-    ctx.fillText(`R ${Math.round(roll)}° P ${Math.round(pitch)}°`, r, h - 10);
-    ctx.textAlign = "start";
   }
 
   /** A compass rose turning under a fixed lubber line: the heading read at the top. */
@@ -284,7 +281,7 @@
     }
     for (const s of sonars) {
       if (!s || !isNum(s.bearing)) continue;
-      const half = Math.max(3, isNum(s.beam) ? s.beam / 2 : 10) * Math.PI / 180;
+      const half = Math.max(6, isNum(s.beam) ? s.beam / 2 : 10) * Math.PI / 180;  // narrow beams still show
       const a = s.bearing * Math.PI / 180 - Math.PI / 2;  // canvas angle: 0 east, clockwise; bearing 0 is up
       const near = isNum(s.distance) && isNum(s.max_range) && s.distance < s.max_range;
       const length = Math.max(4, (near ? s.distance : (isNum(s.max_range) ? s.max_range : range)) * scale);

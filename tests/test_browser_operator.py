@@ -59,7 +59,7 @@ def station(scene, tmp_path_factory):
 @pytest.fixture(scope="module")
 def copters(scene, station):
     flying = start_sim(station, scene, FLYER, "copter", "search", True, None, Settings(), SPEEDUP).start()
-    idle = start_sim(station, scene, IDLE, "copter", "browse", False, (4.0, -6.0), Settings(), SPEEDUP).start()
+    idle = start_sim(station, scene, IDLE, "copter", "browse", False, None, Settings(), SPEEDUP).start()
     wait_wall(lambda: station.http.vehicle(FLYER) and station.http.vehicle(IDLE), 20, "both copters are heard")
     yield flying, idle
     flying.stop()
@@ -155,6 +155,7 @@ def test_instruments_show_the_selected_vehicle(page, station):
     expect(page.locator("#readout-speed")).to_have_text(re.compile(r"^\d+\.\d m/s$"))
     expect(page.locator("#readout-climb")).to_have_text(re.compile(r"^[+-]\d+\.\d m/s$"))
     expect(page.locator("#readout-heading")).to_have_text(re.compile(r"^\d{1,3}°$"))
+    expect(page.locator("#readout-attitude")).to_have_text(re.compile(r"^roll -?\d+\.\d°, pitch -?\d+\.\d°$"))
     expect(page.locator("#readout-battery")).to_have_text(re.compile(r"^\d+\.\d V"))
     expect(page.locator("#readout-sonar")).to_have_text(re.compile(r"^\d+°: "))
     altitude = float(page.locator("#readout-altitude").inner_text().split()[0])
@@ -281,11 +282,15 @@ def test_plots_live_and_in_replay_with_events_that_seek(page, station):
         wait_wall(lambda: abs(station.http.get("/api/replay").json()["replay"]["time"] - min(at, duration)) < 0.2,
                   20, f"the replay went to the marker at {at:.1f} s")
         # a click on the plot seeks to the time under it
+        page.locator("#plot").scroll_into_view_if_needed()
         box = page.locator("#plot").bounding_box()
         page.mouse.click(box["x"] + box["width"] * 0.25, box["y"] + box["height"] / 2)
         wait_wall(lambda: abs(station.http.get("/api/replay").json()["replay"]["time"] - duration * 0.25) <
                   duration * 0.02 + 0.2, 20, "the replay went to a quarter of the log")
-        page.screenshot(path=str(SCREENSHOTS / "operator-replay.png"))
+        page.set_viewport_size({"width": 1400, "height": 1300})
+        page.locator("#plots").scroll_into_view_if_needed()
+        page.wait_for_timeout(2500)  # a plot poll after the resize
+        page.locator("#panel").screenshot(path=str(SCREENSHOTS / "operator-replay.png"))
     finally:
         station.http.post("/api/replay/stop", headers=station.http.operator)
     assert station.http.get("/api/replay/timeline").status_code == 409
