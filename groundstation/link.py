@@ -235,7 +235,7 @@ class Link:
         """Send to where the vehicle was heard (to every link and peer if it is unknown or None)."""
         with self._lock:
             packet = pack(message, self.packer)
-        self.fleet.apply(message, time.time())  # the fleet tells this station's orders from another's
+        self.fleet.apply(message, time.time())  # this station's orders: not another's, and on the timeline
         if sysid in self.route:
             port, peer, _ = self.route[sysid]
             port.write(packet, peer)
@@ -243,9 +243,7 @@ class Link:
             for port in self.ports:
                 port.write(packet)
         self.stats["sent"] += 1
-        now = time.time()
-        self._record(packet, now)
-        self.fleet.apply(message, now)  # what we command shows on the vehicle's timeline, as a replay shows it
+        self._record(packet, time.time())
 
     def request(self, sysid: int, message, accepts: Callable[[object], bool], timeout: float = 1.0,
                 retries: int = 3, resend: Callable[[int], object] | None = None):

@@ -258,6 +258,14 @@ def test_plots_live_and_in_replay_with_events_that_seek(page, station):
     expect(page.locator("#plot-events .event-marker").first).to_be_attached()
     wait_wall(lambda: len(canvas_colours(page, "#plot")) > 3, 20, "the plot draws a line")
 
+    # a command the station sends, and the vehicle's ACK, are events of that vehicle (once each)
+    assert station.http.result(IDLE, action="set_mode", mode="GUIDED") == "accepted"
+    events = station.http.get(f"/api/vehicles/{IDLE}/history").json()["events"]
+    assert [e["text"] for e in events if e["kind"] == "command"][-1:] == ["sent DO_SET_MODE GUIDED"], events
+    assert [e["text"] for e in events if e["kind"] == "ack"][-1:] == ["DO_SET_MODE: accepted"], events
+    assert len([e for e in events if e["kind"] == "command"]) == 1, events
+    page.wait_for_timeout(3000)  # the recording is flushed every second
+
     recording = next(r for r in station.http.get("/api/recordings").json() if r["recording"])
     started = station.http.post("/api/replay", json={"name": recording["name"]}, headers=station.http.operator)
     assert started.status_code == 200, started.text
@@ -275,7 +283,9 @@ def test_plots_live_and_in_replay_with_events_that_seek(page, station):
         expect(markers.first).to_be_attached()
         # events on the whole log's axis: a command the station sent, and the vehicle's ACK, are among them
         kinds = {e["kind"] for e in timeline["vehicles"][str(FLYER)]["events"]}
-        assert {"mode", "message"} <= kinds, kinds
+        assert {"mode", "message", "agent"} <= kinds, kinds
+        idle = [(e["kind"], e["text"]) for e in timeline["vehicles"][str(IDLE)]["events"]]
+        assert ("command", "sent DO_SET_MODE GUIDED") in idle and ("ack", "DO_SET_MODE: accepted") in idle, idle
         last = markers.last
         at = float(last.get_attribute("data-t"))
         last.dispatch_event("click")
