@@ -181,19 +181,27 @@ class Replay:
         return self.index.start + self.clock
 
     # ---- decoding ---------------------------------------------------------------------------------
-    def decode(self, i: int):
-        """The message of record ``i`` (None if it does not decode)."""
+    def decode(self, i: int, decoder=None):
+        """The message of record ``i`` (None if it does not decode), by the replay's decoder or ``decoder``."""
         start = int(self.index.offsets[i])
         packet = self._data[start:start + int(self.index.lengths[i])]
         try:
-            message = self._decoder.decode(bytearray(packet))
+            message = (decoder or self._decoder).decode(bytearray(packet))
         except Exception:  # noqa: BLE001 - pymavlink raises many kinds on a damaged packet
             return None
         return message
 
-    def message(self, i: int):
-        """Record ``i`` decoded (None if it is damaged)."""
-        return self.decode(i)
+    def message(self, i: int, decoder):
+        """Record ``i`` decoded by ``decoder`` (another thread's: a pymavlink decoder keeps state, so the
+        player's is not shared), None if it is damaged."""
+        return self.decode(i, decoder)
+
+    @staticmethod
+    def decoder():
+        """A decoder of its own for a thread that reads the log besides the player."""
+        decoder = mavlink.MAVLink(None)
+        decoder.robust_parsing = True
+        return decoder
 
     def chunk_header(self, i: int) -> tuple[int, int, int]:
         """Snapshot id, chunk index and chunk count of a map snapshot chunk (record ``i``), undecoded."""

@@ -189,6 +189,8 @@ class GroundStation:
             if self.view.scene is not chosen.scene:
                 self.view.set_scene(chosen.scene)
             self._player = Player(replay).start()
+            if self.timeline is not None:
+                self.timeline.cancel()
             self.timeline = Timeline(replay)
             self.view.show(replay.fleet)
             replay.playing = True
@@ -211,6 +213,8 @@ class GroundStation:
             self._stop_player()
             if self.replay is not None:
                 self.replay = None
+                if self.timeline is not None:
+                    self.timeline.cancel()
                 self.timeline = None
                 if self.view.scene is not self.scene:
                     self.view.set_scene(self.scene)

@@ -45,12 +45,17 @@ class Timeline:
         self.every = max(0.5, replay.duration / SAMPLES)
         self.history: History | None = None
         self.error: str | None = None
+        self._cancelled = False
         self._thread = threading.Thread(target=self._build, name="timeline", daemon=True)
         self._thread.start()
 
     @property
     def ready(self) -> bool:
         return self.history is not None or self.error is not None
+
+    def cancel(self) -> None:
+        """Stop scanning (the replay ended): an hour of log need not be read for nobody."""
+        self._cancelled = True
 
     def wait(self, timeout: float | None = None) -> bool:
         self._thread.join(timeout)
@@ -63,8 +68,12 @@ class Timeline:
             fleet = Fleet(replay.fleet.datum, replay.fleet.ground_height, forget_after=None, own_maps=False,
                           own_sysid=replay.fleet.own_sysid,
                           history=history)
+            decoder = replay.decoder()
             for i in records(replay, self.every):
-                message = replay.message(int(i))
+                if self._cancelled:
+                    self.error = "cancelled"
+                    return
+                message = replay.message(int(i), decoder)
                 if message is not None:
                     fleet.apply(message, float(replay.index.times[i]))
             self.history = history
