@@ -206,15 +206,17 @@ def create_app(station: GroundStation) -> FastAPI:
             return {"sysid": sysid, **fleet.history.of(sysid).as_json(since, limit)}
 
     @app.get("/api/replay/timeline", tags=["replay"])
-    def replay_timeline(limit: int = Query(1500, ge=1, le=MAX_HISTORY, description="samples per vehicle at most")):
-        """The replayed log's whole history, every vehicle's, on the log's clock (``start`` is replay time 0):
-        scanned in the background when the replay starts (``ready`` false meanwhile)."""
+    def replay_timeline(limit: int = Query(1500, ge=1, le=MAX_HISTORY, description="samples per vehicle at most"),
+                        sysid: int | None = Query(None, ge=1, le=255, description="only this vehicle's")):
+        """The replayed log's whole history, every vehicle's (or one's), on the log's clock (``start`` is replay
+        time 0): scanned in the background when the replay starts (``ready`` false meanwhile)."""
         replay, timeline = station.replay, station.timeline
         if replay is None or timeline is None:
             raise HTTPException(409, "nothing is being replayed")
         history = timeline.history
-        vehicles = {} if history is None else {str(sysid): {"sysid": sysid, **found.as_json(None, limit)}
-                                                for sysid, found in sorted(history.vehicles.items())}
+        vehicles = {} if history is None else {str(key): {"sysid": key, **found.as_json(None, limit)}
+                                                for key, found in sorted(history.vehicles.items())
+                                                if sysid is None or key == sysid}
         return {"ready": timeline.ready, "error": timeline.error, "start": replay.index.start,
                 "duration": replay.duration, "vehicles": vehicles}
 

@@ -24,7 +24,7 @@
   let drag = null;
   let cursor = null;
   const map2d = { view, measure, get distance() { return distance(); } };
-  window.map2d = map2d;  // for tests and the 3D view's worker: what the map shows
+  window.map2d = map2d;  // what the map shows, for tests and the page's other scripts
 
   function image(url) {
     return new Promise((resolve) => {

@@ -41,9 +41,9 @@
     $("#plots").hidden = !Number.isInteger(sysid);
     if (!Number.isInteger(sysid) || document.hidden) return;
     if (mode === "replay") {
-      const name = replay && replay.name;
+      const name = `${replay && replay.name}|${sysid}`;  // the selected vehicle's timeline of this log
       if (!timeline || !timeline.ready || timelineName !== name) {
-        const found = await getJson("/api/replay/timeline");
+        const found = await getJson(`/api/replay/timeline?sysid=${sysid}`);
         if (found && typeof found === "object") {
           timeline = found;
           timelineName = name;
