@@ -81,13 +81,14 @@ def page(browser, station, copters):
     found = context.new_page()
     errors: list[str] = []
     found.on("pageerror", lambda error: errors.append(str(error)))
+    found.on("console", lambda m: errors.append(m.text) if "Content Security Policy" in m.text else None)
     found.route("**/viz/**", lambda route: route.fulfill(body="<!doctype html><title>3D view left out</title>",
                                                          content_type="text/html"))
     found.goto(f"{station.base}/#token={TOKEN}")
     expect(found.locator("#auth-status")).to_have_text("Signed in")
     yield found
     context.close()
-    assert not errors, f"JavaScript errors on the page: {errors}"
+    assert not errors, f"JavaScript errors or policy violations on the page: {errors}"
 
 
 def wait_sim(station: RunningStation, sysid: int, condition, sim_timeout: float, what: str) -> dict:
