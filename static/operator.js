@@ -53,7 +53,7 @@
   function renderFleet() {
     const list = $("#fleet-list");
     const key = JSON.stringify(vehicles.map((v) => [v.sysid, v.type, v.mode, v.colour,
-      v.agent && v.agent.state, v.sysid === window.selectedVehicle]));
+      v.agent && v.agent.state, v.agent && v.agent.reason, v.sysid === window.selectedVehicle]));
     if (list.dataset.key !== key) {
       list.dataset.key = key;
       list.replaceChildren(...vehicles.map((v) => {
@@ -64,7 +64,8 @@
         button.setAttribute("aria-pressed", String(v.sysid === window.selectedVehicle));
         const dot = el("span", "swatch-dot");
         dot.style.background = colourOf(v);
-        const agent = v.agent && v.agent.state ? ` · mission ${String(v.agent.state)}` : "";
+        const reason = v.agent && v.agent.reason ? `: ${String(v.agent.reason).slice(0, 80)}` : "";
+        const agent = v.agent && v.agent.state ? ` · mission ${String(v.agent.state)}${reason}` : "";
         button.append(dot, el("span", "fleet-name", nameOf(v)), el("span", "fleet-mode", `${v.mode ?? "–"}${agent}`));
         button.addEventListener("click", () => select(v.sysid));
         li.append(button);

@@ -123,6 +123,7 @@ def test_vehicles_are_listed_in_their_colours_and_one_is_selected(page, station)
     for sysid in (FLYER, IDLE):
         item = page.locator(f'#fleet-list .fleet-item[data-sysid="{sysid}"]')
         expect(item).to_contain_text(f"{sysid} copter")
+        expect(item.locator(".fleet-mode")).to_have_text(re.compile(r"^[A-Z_]+ · mission (running|waiting)"))
         dot = item.locator(".swatch-dot")
         assert dot.evaluate("d => getComputedStyle(d).backgroundColor") == rgb(vehicles[sysid]["colour"])
         card = page.locator(f'.vehicle-card[data-sysid="{sysid}"]')
