@@ -675,7 +675,42 @@ function render(msg) {
   renderVehicles(vehicles);
   renderTargetVehicles(vehicles);
   if (modeChanged) loadRecordings();
+  else if (Array.isArray(msg.recordings)) renderRecordings(msg.recordings);
   updateControls();
+  // The operator's view (operator.js, map2d.js, plots.js) draws from the same frames.
+  window.dispatchEvent(new CustomEvent("station-status", { detail: msg }));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The station's own health: a link down, a stalled link thread, a recording that fails, vehicles turned
+// away. Said at the top of the panel, since every number below may be stale or incomplete because of it.
+
+const HEALTH_PERIOD_MS = 5000;
+
+function healthProblems(health) {
+  const problems = [];
+  const link = health && health.link;
+  if (!link) return problems;
+  for (const port of link.links || []) {
+    if (!port.up) problems.push(`MAVLink ${port.url} is down${port.error ? `: ${port.error}` : ""}`);
+  }
+  if (link.thread !== "ok") problems.push("the MAVLink thread has stalled: nothing new is received");
+  if (link.recording_error) problems.push(`recording failed: ${link.recording_error}`);
+  const held = link.vehicles || {};
+  if (held.refused) problems.push(`${held.refused} new vehicles turned away: ${held.held} held, the most allowed`);
+  for (const refused of (link.signing && link.signing.refused) || []) {
+    problems.push(`system ${refused.sysid}: ${refused.messages} messages dropped, not signed with the key`);
+  }
+  return problems;
+}
+
+async function checkHealth() {
+  const { status, data } = await api("GET", "/api/health");
+  const banner = $("#health-banner");
+  const problems = status === 200 ? healthProblems(data) : [];
+  banner.hidden = problems.length === 0;
+  banner.replaceChildren(...problems.map((text) => el("li", "", text)));
+  banner.dataset.checked = String(status);  // when it last looked, and what the station answered
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -792,8 +827,7 @@ function recordingItem(rec) {
   li.dataset.name = name;
   const info = el("div", "recording-info");
   info.append(el("span", "recording-name", name));
-  const meta = [formatDuration(rec.duration_s), formatSize(rec.size), formatModified(rec.modified)].filter(Boolean);
-  info.append(el("span", "recording-meta", meta.join(" · ")));
+  info.append(el("span", "recording-meta", recordingMeta(rec)));
 
   const actions = el("div", "recording-actions");
   const replay = el("button", "btn btn-small replay-button", "Replay");
@@ -814,12 +848,39 @@ async function loadRecordings() {
   const { status, data, error } = await api("GET", "/api/recordings");
   if (status !== 200 || !Array.isArray(data)) {
     list.replaceChildren(el("li", "empty", `Could not load recordings (${status ? `HTTP ${status}` : error})`));
-  } else if (!data.length) {
-    list.replaceChildren(el("li", "empty", "No recordings yet"));
+    delete list.dataset.key;
   } else {
-    list.replaceChildren(...data.filter((r) => r && r.name != null).map(recordingItem));
+    renderRecordings(data);
   }
   updateControls();
+}
+
+/** The recordings list, from GET /api/recordings or the stream (which lists them live: sizes and durations
+ * grow, new sessions appear); rebuilt only when something changed. */
+function renderRecordings(data) {
+  const list = $("#recordings-list");
+  const recordings = data.filter((r) => r && r.name != null);
+  const key = JSON.stringify(recordings.map((r) => [r.name, r.size, r.duration_s, r.recording]));
+  if (list.dataset.key === key) return;
+  list.dataset.key = key;
+  if (!recordings.length) {
+    list.replaceChildren(el("li", "empty", "No recordings yet"));
+  } else {
+    // Items are kept (only their sizes and durations change), so a click on Replay is never lost to a rebuild.
+    const old = new Map(Array.from(list.querySelectorAll("li.recording"), (li) => [li.dataset.name, li]));
+    list.replaceChildren(...recordings.map((rec) => {
+      const li = old.get(String(rec.name)) || recordingItem(rec);
+      setText(li.querySelector(".recording-meta"), recordingMeta(rec));
+      li.classList.toggle("is-recording", Boolean(rec.recording));
+      return li;
+    }));
+  }
+  updateControls();
+}
+
+function recordingMeta(rec) {
+  const meta = [formatDuration(rec.duration_s), formatSize(rec.size), formatModified(rec.modified)].filter(Boolean);
+  return (rec.recording ? "recording · " : "") + meta.join(" · ");
 }
 
 function replayControl(label, body) {
@@ -889,6 +950,7 @@ function setupPanel() {
 // ---------------------------------------------------------------------------------------------
 
 async function main() {
+  window.stationApi = api;  // for the operator's view's scripts (seeking from a plot needs the token)
   setupPanel();
   setupTarget();
   setupReplay();
@@ -899,6 +961,8 @@ async function main() {
   setupAuth();
   connect();
   loadRecordings();
+  checkHealth();
+  setInterval(checkHealth, HEALTH_PERIOD_MS);
 }
 
 main();

@@ -10,6 +10,7 @@ through the 3D view, a socket to a foreign server) run in headless Chromium.
 from __future__ import annotations
 
 import json
+import re
 import socket
 import time
 from pathlib import Path
@@ -419,3 +420,38 @@ def test_the_page_asks_a_token_to_watch_and_a_viewer_token_only_watches(guarded,
         expect(page.locator("#auth-status")).to_have_text("Signed in")
     finally:
         context.close()
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_the_page_says_when_a_link_is_down(browser):
+    from playwright.sync_api import expect
+
+    closed = socket.socket()
+    closed.bind(("127.0.0.1", 0))  # a port nothing listens on
+    port = closed.getsockname()[1]
+    with RunningStation(None, None, urls=[f"tcp:127.0.0.1:{port}"]) as running:
+        page = browser.new_page()
+        try:
+            page.goto(running.base + "/")
+            banner = page.locator("#health-banner")
+            expect(banner).to_be_visible(timeout=15_000)
+            expect(banner.locator("li").first).to_have_text(re.compile(rf"^MAVLink tcp:127\.0\.0\.1:{port} is down"))
+        finally:
+            page.close()
+    closed.close()
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_a_healthy_station_shows_no_health_banner(station, browser):
+    from playwright.sync_api import expect
+
+    page = browser.new_page()
+    try:
+        page.goto(station.base + "/")
+        expect(page.locator("#health-banner")).to_have_attribute("data-checked", "200")  # it has looked
+        assert page.locator("#health-banner").is_hidden()
+        assert station.http.get("/api/health").json()["status"] == "ok"
+    finally:
+        page.close()

@@ -24,7 +24,7 @@ import pytest
 import viser
 import websockets.sync.client
 import zstandard
-from harness import CHROMIUM, RunningStation, launch_chromium, load_default_scene, start_sim, wait_wall
+from harness import CHROMIUM, RunningStation, WaitTimeout, launch_chromium, load_default_scene, start_sim, wait_wall
 from PIL import Image
 
 from groundstation.recorder import Recorder
@@ -296,6 +296,8 @@ def test_an_export_plays_offline_in_chromium_and_draws_the_scene(exported, tmp_p
             page = context.new_page()
             errors: list[str] = []
             page.on("pageerror", lambda error: errors.append(str(error)))
+            console: list[str] = []
+            page.on("console", lambda message: console.append(f"{message.type}: {message.text}"))
             requests: list[str] = []
             page.on("request", lambda request: requests.append(request.url))
             page.goto(exported.as_uri())
@@ -308,8 +310,13 @@ def test_an_export_plays_offline_in_chromium_and_draws_the_scene(exported, tmp_p
                 return shots[-1][0] > 100 and shots[-1][1] < 0.5
 
             # a page error ends the wait at once, to be reported below
-            wait_wall(lambda: errors or drawn(), 90, "the exported page draws the scene",
-                      sleep=lambda: page.wait_for_timeout(500))
+            try:
+                wait_wall(lambda: errors or drawn(), 90, "the exported page draws the scene",
+                          sleep=lambda: page.wait_for_timeout(500))
+            except WaitTimeout:
+                opacity = page.evaluate("[...document.querySelectorAll('canvas')].map(c => c.style.opacity)")
+                raise WaitTimeout(f"not drawn: last {shots[-3:]}, canvas opacity {opacity}, "
+                                  f"console {console[-10:]}") from None
         finally:
             browser.close()
     assert not errors, errors
