@@ -50,7 +50,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "out" / "mutants"
 EQUIVALENT = ROOT / "scripts" / "equivalent-mutants.md"  # surviving mutants shown to be equivalent, with why
-COPIED = ["vehicle", "groundstation", "tests", "static", "scenes", "pyproject.toml"]
+COPIED = ["vehicle", "groundstation", "tests", "static", "scenes", "pyproject.toml", "README.md"]
 NUMBA_DECORATOR = re.compile(r"^\s*@numba\.n?jit\b.*$")
 KILLED = {"killed", "timeout", "caught by type check", "segfault"}
 
@@ -193,7 +193,7 @@ def prepare(module: Module, python: str) -> Path:
         path.write_text(text)
     settings = {
         "source_paths": ["vehicle", "groundstation"],
-        "also_copy": ["static", "scenes"],  # the page's files and the bundled scenes, which the station serves
+        "also_copy": ["static", "scenes", "README.md"],  # served or read by the tests
         "only_mutate": module.files,
         "pytest_add_cli_args": ["-p", "no:cacheprovider", "-q", "-p", "no:randomly"],
         "pytest_add_cli_args_test_selection": module.tests,
