@@ -44,7 +44,8 @@ const RESULT_CLASS = {
 
 const state = {
   token: "",
-  auth: "none",          // none | checking | valid | invalid | unverified
+  auth: "none",          // none | checking | valid | viewer | invalid | unverified
+  watchRefused: false,   // watching needs a token this page has not given yet
   mode: "live",          // live | replay, as the server last said
   vehicles: [],          // last vehicle list from the stream (kept while reconnecting)
   replay: null,          // last replay status from the stream
@@ -222,7 +223,11 @@ async function checkToken(token, quiet = false) {
   if (state.token !== token) return;  // signed out or replaced meanwhile
   if (status === 200) {
     storeToken(token);
+    await openSession();
     if (state.auth !== "valid") setAuth("valid");
+  } else if ((status === 401 || status === 403) && await openSession() && state.token === token) {
+    storeToken(token);  // not the operator's, but a viewer's: it may watch
+    if (state.auth !== "viewer") setAuth("viewer");
   } else if (status === 401 || status === 403) {
     storeToken("");
     state.token = "";
@@ -232,6 +237,34 @@ async function checkToken(token, quiet = false) {
     storeToken(token);
     setAuth("unverified");
   }
+}
+
+/**
+ * Trade the token for the cookie that lets this browser watch (the 3D view and the stream cannot send
+ * a header). Only a station served beyond loopback asks for it; elsewhere it is harmless. When watching
+ * was refused before, the view and the stream start again now.
+ */
+async function openSession() {
+  const { status } = await api("POST", "/api/session");
+  if (status !== 204) return false;
+  if (state.watchRefused) {
+    state.watchRefused = false;
+    $("#watch-hint").hidden = true;
+    setupView();
+    reconnectNow();
+    loadRecordings();
+  }
+  return true;
+}
+
+/** The stream was refused before it opened: does this station need a token to watch? */
+async function checkWatching() {
+  const { status } = await api("GET", "/api/health");
+  const refused = status === 401;
+  if (refused && !state.watchRefused) $("#view").removeAttribute("src");
+  state.watchRefused = refused;
+  $("#watch-hint").hidden = !refused;
+  return refused;
 }
 
 function markTokenRejected() {
@@ -249,12 +282,13 @@ function setAuth(auth, message) {
     none: "Not signed in",
     checking: "Checking token…",
     valid: "Signed in",
+    viewer: "Watching (the viewer token cannot command)",
     invalid: "Wrong token",
     unverified: "Cannot check the token: server unreachable. Retrying when connected.",
   };
   status.textContent = message || messages[auth];
   status.className = `auth-status ${auth}`;
-  const signedIn = auth === "valid";
+  const signedIn = auth === "valid" || auth === "viewer";
   $("#auth-form").hidden = signedIn;
   $("#sign-out").hidden = auth === "none" || auth === "invalid";
   updateControls();
@@ -512,11 +546,20 @@ function renderCard(card, v) {
   const link = v.link || {};
   const lost = link.state === "lost";
   const age = isNum(link.heartbeat_age) ? `${fmt(link.heartbeat_age)} s` : "–";
-  setText(card.querySelector(".link"), lost ? "LINK LOST" : link.state ? `link ${link.state} · ${age}` : "–");
+  const signed = link.signed ? " · signed" : "";
+  setText(card.querySelector(".link"), lost ? "LINK LOST" : link.state ? `link ${link.state} · ${age}${signed}` : "–");
   card.classList.toggle("lost", lost);
   const banner = card.querySelector(".lost-banner");
   banner.hidden = !lost;
   setText(banner, lost ? `LINK LOST — no heartbeat for ${age}` : "");
+  card.querySelector(".link").title = link.signed ? "its messages carry a valid MAVLink 2 signature" : "";
+
+  // Another ground station commanding the same vehicle: the operator must know orders may not be theirs.
+  const other = v.other_gcs;
+  const otherBanner = card.querySelector(".other-gcs-banner");
+  otherBanner.hidden = !other;
+  setText(otherBanner, other ? `Another ground station (system ${other.sysid}) is commanding this vehicle: ` +
+    `${other.last}, ${fmt(other.age)} s ago` : "");
 
   setText(card.querySelector(".progress-item"), progressText(v.mission));
   setText(card.querySelector(".progress-status"), v.status ? String(v.status) : "");
@@ -636,12 +679,53 @@ function render(msg) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// The station's own health: a link down, a stalled link thread, a recording that fails, vehicles turned
+// away. Said at the top of the panel, since every number below may be stale or incomplete because of it.
+
+const HEALTH_PERIOD_MS = 5000;
+
+function healthProblems(health) {
+  const problems = [];
+  const link = health && health.link;
+  if (!link) return problems;
+  for (const port of link.links || []) {
+    if (!port.up) problems.push(`MAVLink ${port.url} is down${port.error ? `: ${port.error}` : ""}`);
+  }
+  if (link.thread !== "ok") problems.push("the MAVLink thread has stalled: nothing new is received");
+  if (link.recording_error) problems.push(`recording failed: ${link.recording_error}`);
+  const held = link.vehicles || {};
+  if (held.refused) problems.push(`${held.refused} new vehicles turned away: ${held.held} held, the most allowed`);
+  for (const refused of (link.signing && link.signing.refused) || []) {
+    problems.push(`system ${refused.sysid}: ${refused.messages} messages dropped, not signed with the key`);
+  }
+  return problems;
+}
+
+async function checkHealth() {
+  const { status, data } = await api("GET", "/api/health");
+  const banner = $("#health-banner");
+  const problems = status === 200 ? healthProblems(data) : [];
+  banner.hidden = problems.length === 0;
+  banner.replaceChildren(...problems.map((text) => el("li", "", text)));
+  banner.dataset.checked = String(status);  // when it last looked, and what the station answered
+}
+
+// ---------------------------------------------------------------------------------------------
 // WebSocket
 
 const viewerId = makeViewerId();
 let socket = null;
 let retryDelay = 500;
 let everConnected = false;
+let retryTimer = null;
+
+/** Connect again at once (the page was just given what it lacked), not after the backoff. */
+function reconnectNow() {
+  retryDelay = 500;
+  clearTimeout(retryTimer);
+  if (socket && socket.readyState <= WebSocket.OPEN) socket.close();  // its close handler reconnects
+  else connect();
+}
 
 function setConnection(kind, text) {
   $("#connection").className = `connection ${kind}`;
@@ -668,7 +752,9 @@ function onMessage(event) {
 function connect() {
   const proto = location.protocol === "https:" ? "wss:" : "ws:";
   socket = new WebSocket(`${proto}//${location.host}/ws?viewer=${encodeURIComponent(viewerId)}`);
+  let opened = false;
   socket.addEventListener("open", () => {
+    opened = true;
     retryDelay = 500;
     state.connected = true;
     setConnection("connected", "connected");
@@ -682,11 +768,15 @@ function connect() {
       viewerId, send: (request) => open.readyState === WebSocket.OPEN && open.send(JSON.stringify(request)) } }));
   });
   socket.addEventListener("message", onMessage);
-  socket.addEventListener("close", () => {
+  const mine = socket;
+  socket.addEventListener("close", async () => {
     state.connected = false;
-    setConnection("reconnecting", "reconnecting… showing the last known state");
+    const refused = !opened && await checkWatching();
+    if (socket !== mine) return;  // reconnected meanwhile
+    setConnection("reconnecting", refused ? "this station needs a token to watch: sign in"
+      : "reconnecting… showing the last known state");
     // Exponential backoff with jitter, so many pages do not hammer a restarting server together.
-    setTimeout(connect, retryDelay * (0.8 + Math.random() * 0.4));
+    retryTimer = setTimeout(connect, retryDelay * (0.8 + Math.random() * 0.4));
     retryDelay = Math.min(retryDelay * 2, 10000);
   });
   // "error" is always followed by "close", which schedules the retry.
@@ -838,17 +928,19 @@ function setupPanel() {
 
 // ---------------------------------------------------------------------------------------------
 
-function main() {
+async function main() {
   setupPanel();
-  setupView();
-  setupAuth();
   setupTarget();
   setupReplay();
   renderTarget(null);
   renderVehicles([]);
   setConnection("connecting", "connecting…");
+  if (!await checkWatching()) setupView();  // else once a token opens a session
+  setupAuth();
   connect();
   loadRecordings();
+  checkHealth();
+  setInterval(checkHealth, HEALTH_PERIOD_MS);
 }
 
 main();

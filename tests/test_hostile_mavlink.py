@@ -16,6 +16,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import socket
 import struct
 import threading
@@ -23,16 +24,19 @@ import time
 import tracemalloc
 import zlib
 from collections import Counter
+from pathlib import Path
 from unittest import mock
 
 import pytest
 from harness import (
+    CHROMIUM,
     HEARTBEAT_WAIT,
     SPEEDUP,
     RunningSim,
     RunningStation,
     command_ok,
     free_udp_port,
+    launch_chromium,
     make_vehicle,
     small_scene,
     start_sim,
@@ -518,6 +522,37 @@ def test_the_station_shows_when_another_ground_station_commands_its_vehicle(scen
         shown = api.wait_vehicle(1, lambda v: v["mode"] == "BRAKE", sim_timeout=HEARTBEAT_WAIT, what="BRAKE")
         assert shown["other_gcs"] == {"sysid": 254, "last": "mode BRAKE, not ordered by this station",
                                       "age": mock.ANY}
+    other.close()
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="needs Debian's chromium at /usr/bin/chromium")
+@pytest.mark.browser
+def test_the_page_shows_another_ground_station_and_a_signed_link(scene, tmp_path):
+    from playwright.sync_api import expect, sync_playwright
+
+    other_port = free_udp_port()
+    other = Gcs(f"udpin:127.0.0.1:{other_port}", sysid=254, speedup=SPEEDUP)
+    other.conn.setup_signing(KEY, sign_outgoing=True)  # the other station has the key too
+    with RunningStation(scene, tmp_path, signing_key=KEY) as station, \
+            RunningSim(make_vehicle(scene), [station.vehicle_url(), f"udpout:127.0.0.1:{other_port}"],
+                       signing_key=KEY), sync_playwright() as playwright:
+        station.http.wait_vehicle(1, lambda v: v["link"]["signed"], what="the signed vehicle")
+        browser = launch_chromium(playwright)
+        try:
+            page = browser.new_page()
+            page.goto(station.base + "/")
+            card = page.locator(".vehicle-card[data-sysid='1']")
+            expect(card.locator(".link")).to_have_text(re.compile(r"^link ok · .* · signed$"))
+            banner = card.locator(".other-gcs-banner")
+            expect(banner).to_be_hidden()
+            other.wait("HEARTBEAT")
+            assert other.set_mode(5) == mavlink.MAV_RESULT_ACCEPTED  # LOITER, by station 254
+            expect(banner).to_have_text(re.compile(
+                r"^Another ground station \(system 254\) is commanding this vehicle: "
+                r"COMMAND_ACK MAV_CMD_DO_SET_MODE accepted, [\d.]+ s ago$"), timeout=15_000)
+            expect(banner).to_be_visible()
+        finally:
+            browser.close()
     other.close()
 
 

@@ -10,6 +10,7 @@ through the 3D view, a socket to a foreign server) run in headless Chromium.
 from __future__ import annotations
 
 import json
+import re
 import socket
 import time
 from pathlib import Path
@@ -388,3 +389,67 @@ def test_the_api_page_needs_nothing_from_the_internet(station, browser):
     finally:
         page.close()
 
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_the_page_asks_a_token_to_watch_and_a_viewer_token_only_watches(guarded, browser):
+    from playwright.sync_api import expect
+
+    context = browser.new_context()  # a browser of its own: no cookie from before
+    page = context.new_page()
+    try:
+        page.goto(guarded.base + "/")
+        expect(page.locator("#watch-hint")).to_be_visible()
+        expect(page.locator("#connection-text")).to_have_text("this station needs a token to watch: sign in")
+        assert page.locator("#view").get_attribute("src") is None  # no 3D view to refuse
+
+        page.fill("#token", "viewer-token-1234")
+        page.click("#sign-in")
+        expect(page.locator("#auth-status")).to_have_text("Watching (the viewer token cannot command)")
+        expect(page.locator("#watch-hint")).to_be_hidden()
+        expect(page.locator("#connection-text")).to_have_text("connected", timeout=15_000)
+        assert page.locator("#view").get_attribute("src").startswith("/viz/v/")
+        view = page.frame_locator("#view")
+        expect(view.locator("canvas").first).to_be_attached(timeout=30_000)  # viser's page, not a 401
+        expect(page.locator("#go-here")).to_be_disabled()
+
+        page.click("#sign-out")
+        page.fill("#token", TOKEN)
+        page.click("#sign-in")
+        expect(page.locator("#auth-status")).to_have_text("Signed in")
+    finally:
+        context.close()
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_the_page_says_when_a_link_is_down(browser):
+    from playwright.sync_api import expect
+
+    closed = socket.socket()
+    closed.bind(("127.0.0.1", 0))  # a port nothing listens on
+    port = closed.getsockname()[1]
+    with RunningStation(None, None, urls=[f"tcp:127.0.0.1:{port}"]) as running:
+        page = browser.new_page()
+        try:
+            page.goto(running.base + "/")
+            banner = page.locator("#health-banner")
+            expect(banner).to_be_visible(timeout=15_000)
+            expect(banner.locator("li").first).to_have_text(re.compile(rf"^MAVLink tcp:127\.0\.0\.1:{port} is down"))
+        finally:
+            page.close()
+    closed.close()
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_a_healthy_station_shows_no_health_banner(station, browser):
+    page = browser.new_page()
+    try:
+        page.goto(station.base + "/")
+        page.wait_for_function("document.querySelector('#health-banner').dataset.checked === '200'")
+        assert page.locator("#health-banner").is_hidden()
+        assert station.http.get("/api/health").json()["status"] == "ok"
+    finally:
+        page.close()

@@ -307,7 +307,9 @@ def test_an_export_plays_offline_in_chromium_and_draws_the_scene(exported, tmp_p
                 (tmp_path / "export.png").write_bytes(png)
                 return shots[-1][0] > 100 and shots[-1][1] < 0.5
 
-            wait_wall(drawn, 90, "the exported page draws the scene", sleep=lambda: page.wait_for_timeout(500))
+            # a page error ends the wait at once, to be reported below
+            wait_wall(lambda: errors or drawn(), 90, "the exported page draws the scene",
+                      sleep=lambda: page.wait_for_timeout(500))
         finally:
             browser.close()
     assert not errors, errors
