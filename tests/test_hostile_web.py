@@ -448,7 +448,11 @@ def test_a_healthy_station_shows_no_health_banner(station, browser):
     page = browser.new_page()
     try:
         page.goto(station.base + "/")
-        page.wait_for_function("document.querySelector('#health-banner').dataset.checked === '200'")
+        from playwright.sync_api import expect
+
+        # (not wait_for_function with a string: after its first try it polls with eval, which the page's
+        # policy refuses, so it fails whenever the page has not looked yet)
+        expect(page.locator("#health-banner")).to_have_attribute("data-checked", "200", timeout=20_000)
         assert page.locator("#health-banner").is_hidden()
         assert station.http.get("/api/health").json()["status"] == "ok"
     finally:
