@@ -10,7 +10,3 @@ def colour(sysid: int) -> tuple[int, int, int]:
     """The same sysid always gets the same colour, however many vehicles come and go."""
     return PALETTE[(int(sysid) - 1) % len(PALETTE)]
 
-
-def css(sysid: int) -> str:
-    red, green, blue = colour(sysid)
-    return f"#{red:02x}{green:02x}{blue:02x}"

@@ -104,7 +104,10 @@ class View:
 
     def open(self) -> View:
         self.page.goto(self.station.base + "/")
-        self.viewer = self.page.evaluate("new URL(document.querySelector('#view').src).pathname.split('/')[3]")
+        # the page sets its view's address once it knows it may watch: /viz/v/VIEWER/
+        source = self.poll(lambda: self.page.evaluate("document.querySelector('#view').getAttribute('src')"), 30,
+                           "the page opens its 3D view")
+        self.viewer = source.strip("/").split("/")[2]
         self.poll(lambda: self.client_id is not None, 60, "the station ties the view's viser client to the page")
         return self
 
@@ -141,7 +144,7 @@ class View:
     def shot(self, path: Path | None = None) -> Image.Image | None:
         """A screenshot of the 3D view (a clip: an element screenshot waits for stillness that never comes)."""
         try:
-            png = self.page.screenshot(clip=self.page.locator("#view").bounding_box(), timeout=15_000)
+            png = self.page.screenshot(clip=self.page.locator("#view").bounding_box(), timeout=30_000)
         except PlaywrightTimeout:
             return None
         if path is not None:
@@ -244,7 +247,7 @@ def test_every_vehicle_is_seen_at_the_default_view(view, station):
         # colour; the bare body at this distance, a dozen
         return min(seen[-1]) >= MARKER_PIXELS * 5
     try:
-        one.poll(both_seen, 90, "both vehicles drawn large enough to see, in their colours")
+        one.poll(both_seen, 150, "both vehicles drawn large enough to see, in their colours")
     except AssertionError as error:
         raise AssertionError(f"{error}; (blue, orange) pixels seen: {seen[-8:]}") from None
 
@@ -280,11 +283,11 @@ def test_follow_mode_chases_the_selected_vehicle_in_this_viewer_only(view, stati
         centred.append((count, round(float(across), 2)))
         return count > 600 and abs(across) < 0.15
     try:
-        one.poll(lambda: on_screen(GROUNDED, "view3d-follow-1.png"), 60, "vehicle 1 big in the middle of the view")
+        one.poll(lambda: on_screen(GROUNDED, "view3d-follow-1.png"), 150, "vehicle 1 big in the middle of the view")
         choose(one, HOVERING)  # the panel's selection: the camera goes after vehicle 2
         expect(one.page.locator("#view3d-vehicle")).to_have_text(f"camera on vehicle {HOVERING}")
         one.poll(lambda: following(HOVERING), 30, "the camera chases vehicle 2")
-        one.poll(lambda: on_screen(HOVERING, "view3d-follow.png"), 60, "vehicle 2 big in the middle of the view")
+        one.poll(lambda: on_screen(HOVERING, "view3d-follow.png"), 150, "vehicle 2 big in the middle of the view")
     except AssertionError as error:
         raise AssertionError(f"{error}; (pixels, centroid) seen: {centred[-6:]}") from None
 
@@ -384,11 +387,11 @@ def test_layers_and_map_opacity_are_each_viewers_own(view, station):
             return False
         shares.append(spread(image))
         return shares[-1] < 0.5 if shown else shares[-1] > 0.6
-    one.poll(lambda: scene_shown(True), 90, "the scene drawn")
+    one.poll(lambda: scene_shown(True), 150, "the scene drawn")
     page.locator('#view3d input[data-layer="scene"]').uncheck(timeout=90_000)
     one.poll(lambda: one.visibility("/layers/scene") is False, 30, "the scene layer hidden")
     try:
-        one.poll(lambda: scene_shown(False), 90, "the view without the scene")
+        one.poll(lambda: scene_shown(False), 150, "the view without the scene")
     except AssertionError as error:
         raise AssertionError(f"{error}; share of the commonest colour: {shares[-6:]}") from None
 
