@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from fastapi import Depends, FastAPI, Header, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi import Path as FastPath
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import (
     FileResponse,
@@ -35,6 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from groundstation.commands import Command, execute, outside_space
 from groundstation.link import LinkError
+from groundstation.mapview import legend, trails
 from groundstation.proxy import VIEWER_ID
 from groundstation.replay import ReplayError
 from groundstation.security import SESSION_COOKIE, BodyTooLarge, Gate
@@ -68,6 +70,7 @@ class ReplayControl(BaseModel):
     step: Literal[-1, 1] | None = None
 
 
+MAX_HISTORY = 3000  # samples per vehicle in a history or timeline answer
 STREAM_PERIOD = 0.25  # s between status frames on /ws
 MAX_STREAMS = 256  # /ws connections at once
 DOCS_ASSETS = "/docs/assets"
@@ -187,6 +190,63 @@ def create_app(station: GroundStation) -> FastAPI:
                     "window": {"row": r0, "col": c0, "rows": r1 - r0, "cols": c1 - c0},
                     "values": values[r0:r1, c0:c1].tolist()}
         return Response(station.map_picture(v, grid), media_type="image/png")
+
+    # ---- plots, the timeline and the 2D map -------------------------------------------------------------
+    @app.get("/api/vehicles/{sysid}/history", tags=["vehicles"])
+    def vehicle_history(sysid: int, since: float | None = Query(None, ge=0, le=1e11, allow_inf_nan=False,
+                                                                 description="only samples and events after this "
+                                                                             "time (the station's clock, s)"),
+                        limit: int = Query(600, ge=1, le=MAX_HISTORY, description="samples at most (thinned)")):
+        """The vehicle's sampled telemetry (every numeric field, by name, with units) and its events (mode
+        changes, arming, commands and their ACKs, messages, the onboard agent's phases), oldest first."""
+        fleet = station.fleet
+        with fleet.lock:
+            if fleet.get(sysid) is None:
+                raise HTTPException(404, f"no vehicle with system id {sysid}")
+            return {"sysid": sysid, **fleet.history.of(sysid).as_json(since, limit)}
+
+    @app.get("/api/replay/timeline", tags=["replay"])
+    def replay_timeline(limit: int = Query(1500, ge=1, le=MAX_HISTORY, description="samples per vehicle at most"),
+                        sysid: int | None = Query(None, ge=1, le=255, description="only this vehicle's")):
+        """The replayed log's whole history, every vehicle's (or one's), on the log's clock (``start`` is replay
+        time 0): scanned in the background when the replay starts (``ready`` false meanwhile)."""
+        replay, timeline = station.replay, station.timeline
+        if replay is None or timeline is None:
+            raise HTTPException(409, "nothing is being replayed")
+        history = timeline.history
+        vehicles = {} if history is None else {str(key): {"sysid": key, **found.as_json(None, limit)}
+                                                for key, found in sorted(history.vehicles.items())
+                                                if sysid is None or key == sysid}
+        return {"ready": timeline.ready, "error": timeline.error, "start": replay.index.start,
+                "duration": replay.duration, "vehicles": vehicles}
+
+    @app.get("/api/map2d/scene", tags=["map"])
+    async def map2d_scene():
+        """The scene seen from above, as a PNG data URL with its bounds (scene metres: west, south, east,
+        north)."""
+        scene = station.view.scene
+        found = await asyncio.to_thread(station.pictures.scene, scene)
+        if found is None:
+            raise HTTPException(404, "no scene is shown")
+        return found
+
+    @app.get("/api/map2d/maps/{which}", tags=["map"])
+    async def map2d_map(which: str = FastPath(pattern=r"^(merged|[0-9]{1,3})$")):
+        """A memory map (a vehicle's system id, or ``merged``: every vehicle's evidence summed cell by cell in
+        log-odds) as a PNG data URL of its explored part, with its bounds and the legend's colours."""
+        fleet = station.fleet
+        if which == "merged":
+            found = await asyncio.to_thread(station.pictures.merged, fleet)
+        else:
+            found = await asyncio.to_thread(station.pictures.vehicle, fleet, int(which))
+        if found is None:
+            raise HTTPException(404, "no such map yet")
+        return {**found, "legend": legend()}
+
+    @app.get("/api/map2d/trails", tags=["map"])
+    def map2d_trails():
+        """Each vehicle's trail (scene x, y; at most 1000 points each, evenly thinned)."""
+        return trails(station.fleet)
 
     @app.post("/api/vehicles/{sysid}/commands", tags=["commands"], dependencies=[Depends(operator)],
               responses={401: {"description": "no or wrong operator token"}, 404: {"description": "no such vehicle"},

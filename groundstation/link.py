@@ -235,7 +235,7 @@ class Link:
         """Send to where the vehicle was heard (to every link and peer if it is unknown or None)."""
         with self._lock:
             packet = pack(message, self.packer)
-        self.fleet.apply(message, time.time())  # the fleet tells this station's orders from another's
+        self.fleet.apply(message, time.time())  # this station's orders: not another's, and on the timeline
         if sysid in self.route:
             port, peer, _ = self.route[sysid]
             port.write(packet, peer)

@@ -181,15 +181,39 @@ class Replay:
         return self.index.start + self.clock
 
     # ---- decoding ---------------------------------------------------------------------------------
-    def decode(self, i: int):
-        """The message of record ``i`` (None if it does not decode)."""
+    def decode(self, i: int, decoder=None):
+        """The message of record ``i`` (None if it does not decode), by the replay's decoder or ``decoder``."""
         start = int(self.index.offsets[i])
         packet = self._data[start:start + int(self.index.lengths[i])]
         try:
-            message = self._decoder.decode(bytearray(packet))
+            message = (decoder or self._decoder).decode(bytearray(packet))
         except Exception:  # noqa: BLE001 - pymavlink raises many kinds on a damaged packet
             return None
         return message
+
+    def message(self, i: int, decoder):
+        """Record ``i`` decoded by ``decoder`` (another thread's: a pymavlink decoder keeps state, so the
+        player's is not shared), None if it is damaged."""
+        return self.decode(i, decoder)
+
+    @staticmethod
+    def decoder():
+        """A decoder of its own for a thread that reads the log besides the player."""
+        decoder = mavlink.MAVLink(None)
+        decoder.robust_parsing = True
+        return decoder
+
+    def chunk_header(self, i: int) -> tuple[int, int, int]:
+        """Snapshot id, chunk index and chunk count of a map snapshot chunk (record ``i``), undecoded."""
+        return self._chunk_header(i)
+
+    def sensor_id(self, i: int) -> int:
+        """The sensor id of a DISTANCE_SENSOR record, undecoded (its 12th payload byte; MAVLink 2 drops
+        trailing zero bytes, so a short payload means 0)."""
+        start = int(self.index.offsets[i])
+        v2 = self._data[start] == V2
+        length, body = self._data[start + 1], start + (10 if v2 else 6)
+        return self._data[body + 11] if length > 11 else 0
 
     def _apply(self, indices) -> None:
         for i in indices:

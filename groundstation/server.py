@@ -20,12 +20,14 @@ import uvicorn
 from groundstation.app import create_app
 from groundstation.export import export_html
 from groundstation.link import Link
+from groundstation.mapview import MapPictures
 from groundstation.proxy import VizProxy
 from groundstation.recorder import Recorder
 from groundstation.replay import Player, Replay, ReplayError, index_tlog
 from groundstation.replay_scene import find_scene, logged_scene
 from groundstation.security import Access, is_loopback
 from groundstation.state import Fleet, VehicleState
+from groundstation.timeline import Timeline
 from groundstation.views import ViewRequestError
 from groundstation.viz import SceneView
 from vehicle.mapping.picture import draw_map
@@ -36,6 +38,8 @@ from vehicle.protocol.waypoints import positions
 from vehicle.world.bundled import scenes_dir
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
+
+RECORDINGS_STREAMED = 200  # the newest recordings the status stream lists
 
 
 class GroundStation:
@@ -70,6 +74,9 @@ class GroundStation:
         self.view.on_target(self._target)
         self.view.viewer_of = self.proxy.viewers.get  # which page each viser client is
         self.replay: Replay | None = None  # set while a recording is replayed
+        self.timeline: Timeline | None = None  # the replayed log's whole history, scanned in the background
+        self.pictures = MapPictures()  # the 2D map's
+        self._recordings: tuple[float, list[dict]] = (-1e9, [])  # (when listed, the list) for the stream
         self._replay_world: tuple = (scene, self.datum, self.live.ground_height)  # its scene, datum, ground
         self._player: Player | None = None
         self._replay_lock = threading.Lock()
@@ -125,7 +132,15 @@ class GroundStation:
     def status(self) -> dict:
         replay = self.replay
         return {"type": "vehicles", "mode": self.mode, "time": self.now(), "vehicles": self.vehicles(),
-                "replay": replay.status() if replay is not None else None}
+                "replay": replay.status() if replay is not None else None, "recordings": self.recordings_now()}
+
+    def recordings_now(self, every: float = 1.0) -> list[dict]:
+        """The recordings as the stream shows them: listed again at most every ``every`` seconds."""
+        listed, found = self._recordings
+        if time.monotonic() - listed >= every:
+            found = self.recordings()[:RECORDINGS_STREAMED]
+            self._recordings = (time.monotonic(), found)
+        return found
 
     # ---- recordings and replay -----------------------------------------------------------------------
     def recordings(self) -> list[dict]:
@@ -176,6 +191,9 @@ class GroundStation:
             if self.view.scene is not chosen.scene:
                 self.view.set_scene(chosen.scene)
             self._player = Player(replay).start()
+            if self.timeline is not None:
+                self.timeline.cancel()
+            self.timeline = Timeline(replay)
             self.view.show(replay.fleet)
             replay.playing = True
             return replay
@@ -197,6 +215,9 @@ class GroundStation:
             self._stop_player()
             if self.replay is not None:
                 self.replay = None
+                if self.timeline is not None:
+                    self.timeline.cancel()
+                self.timeline = None
                 if self.view.scene is not self.scene:
                     self.view.set_scene(self.scene)
                 self.view.show(self.live)

@@ -9,7 +9,10 @@ with the same memory-map code the vehicle uses. An onboard agent on a companion
 computer (component 191 of the vehicle's system) is part of its vehicle: its
 map, path, state and messages show on the vehicle of the same system id.
 Positions are kept in the scene frame (metres east and north of the datum,
-height above the vehicle's home).
+height above the vehicle's home). As it goes the Fleet keeps each vehicle's
+history (``groundstation.history``): sampled telemetry and the events the
+page marks on its timeline, including the commands a ground station sent
+(the link hands its own messages in too, and a recording holds them).
 
 Anyone on a link can claim to be a vehicle, so the fleet holds at most
 ``MAX_VEHICLES`` (a new system id is refused, and counted, until one is
@@ -34,12 +37,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from groundstation.history import History
 from vehicle.mapping.memory_map import OCCUPIED_AT, MemoryMap
 from vehicle.protocol import agent_status
 from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mapstream import MapReceiver
 from vehicle.protocol.mav import mavlink, mavutil
+from vehicle.protocol.modes import FORCE_DISARM
 from vehicle.protocol.rangefinder import reading_from
 from vehicle.protocol.statustext import Reassembler
 
@@ -52,6 +57,13 @@ MESSAGES_KEPT = 50
 OWN_MAP_SPACE = 100.0  # m around home, for maps built from DISTANCE_SENSOR
 OWN_MAP_RESOLUTION = 5.0  # cells/m
 OWN_MAP_AFTER = 2.0  # s a vehicle is heard without a map stream or a companion before the station builds a map
+# one colour per vehicle, by system id, the same in the 3D view, the 2D map and the panel (distinct on a dark
+# background, and none of them the map's red or the path's yellow)
+COLOURS = [(64, 156, 255), (255, 140, 40), (80, 210, 110), (230, 90, 220), (70, 220, 225), (250, 110, 130),
+           (180, 150, 255), (200, 220, 60), (255, 190, 150), (150, 200, 255)]
+# commands a station sends on its own account (telemetry requests): not events worth marking
+QUIET_COMMANDS = {mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE}
+SEVERE = mavlink.MAV_SEVERITY_WARNING  # this severity or worse is shown as a banner on the page
 OWN_SYSID = 255  # this station's system id (the link's)
 ORDERED_WITHIN = 5.0  # s after this station's order (or the companion's) a mode change is taken as its doing
 # (a mode other than the one it named is not)
@@ -76,6 +88,14 @@ NOT_VEHICLES = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavli
                 mavlink.MAV_TYPE_ADSB, mavlink.MAV_TYPE_CAMERA, mavlink.MAV_TYPE_ANTENNA_TRACKER}
 
 
+def colour_of(sysid: int) -> tuple[int, int, int]:
+    return COLOURS[(sysid - 1) % len(COLOURS)]
+
+
+def hex_colour(rgb: tuple[int, int, int]) -> str:
+    return "#{:02x}{:02x}{:02x}".format(*rgb)
+
+
 @dataclass
 class Sonar:
     distance: float | None  # m, None: no echo
@@ -83,6 +103,8 @@ class Sonar:
     direction: tuple[float, float, float]
     max_range: float
     time: float
+    yaw_offset: float = 0.0  # degrees clockwise of the nose
+    beam: float = 0.0  # degrees, half-angle of the cone (0: not said)
 
 
 @dataclass
@@ -179,13 +201,19 @@ class Fleet:
     """Every vehicle heard, by system id. Thread-safe: the link writes, views read snapshots."""
 
     def __init__(self, datum: Datum | None = None, ground_height=None, forget_after: float | None = FORGET_AFTER,
-                 max_vehicles: int = MAX_VEHICLES, own_sysid: int = OWN_SYSID):
+                 max_vehicles: int = MAX_VEHICLES, own_sysid: int = OWN_SYSID, own_maps: bool = True,
+                 history: History | None = None):
+        """``own_maps``: build a map from DISTANCE_SENSOR for a vehicle that streams none (a replay's quick scan
+        of its whole log, which skips most readings, does not)."""
         self.datum = datum  # None: the first home heard becomes the scene origin
         self.ground_height = ground_height or (lambda x, y: 0.0)
+        self.own_maps = own_maps
         self.vehicles: dict[int, VehicleState] = {}
         self.lock = threading.RLock()
         self.version = 0
         self.texts = Reassembler()
+        self.history = history or History()
+        self._occupied: dict[int, tuple[tuple, int]] = {}  # sysid -> (map version, occupied cells)
         self.forget_after = forget_after  # None: never (a replayed log)
         self.max_vehicles = max_vehicles
         self.refused = 0  # heartbeats of new vehicles turned away while the fleet was full
@@ -199,6 +227,8 @@ class Fleet:
             self.vehicles.clear()
             self.stations.clear()
             self.texts = Reassembler()
+            self.history.clear()
+            self._occupied.clear()
             self.version += 1
 
     def get(self, sysid: int) -> VehicleState | None:
@@ -223,6 +253,9 @@ class Fleet:
             if kind == "HEARTBEAT" and message.type == mavlink.MAV_TYPE_GCS:
                 self._station_heard(sysid, now)
             vehicle = self.vehicles.get(sysid)
+            if vehicle is None and kind in ("COMMAND_LONG", "COMMAND_INT"):
+                self._command_sent(message, now)  # a ground station's (ours, or another's) to a vehicle
+                return
             if vehicle is None:
                 if kind != "HEARTBEAT" or message.type in NOT_VEHICLES or message.autopilot == \
                         mavlink.MAV_AUTOPILOT_INVALID:
@@ -238,6 +271,17 @@ class Fleet:
                 handler(vehicle, message, now)
                 vehicle.version += 1
                 self.version += 1
+            if self.history.due(sysid, now) and vehicle.last_heartbeat is not None:
+                self.history.sample(sysid, now, self._sample(vehicle))
+
+    def _sample(self, v: VehicleState) -> dict[str, float | None]:
+        """The vehicle's numbers as the history keeps them."""
+        values = {"altitude": v.alt, "speed": v.speed, "climb": v.climb, "heading": math.degrees(v.yaw) % 360,
+                  "roll": math.degrees(v.roll), "pitch": math.degrees(v.pitch), "battery voltage": v.voltage,
+                  "battery remaining": v.remaining, "battery current": v.current, "occupied cells": self.occupied(v)}
+        for ident, sonar in sorted(v.sonar.items()):
+            values[f"sonar {ident}"] = sonar.distance
+        return values
 
     def _forget_silent(self, now: float) -> None:
         """Drop the vehicles not heard for ``forget_after`` seconds (never while a log replays)."""
@@ -254,11 +298,14 @@ class Fleet:
 
     # ---- ground stations -------------------------------------------------------------------------
     def _ours(self, message, now: float) -> None:
-        """A message this station sent: an order that may change a vehicle's mode is ours, not another's."""
+        """A message this station sent: an order that may change a vehicle's mode is ours, not another's; a
+        command is an event on the vehicle's timeline."""
         kind = message.get_type()
         vehicle = self.vehicles.get(getattr(message, "target_system", 0))
         if vehicle is None:
             return
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
+            self._command_sent(message, now)
         if kind == "SET_MODE":
             vehicle.ordered = (now, message.custom_mode)
         elif kind in ("COMMAND_LONG", "COMMAND_INT") and message.command in MODE_ORDERS:
@@ -272,6 +319,9 @@ class Fleet:
             self.stations.popitem(last=False)
 
     def _command_ack(self, vehicle, m, now) -> None:
+        if m.command not in QUIET_COMMANDS:
+            result = RESULTS.get(m.result, f"result {m.result}")
+            self.history.event(vehicle.sysid, now, "ack", f"{_command_name(m.command)}: {result}")
         target = getattr(m, "target_system", 0)
         if target == vehicle.sysid:  # the companion's order
             vehicle.ordered = (now, None)
@@ -310,8 +360,17 @@ class Fleet:
         vehicle.mav_type = m.type
         vehicle.autopilot = m.autopilot
         vehicle.custom_mode = m.custom_mode
-        vehicle.armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-        vehicle.mode = mavutil.mode_string_v10(m)
+        armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        mode = mavutil.mode_string_v10(m)
+        if vehicle.last_heartbeat is None:
+            self.history.event(vehicle.sysid, now, "mode", f"first heard: {mode}{', armed' if armed else ''}")
+        else:
+            if mode != vehicle.mode:
+                self.history.event(vehicle.sysid, now, "mode", f"mode {vehicle.mode} → {mode}")
+            if armed != vehicle.armed:
+                self.history.event(vehicle.sysid, now, "armed", "armed" if armed else "disarmed")
+        vehicle.armed = armed
+        vehicle.mode = mode
         if changed:
             self._mode_changed(vehicle, vehicle.mode, now)
         vehicle.mavlink_version = 2 if m.get_msgbuf()[:1] == b"\xfd" else 1
@@ -389,6 +448,15 @@ class Fleet:
         for severity, text in self.texts.feed(m, now):  # whole texts, put together from their chunks
             vehicle.status = text
             vehicle.messages.append({"time": now, "severity": severity, "text": text})
+            self.history.event(vehicle.sysid, now, "message", text, severity)
+
+    def _command_sent(self, m, now: float) -> None:
+        """A command from a ground station to a vehicle we know: an event on the vehicle's timeline (a retry,
+        with its confirmation count up, is the same command)."""
+        vehicle = self.vehicles.get(m.target_system)
+        if vehicle is None or m.command in QUIET_COMMANDS or getattr(m, "confirmation", 0):
+            return
+        self.history.event(vehicle.sysid, now, "command", f"sent {_command_text(vehicle, m)}")
 
     def _mission_current(self, vehicle, m, now) -> None:
         vehicle.mission_current = m.seq
@@ -401,7 +469,10 @@ class Fleet:
     def _tunnel(self, vehicle, m, now) -> None:
         payload = bytes(m.payload[:m.payload_length])
         if m.payload_type == agent_status.AGENT_STATUS:
-            vehicle.agent = agent_status.decode(payload) or vehicle.agent
+            status = agent_status.decode(payload)
+            if status is not None and status != vehicle.agent:
+                self.history.event(vehicle.sysid, now, "agent", _agent_text(status))
+            vehicle.agent = status or vehicle.agent
         else:
             vehicle.map_stream.feed(m.payload_type, payload)
 
@@ -414,10 +485,10 @@ class Fleet:
         if reading is None:
             return
         vehicle.sonar[m.id] = Sonar(reading.distance, pose.xyz(), tuple(reading.direction.tolist()),
-                                    reading.max_range, now)
+                                    reading.max_range, now, reading.yaw_offset, reading.beam_angle)
         if reading.distance is not None:
             vehicle.hits.append(tuple(reading.hit.tolist()))
-        if vehicle.streams_map or vehicle.home is None:
+        if vehicle.streams_map or vehicle.home is None or not self.own_maps:
             vehicle.unmapped.clear()
             return
         vehicle.unmapped.append(reading)
@@ -438,7 +509,8 @@ class Fleet:
             position = {"lat": _round(v.lat, 7), "lon": _round(v.lon, 7), "alt": _round(v.alt), "x": _round(v.x),
                         "y": _round(v.y), "z": _round(self.height(v))}
         return {
-            "sysid": v.sysid, "type": v.kind, "mode": v.mode, "armed": v.armed, "position": position,
+            "sysid": v.sysid, "type": v.kind, "colour": hex_colour(colour_of(v.sysid)), "mode": v.mode,
+            "armed": v.armed, "position": position,
             "attitude": {"roll": _round(math.degrees(v.roll)), "pitch": _round(math.degrees(v.pitch)),
                          "yaw": _round(math.degrees(v.yaw))},
             "heading": _round(math.degrees(v.yaw) % 360), "speed": _round(v.speed), "climb": _round(v.climb),
@@ -456,14 +528,30 @@ class Fleet:
             "messages": list(v.messages)[-20:],
             "map": {"occupied": self.occupied(v), "source": v.map_source},
             "path": [[_round(x), _round(y)] for x, y in v.planned_path()],
+            "waypoints": [[_round(x), _round(y)] for x, y in v.waypoints[:MAX_WAYPOINTS_SHOWN]],
+            "sonar": [{"id": ident, "distance": _round(s.distance), "max_range": _round(s.max_range),
+                       "bearing": _round(s.yaw_offset % 360, 1), "beam": _round(s.beam, 1),
+                       "age": _round(max(0.0, now - s.time))} for ident, s in sorted(v.sonar.items())],
             "other_gcs": None if v.other_gcs is None else {"sysid": v.other_gcs[0], "last": v.other_gcs[1],
                                                            "age": _round(now - v.other_gcs[2], 1)},
         }
 
     @staticmethod
-    def occupied(v: VehicleState) -> int | None:
+    def map_version(v: VehicleState) -> tuple:
+        """Changes whenever the vehicle's map does."""
+        return v.map_source, v.map_stream.version, v.own_map.version if v.own_map is not None else 0
+
+    def occupied(self, v: VehicleState) -> int | None:
+        """Occupied cells of the vehicle's map (counted again only when the map changed: a 2000 x 2000 map
+        takes milliseconds, and every status frame and history sample asks)."""
         grid = v.map_grid()
-        return None if grid is None else int(np.count_nonzero(grid[0] >= OCCUPIED_AT))
+        if grid is None:
+            return None
+        version = self.map_version(v)
+        cached = self._occupied.get(v.sysid)
+        if cached is None or cached[0] != version:
+            cached = self._occupied[v.sysid] = (version, int(np.count_nonzero(grid[0] >= OCCUPIED_AT)))
+        return cached[1]
 
 
 def _round(value: float | None, digits: int = 2) -> float | None:
@@ -471,6 +559,35 @@ def _round(value: float | None, digits: int = 2) -> float | None:
     if value is None or not math.isfinite(value):
         return None
     return round(float(value), digits)
+
+
+MAX_WAYPOINTS_SHOWN = 500
+RESULTS = {
+    mavlink.MAV_RESULT_ACCEPTED: "accepted", mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily rejected",
+    mavlink.MAV_RESULT_DENIED: "denied", mavlink.MAV_RESULT_UNSUPPORTED: "unsupported",
+    mavlink.MAV_RESULT_FAILED: "failed", mavlink.MAV_RESULT_IN_PROGRESS: "in progress",
+}
+
+
+def _command_name(command: int) -> str:
+    entry = mavlink.enums["MAV_CMD"].get(command)
+    return entry.name.removeprefix("MAV_CMD_") if entry is not None else f"command {command}"
+
+
+def _command_text(vehicle: VehicleState, m) -> str:
+    """A command as the operator would say it: "DO_SET_MODE RTL", "arm", "kill"."""
+    if m.command == mavlink.MAV_CMD_DO_SET_MODE and m.param1 == mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        mapping = mavutil.mode_mapping_bynumber(vehicle.mav_type) or {}
+        return f"DO_SET_MODE {mapping.get(int(m.param2), int(m.param2))}"
+    if m.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+        return "arm" if m.param1 == 1 else "kill" if m.param2 == FORCE_DISARM else "disarm"
+    to = " to the onboard agent" if m.target_component == COMPANION else ""
+    return _command_name(m.command) + to
+
+
+def _agent_text(status: agent_status.AgentStatus) -> str:
+    text = f"{status.mission or 'agent'} {status.state} ({status.phase})"
+    return f"{text}: {status.reason}" if status.reason else text
 
 
 def _finite(*values: float) -> bool:

@@ -24,8 +24,8 @@ from collections.abc import Callable
 import numpy as np
 import viser
 
-from groundstation.colours import colour
 from groundstation.state import Fleet, VehicleState
+from groundstation.state import colour_of as colour
 from groundstation.viewport import Vehicle, Viewport, opacity_root
 from groundstation.views import Views
 from vehicle.mapping.memory_map import state_image, states_of

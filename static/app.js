@@ -675,7 +675,10 @@ function render(msg) {
   renderVehicles(vehicles);
   renderTargetVehicles(vehicles);
   if (modeChanged) loadRecordings();
+  else if (Array.isArray(msg.recordings)) renderRecordings(msg.recordings);
   updateControls();
+  // The operator's view (operator.js, map2d.js, plots.js) draws from the same frames.
+  window.dispatchEvent(new CustomEvent("station-status", { detail: msg }));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -832,8 +835,7 @@ function recordingItem(rec) {
   li.dataset.name = name;
   const info = el("div", "recording-info");
   info.append(el("span", "recording-name", name));
-  const meta = [formatDuration(rec.duration_s), formatSize(rec.size), formatModified(rec.modified)].filter(Boolean);
-  info.append(el("span", "recording-meta", meta.join(" · ")));
+  info.append(el("span", "recording-meta", recordingMeta(rec)));
 
   const actions = el("div", "recording-actions");
   const replay = el("button", "btn btn-small replay-button", "Replay");
@@ -854,12 +856,39 @@ async function loadRecordings() {
   const { status, data, error } = await api("GET", "/api/recordings");
   if (status !== 200 || !Array.isArray(data)) {
     list.replaceChildren(el("li", "empty", `Could not load recordings (${status ? `HTTP ${status}` : error})`));
-  } else if (!data.length) {
-    list.replaceChildren(el("li", "empty", "No recordings yet"));
+    delete list.dataset.key;
   } else {
-    list.replaceChildren(...data.filter((r) => r && r.name != null).map(recordingItem));
+    renderRecordings(data);
   }
   updateControls();
+}
+
+/** The recordings list, from GET /api/recordings or the stream (which lists them live: sizes and durations
+ * grow, new sessions appear); rebuilt only when something changed. */
+function renderRecordings(data) {
+  const list = $("#recordings-list");
+  const recordings = data.filter((r) => r && r.name != null);
+  const key = JSON.stringify(recordings.map((r) => [r.name, r.size, r.duration_s, r.recording]));
+  if (list.dataset.key === key) return;
+  list.dataset.key = key;
+  if (!recordings.length) {
+    list.replaceChildren(el("li", "empty", "No recordings yet"));
+  } else {
+    // Items are kept (only their sizes and durations change), so a click on Replay is never lost to a rebuild.
+    const old = new Map(Array.from(list.querySelectorAll("li.recording"), (li) => [li.dataset.name, li]));
+    list.replaceChildren(...recordings.map((rec) => {
+      const li = old.get(String(rec.name)) || recordingItem(rec);
+      setText(li.querySelector(".recording-meta"), recordingMeta(rec));
+      li.classList.toggle("is-recording", Boolean(rec.recording));
+      return li;
+    }));
+  }
+  updateControls();
+}
+
+function recordingMeta(rec) {
+  const meta = [formatDuration(rec.duration_s), formatSize(rec.size), formatModified(rec.modified)].filter(Boolean);
+  return (rec.recording ? "recording · " : "") + meta.join(" · ");
 }
 
 function replayControl(label, body) {
@@ -929,6 +958,7 @@ function setupPanel() {
 // ---------------------------------------------------------------------------------------------
 
 async function main() {
+  window.stationApi = api;  // for the operator's view's scripts (seeking from a plot needs the token)
   setupPanel();
   setupTarget();
   setupReplay();

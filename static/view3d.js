@@ -157,8 +157,8 @@ function main() {
     view.vehicles = Array.isArray(event.detail) ? event.detail.filter((v) => v && Number.isInteger(v.sysid)) : [];
     select();
   });
-  // the panel's selection (its vehicle list fires this with the system id)
-  document.addEventListener("vehicle-selected", (event) => {
+  // the panel's selection (operator.js fires this on window with {sysid}; window hears it from document too)
+  window.addEventListener("vehicle-selected", (event) => {
     const detail = event.detail;
     const sysid = Number(detail && typeof detail === "object" ? detail.sysid : detail);
     if (!Number.isInteger(sysid)) return;

@@ -25,7 +25,7 @@ from harness import CHROMIUM, RunningStation, launch_chromium, load_default_scen
 from PIL import Image
 
 from groundstation import camera
-from groundstation.colours import colour
+from groundstation.state import colour_of as colour
 from groundstation.viewport import MARKER_PIXELS
 
 pytestmark = pytest.mark.browser

@@ -1,0 +1,132 @@
+"""What each vehicle did over time: numeric telemetry sampled into bounded series, and its events.
+
+The page plots any numeric field against time and marks events on the same
+axis (mode changes, arming, the operator's commands and the vehicle's ACKs,
+messages, the onboard agent's phases). The Fleet feeds this as it applies
+messages, live and in replay alike, so a field means the same in both: a
+sample is the vehicle's state as the Fleet knew it at that moment. Series are
+numpy ring buffers (an hour at two samples a second is half a megabyte per
+vehicle), events a bounded deque. Nothing stored is ever NaN on the way out:
+a value that is missing or not finite is sent as null.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SAMPLE_EVERY = 0.5  # s of the fleet's clock between samples of a vehicle
+SAMPLES_KEPT = 7200  # an hour at SAMPLE_EVERY
+EVENTS_KEPT = 1000
+MAX_SONARS = 12  # sonar columns per vehicle; more sensors are not plotted
+
+# (name, unit): the fields every vehicle has; each sonar adds "sonar ID" (m)
+FIELDS = [("altitude", "m"), ("speed", "m/s"), ("climb", "m/s"), ("heading", "°"), ("roll", "°"),
+          ("pitch", "°"), ("battery voltage", "V"), ("battery remaining", "%"), ("battery current", "A"),
+          ("occupied cells", "cells")]
+BASE = [name for name, _ in FIELDS]
+UNITS = dict(FIELDS)
+
+
+@dataclass
+class Event:
+    time: float
+    kind: str  # mode, armed, command, ack, message, agent
+    text: str
+    severity: int | None = None  # MAVLink severity of a message (0 emergency .. 7 debug)
+
+    def as_json(self) -> dict:
+        return {"t": round(self.time, 3), "kind": self.kind, "text": self.text, "severity": self.severity}
+
+
+@dataclass
+class VehicleHistory:
+    capacity: int = SAMPLES_KEPT
+    times: np.ndarray = field(init=False)
+    values: np.ndarray = field(init=False)
+    columns: dict[str, int] = field(default_factory=lambda: {name: i for i, name in enumerate(BASE)})
+    count: int = 0  # samples ever taken (the ring holds the last ``capacity``)
+    last: float = -math.inf
+    events: deque = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))
+
+    def __post_init__(self) -> None:
+        self.times = np.zeros(self.capacity)
+        self.values = np.full((self.capacity, len(BASE) + MAX_SONARS), np.nan, dtype=np.float32)
+
+    def column(self, name: str) -> int | None:
+        index = self.columns.get(name)
+        if index is None and len(self.columns) < self.values.shape[1]:
+            index = self.columns[name] = len(self.columns)
+        return index
+
+    def add(self, time: float, values: dict[str, float | None]) -> None:
+        slot = self.count % self.capacity
+        self.times[slot] = time
+        row = self.values[slot]
+        row[:] = np.nan
+        for name, value in values.items():
+            index = self.column(name)
+            if index is not None and value is not None and math.isfinite(value):
+                row[index] = value
+        self.count += 1
+        self.last = time
+
+    def ordered(self) -> tuple[np.ndarray, np.ndarray]:
+        """Times and values of the samples kept, oldest first."""
+        kept = min(self.count, self.capacity)
+        start = self.count - kept
+        order = (np.arange(start, self.count)) % self.capacity
+        return self.times[order], self.values[order]
+
+    def as_json(self, since: float | None = None, limit: int | None = None) -> dict:
+        """Columns of the samples after ``since`` (all without it), at most ``limit`` of them (evenly thinned);
+        the events after ``since``."""
+        times, values = self.ordered()
+        if since is not None:
+            keep = times > since
+            times, values = times[keep], values[keep]
+        if limit is not None and len(times) > limit:
+            pick = np.linspace(0, len(times) - 1, limit).round().astype(int)
+            times, values = times[pick], values[pick]
+        names = sorted(self.columns, key=self.columns.get)
+        series = {}
+        for name in names:
+            column = values[:, self.columns[name]]
+            if np.isnan(column).all():
+                continue
+            series[name] = [None if math.isnan(v) else round(float(v), 3) for v in column]
+        events = [e.as_json() for e in self.events if since is None or e.time > since]
+        return {"t": [round(float(t), 3) for t in times], "series": series,
+                "units": {name: UNITS.get(name, "m" if name.startswith("sonar") else "") for name in series},
+                "events": events}
+
+
+class History:
+    """Every vehicle's history, by system id. The Fleet calls it under its own lock."""
+
+    def __init__(self, every: float = SAMPLE_EVERY, capacity: int = SAMPLES_KEPT):
+        self.every = every
+        self.capacity = capacity
+        self.vehicles: dict[int, VehicleHistory] = {}
+
+    def of(self, sysid: int) -> VehicleHistory:
+        found = self.vehicles.get(sysid)
+        if found is None:
+            found = self.vehicles[sysid] = VehicleHistory(self.capacity)
+        return found
+
+    def due(self, sysid: int, now: float) -> bool:
+        found = self.vehicles.get(sysid)
+        return found is None or now - found.last >= self.every or now < found.last
+
+    def sample(self, sysid: int, now: float, values: dict[str, float | None]) -> None:
+        self.of(sysid).add(now, values)
+
+    def event(self, sysid: int, now: float, kind: str, text: str, severity: int | None = None) -> None:
+        self.of(sysid).events.append(Event(now, kind, text[:300], severity))
+
+    def clear(self) -> None:
+        self.vehicles.clear()

@@ -1,0 +1,68 @@
+"""A vehicle's history: bounded samples (oldest dropped), thinned answers, no NaN out, bounded events; and the
+fleet's events for mode changes, arming and the station's own commands and the vehicle's ACKs."""
+
+from __future__ import annotations
+
+import json
+import math
+
+from groundstation.history import EVENTS_KEPT, History
+from groundstation.state import Fleet
+from vehicle.protocol.mav import mavlink
+
+
+def test_samples_are_bounded_thinned_and_never_nan():
+    history = History(every=1.0, capacity=5)
+    for t in range(8):
+        assert history.due(1, float(t))
+        history.sample(1, float(t), {"altitude": float(t), "speed": math.nan if t == 6 else 1.0, "sonar 0": None})
+        assert not history.due(1, t + 0.5)
+    answer = history.of(1).as_json()
+    assert answer["t"] == [3.0, 4.0, 5.0, 6.0, 7.0]  # the last five, oldest first
+    assert answer["series"]["altitude"] == [3.0, 4.0, 5.0, 6.0, 7.0]
+    assert answer["series"]["speed"] == [1.0, 1.0, 1.0, None, 1.0]
+    assert "sonar 0" not in answer["series"]  # never had a value
+    assert answer["units"] == {"altitude": "m", "speed": "m/s"}
+    json.dumps(answer, allow_nan=False)
+    assert history.of(1).as_json(since=5.0)["t"] == [6.0, 7.0]
+    assert history.of(1).as_json(limit=2)["t"] == [3.0, 7.0]  # evenly thinned, the ends kept
+    assert history.due(1, 2.0)  # a replay that seeks back samples again
+
+
+def test_events_are_bounded_and_cut():
+    history = History()
+    for i in range(EVENTS_KEPT + 10):
+        history.event(1, float(i), "message", "x" * 1000, 4)
+    events = history.of(1).as_json()["events"]
+    assert len(events) == EVENTS_KEPT and events[0]["t"] == 10.0 and len(events[0]["text"]) == 300
+
+
+def message(cls, *args, src=1, comp=1):
+    m = cls(*args)
+    m.pack(mavlink.MAVLink(None, srcSystem=src, srcComponent=comp))
+    return m
+
+
+def heartbeat(mode: int, armed: bool):
+    base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+    return message(mavlink.MAVLink_heartbeat_message, mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                   base, mode, 4, 3)
+
+
+def test_the_fleet_marks_modes_arming_commands_and_acks():
+    fleet = Fleet()
+    fleet.apply(heartbeat(4, False), 100.0)  # GUIDED
+    fleet.apply(heartbeat(4, True), 101.0)
+    command = message(mavlink.MAVLink_command_long_message, 1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0,
+                      mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6, 0, 0, 0, 0, 0, src=255, comp=190)
+    fleet.apply(command, 102.0)  # this station's order: RTL
+    fleet.apply(message(mavlink.MAVLink_command_ack_message, mavlink.MAV_CMD_DO_SET_MODE, 0, 0, 0, 255, 190), 102.1)
+    fleet.apply(heartbeat(6, True), 103.0)
+    quiet = message(mavlink.MAVLink_command_long_message, 1, 1, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                    33, 1e5, 0, 0, 0, 0, 0, src=255, comp=190)
+    fleet.apply(quiet, 104.0)  # telemetry requests are not worth a marker
+    events = [(e["t"], e["kind"], e["text"]) for e in fleet.history.of(1).as_json()["events"]]
+    assert events == [(100.0, "mode", "first heard: GUIDED"), (101.0, "armed", "armed"),
+                      (102.0, "command", "sent DO_SET_MODE RTL"), (102.1, "ack", "DO_SET_MODE: accepted"),
+                      (103.0, "mode", "mode GUIDED → RTL")]
+    assert fleet.vehicles[1].other_gcs is None  # our own order, not another station's
