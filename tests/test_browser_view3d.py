@@ -216,9 +216,8 @@ def press(button) -> None:
 
 
 def choose(view: View, sysid: int) -> None:
-    """Select a vehicle as the panel does: a ``vehicle-selected`` event with its system id."""
-    view.page.evaluate("(sysid) => document.dispatchEvent(new CustomEvent('vehicle-selected', "
-                       "{detail: {sysid}}))", sysid)
+    """Select a vehicle in the panel's vehicle list (which tells the page with a ``vehicle-selected`` event)."""
+    press(view.page.locator(f'#fleet-list .fleet-item[data-sysid="{sysid}"]'))
 
 
 # ---- the tests ---------------------------------------------------------------------------------------
