@@ -387,7 +387,8 @@ def create_app(station: GroundStation) -> FastAPI:
     # ---- the stream ----------------------------------------------------------------------------------
     @app.websocket("/ws")
     async def stream(socket: WebSocket, viewer: str | None = None):
-        """Status frames every STREAM_PERIOD, and this viewer's own notes (its 3D view's clicks)."""
+        """Status frames every STREAM_PERIOD, and this viewer's own notes (its 3D view's clicks); it takes
+        the viewer's requests for its own 3D view (see ``groundstation.views``)."""
         if viewer is not None and not VIEWER_ID.fullmatch(viewer):
             await socket.close(code=1008, reason="a viewer id is 8-64 letters, digits, - or _")
             return
@@ -398,8 +399,9 @@ def create_app(station: GroundStation) -> FastAPI:
         inbox = station.subscribe(viewer)
         sender = asyncio.create_task(_send_status(socket, inbox, station))
         try:
-            while (await socket.receive())["type"] != "websocket.disconnect":
-                pass  # the page sends nothing we use; reading notices when it goes
+            while (message := await socket.receive())["type"] != "websocket.disconnect":
+                # the page's requests for its own 3D view (camera, selection, layers); answered to it alone
+                station.view_request(viewer, message.get("text") or message.get("bytes") or "", inbox)
         except (WebSocketDisconnect, RuntimeError):
             pass
         finally:

@@ -49,12 +49,17 @@ def top(centre, height: float) -> Pose:
     return c + np.array([0.0, -height * 1e-3, height]), c
 
 
-def fit(low, high) -> Pose:
-    """An oblique view of the box from the south-west that shows all of it."""
+FIT_FROM = np.array([-0.35, -0.45, 0.4]) / np.linalg.norm([-0.35, -0.45, 0.4])  # south-west, 35 degrees up
+
+
+def fit(low, high, fov: float = math.radians(50), aspect: float = 1.0) -> Pose:
+    """An oblique view of the box from the south-west that shows all of it: the box's bounding sphere
+    fits the narrower of the two fields of view (``fov`` vertical, radians; ``aspect`` width / height)."""
     low, high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
     centre = (low + high) / 2
-    size = float(max(high[0] - low[0], high[1] - low[1], 10.0))
-    return centre + np.array([-size * 0.35, -size * 0.45, size * 0.3 + (high[2] - low[2])]), centre
+    radius = max(float(np.linalg.norm(high - low)) / 2, 5.0)
+    half = min(fov / 2, math.atan(math.tan(fov / 2) * aspect))
+    return centre + FIT_FROM * radius / math.sin(half), centre
 
 
 def overview(position, heading: float, distance: float = 8.0) -> Pose:

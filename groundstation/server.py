@@ -28,6 +28,7 @@ from groundstation.replay_scene import find_scene, logged_scene
 from groundstation.security import Access, is_loopback
 from groundstation.state import Fleet, VehicleState
 from groundstation.timeline import Timeline
+from groundstation.views import ViewRequestError
 from groundstation.viz import SceneView
 from vehicle.mapping.picture import draw_map
 from vehicle.protocol.geodesy import Datum
@@ -71,6 +72,7 @@ class GroundStation:
         self.view = SceneView(self.live, scene, viser_port, clock=self.now)
         self.proxy = VizProxy(self.view.port)
         self.view.on_target(self._target)
+        self.view.viewer_of = self.proxy.viewers.get  # which page each viser client is
         self.replay: Replay | None = None  # set while a recording is replayed
         self.timeline: Timeline | None = None  # the replayed log's whole history, scanned in the background
         self.pictures = MapPictures()  # the 2D map's
@@ -274,6 +276,19 @@ class GroundStation:
             inboxes.discard(inbox)
             if not inboxes:  # a page that went leaves nothing behind
                 del self._inboxes[viewer]
+                if viewer is not None:
+                    self.view.views.forget(viewer)
+
+    def view_request(self, viewer: str | None, text: str | bytes, inbox: asyncio.Queue) -> None:
+        """A page's request for its own 3D view; the answer (its settings now, or why not) goes to that page."""
+        if viewer is None:
+            note = {"type": "view-error", "detail": "this stream has no viewer id: open it with ?viewer=ID"}
+        else:
+            try:
+                note = self.view.views.apply(viewer, text)
+            except ViewRequestError as error:
+                note = {"type": "view-error", "detail": str(error)}
+        _offer(inbox, note)
 
     def _target(self, client_id: int, x: float, y: float) -> None:
         """A viewer clicked the ground (called from viser's thread): tell that viewer's page."""

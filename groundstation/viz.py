@@ -1,11 +1,15 @@
 """The 3D view: the scene, the vehicles, their trails, sonar, memory maps, waypoints and planned paths, in viser.
 
 viser runs its own server on a loopback port (the web app reverse-proxies it);
-this module owns what it shows. A loop redraws at most ``RATE`` times a second,
-in one atomic batch, and only what changed: poses every frame, trails and
-sonar a few times a second, a map only when it changed. Clicking the ground
+this module owns what all viewers share. A loop redraws at most ``RATE`` times
+a second, in one atomic batch, and only what changed: poses every frame, trails
+and sonar a few times a second, a map only when it changed. Each client's own
+camera, markers and layer switches are its ``Viewport``'s. Clicking the ground
 proposes a target to that viewer alone (a marker only it sees); sending the
 vehicle there goes through the REST API with the operator token.
+
+Shared nodes sit under one root per layer (``/layers/trails/3`` is vehicle 3's
+trail), so that a viewer hides a layer by hiding its own copy of that root.
 """
 
 from __future__ import annotations
@@ -21,6 +25,9 @@ import numpy as np
 import viser
 
 from groundstation.state import Fleet, VehicleState
+from groundstation.state import colour_of as colour
+from groundstation.viewport import Vehicle, Viewport, opacity_root
+from groundstation.views import Views
 from vehicle.mapping.memory_map import state_image, states_of
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
@@ -29,7 +36,7 @@ CLIENT_MARKER = "/_clients/"  # each client alone gets a hidden node of this nam
 RATE = 30.0  # frames per second at most (poses); trails, sonar and maps far less often
 SLOW_EVERY = 8  # trails, sonar, maps and labels every this many frames
 MAP_PIXELS = 512  # a map image is at most this many pixels a side
-COLOURS = [(230, 90, 40), (40, 150, 240), (120, 200, 60), (220, 60, 200), (240, 200, 40), (60, 220, 200)]
+LAYER_NODES = ("trails", "beams", "echoes", "paths", "waypoints")  # a vehicle's node in each of these layers
 
 
 def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
@@ -55,6 +62,12 @@ class SceneView:
         self.port = self.server.get_port()
         self.caster = RayCaster(scene) if scene is not None and len(scene.faces) else None
         self._on_target: Callable[[int, float, float], None] | None = None
+        self.views = Views()  # what each page asked of its view (the web app writes it)
+        self.viewer_of: Callable[[int], str | None] = lambda client_id: None  # viser client -> page (the proxy's)
+        self._viewports: dict[int, Viewport] = {}
+        self._generation: dict[int, int] = {}  # sysid -> how many times its shared nodes were made
+        self._levels: set[float] = {1.0}  # map opacities some viewer uses: each is drawn
+        self._last_frame = time.monotonic()
         self._drawn: dict[int, dict] = {}
         self._draw_lock = threading.Lock()
         self._stop = threading.Event()
@@ -70,13 +83,13 @@ class SceneView:
         # a dimmer environment than viser's default, so the scene's own colours show (not washed out)
         server.scene.configure_environment_map("city", environment_intensity=0.35)
         if self.scene is not None and len(self.scene.faces):
-            server.scene.add_mesh_trimesh("/scene", self.scene.mesh)
+            server.scene.add_mesh_trimesh("/layers/scene/mesh", self.scene.mesh)
             low, high = self.scene.bounds
             size = float(max(high[0] - low[0], high[1] - low[1], 20))
             centre = ((low[0] + high[0]) / 2, (low[1] + high[1]) / 2, float(low[2]) - 0.02)
         else:
             size, centre = 200.0, (0.0, 0.0, 0.0)
-        server.scene.add_grid("/ground", width=size, height=size, position=centre, cell_size=5.0,
+        server.scene.add_grid("/layers/scene/ground", width=size, height=size, position=centre, cell_size=5.0,
                               section_size=25.0, plane="xy")
 
         # an oblique view of the whole scene from the south-west, for every viewer and exported replays
@@ -87,6 +100,13 @@ class SceneView:
         def _connected(client: viser.ClientHandle) -> None:
             # tells the proxy which viser client its connection carries (sent to this client only)
             client.scene.add_frame(f"{CLIENT_MARKER}{client.client_id}", show_axes=False, visible=False)
+            with self._draw_lock:
+                self._viewports[client.client_id] = Viewport(client)
+
+        @server.on_client_disconnect
+        def _gone(client: viser.ClientHandle) -> None:
+            with self._draw_lock:
+                self._viewports.pop(client.client_id, None)
 
         @server.scene.on_click()
         def _clicked(event) -> None:
@@ -102,16 +122,15 @@ class SceneView:
         with self._draw_lock:
             self.scene = scene
             self.caster = RayCaster(scene) if scene is not None and len(scene.faces) else None
-            self.server.scene.remove_by_name("/scene")
+            self.server.scene.remove_by_name("/layers/scene/mesh")
             if self.caster is not None:
-                self.server.scene.add_mesh_trimesh("/scene", scene.mesh)
+                self.server.scene.add_mesh_trimesh("/layers/scene/mesh", scene.mesh)
 
     def show(self, fleet: Fleet) -> None:
         """Draw this fleet from now on (the live one, or a replay's), starting from a clean slate."""
         with self._draw_lock:
             for sysid in list(self._drawn):
-                self.server.scene.remove_by_name(f"/vehicles/{sysid}")
-            self._drawn.clear()
+                self._remove_vehicle(sysid)
             self.fleet = fleet
 
     def on_target(self, callback: Callable[[int, float, float], None]) -> None:
@@ -155,17 +174,61 @@ class SceneView:
             self._stop.wait(max(0.0, 1.0 / RATE - (time.monotonic() - started)))
 
     def draw(self, slow: bool = True) -> None:
-        """Bring the scene up to date with the fleet (called by the loop; callable directly in tests)."""
-        with self._draw_lock, self.fleet.lock:
-            vehicles = [(v.sysid, v) for v in self.fleet.vehicles.values() if v.x is not None]
-            gone = set(self._drawn) - {sysid for sysid, _ in vehicles}
-            with self.server.atomic():
-                for sysid in gone:
-                    self.server.scene.remove_by_name(f"/vehicles/{sysid}")
-                    del self._drawn[sysid]
-                for index, (_, vehicle) in enumerate(vehicles):
-                    self._draw_vehicle(vehicle, COLOURS[index % len(COLOURS)], slow)
+        """Bring the scene up to date with the fleet, then each client's view (called by the loop;
+        callable directly in tests)."""
+        now = time.monotonic()
+        dt, self._last_frame = min(now - self._last_frame, 0.5), now
+        with self._draw_lock:
+            with self.fleet.lock:
+                vehicles = [v for v in self.fleet.vehicles.values() if v.x is not None]
+                gone = set(self._drawn) - {v.sysid for v in vehicles}
+                if slow:
+                    self._note_levels()
+                with self.server.atomic():
+                    for sysid in gone:
+                        self._remove_vehicle(sysid)
+                    for vehicle in vehicles:
+                        self._draw_vehicle(vehicle, colour(vehicle.sysid), slow)
+                seen = [Vehicle(v.sysid, np.array(self._drawn[v.sysid]["body"].position), v.yaw, v.pitch,
+                                colour(v.sysid)) for v in vehicles]
+            self._draw_viewports(seen, dt)
         self.server.flush()
+
+    def _draw_viewports(self, vehicles: list[Vehicle], dt: float) -> None:
+        bounds = self.scene.bounds if self.scene is not None and len(self.scene.faces) \
+            else (np.array([-10.0, -10.0, 0.0]), np.array([10.0, 10.0, 2.0]))
+        for client_id, viewport in list(self._viewports.items()):
+            viewer = self.viewer_of(client_id)
+            viewport.apply(self.views.get(viewer))
+            action = self.views.take_action(viewer) if viewer is not None else None
+            zooms = self.views.take_zooms(viewer) if viewer is not None else []
+            try:
+                with viewport.client.atomic():
+                    viewport.draw_markers(vehicles, self._generation)
+                    viewport.move_camera(vehicles, action, zooms, dt, bounds, self.ground_point)
+            except (AssertionError, ValueError) as error:  # a client mid-connect, or a pose viser refused
+                print(f"3D view of client {client_id}: {type(error).__name__}: {error}")
+
+    def _note_levels(self) -> None:
+        """The map opacities viewers use now; a newly used one has every map drawn again at it."""
+        levels = {viewport.opacity for viewport in self._viewports.values()} | {1.0}
+        for level in self._levels - levels:
+            self.server.scene.remove_by_name(opacity_root(level))
+        if levels - self._levels:
+            for drawn in self._drawn.values():
+                drawn["map"] = None
+        self._levels = levels
+
+    def _remove_vehicle(self, sysid: int) -> None:
+        scene = self.server.scene
+        scene.remove_by_name(f"/vehicles/{sysid}")
+        for layer in LAYER_NODES:
+            scene.remove_by_name(f"/layers/{layer}/{sysid}")
+        for level in self._levels:
+            scene.remove_by_name(f"{opacity_root(level)}/{sysid}")
+        self._drawn.pop(sysid, None)
+        for viewport in self._viewports.values():
+            viewport.forget(sysid)
 
     def _draw_vehicle(self, v: VehicleState, colour, slow: bool) -> None:
         scene = self.server.scene
@@ -173,32 +236,52 @@ class SceneView:
         drawn = self._drawn.get(v.sysid)
         position = (v.x, v.y, self.fleet.height(v))
         if drawn is None:
-            drawn = self._drawn[v.sysid] = {"version": -1, "map": None, "trail": 0, "path": None, "home": None}
-            drawn["body"] = scene.add_frame(f"{root}/body", axes_length=0.8, axes_radius=0.04)
+            drawn = self._drawn[v.sysid] = {"version": -1, "map": None, "trail": 0, "path": None, "home": None,
+                                            "drop": None}
+            self._generation[v.sysid] = self._generation.get(v.sysid, 0) + 1
+            drawn["body"] = scene.add_frame(f"{root}/body", show_axes=False)
             scene.add_icosphere(f"{root}/body/hull", radius=0.3, color=colour)
             scene.add_box(f"{root}/body/nose", dimensions=(0.5, 0.08, 0.08), position=(0.45, 0.0, 0.0),
                           color=(255, 255, 255))
-            drawn["label"] = scene.add_label(f"{root}/body/label", text=f"{v.sysid}", position=(0.0, 0.0, 0.8))
+            drawn["at"] = scene.add_frame(f"{root}/at", show_axes=False)  # its place, not turning with it
+            # below the body: its marker sits on top (viewport.py), the label hangs under it
+            drawn["label"] = scene.add_label(f"{root}/at/label", text=f"{v.sysid}", position=(0.0, 0.0, -0.35),
+                                             anchor="top-center")
         drawn["body"].position = position
         drawn["body"].wxyz = _quaternion(v.roll, v.pitch, v.yaw)
+        drawn["at"].position = position
         if not slow:
             return
         drawn["label"].text = f"{v.sysid} {v.kind} {v.mode}{' ARMED' if v.armed else ''}"
-        self._draw_trail(v, root, colour, drawn)
-        self._draw_sonar(v, root)
-        self._draw_mission(v, root, drawn)
-        self._draw_map(v, root, drawn, position[2])
+        self._draw_drop(v, root, colour, drawn, position)
+        self._draw_trail(v, colour, drawn)
+        self._draw_sonar(v)
+        self._draw_mission(v, drawn)
+        self._draw_map(v, drawn, position[2])
 
-    def _draw_trail(self, v: VehicleState, root: str, colour, drawn: dict) -> None:
+    def _draw_drop(self, v: VehicleState, root: str, colour, drawn: dict, position) -> None:
+        """A line from the vehicle down to the ground under it: where it is over the map, and how high."""
+        depth = max(0.0, position[2] - self.fleet.ground_height(v.x, v.y))
+        if drawn["drop"] is not None and abs(drawn["drop"] - depth) < 0.05:
+            return
+        drawn["drop"] = depth
+        if depth < 0.1:
+            self.server.scene.remove_by_name(f"{root}/at/drop")
+            return
+        segment = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, -depth]]], dtype=np.float32)
+        self.server.scene.add_line_segments(f"{root}/at/drop", segment, colors=colour, thickness=1.5,
+                                            thickness_units="screen")
+
+    def _draw_trail(self, v: VehicleState, colour, drawn: dict) -> None:
         if len(v.trail) < 2 or len(v.trail) == drawn["trail"]:
             return
         points = np.array(v.trail, dtype=np.float32)
         segments = np.stack([points[:-1], points[1:]], axis=1)
-        self.server.scene.add_line_segments(f"{root}/trail", segments, colors=colour, thickness=2.0,
+        self.server.scene.add_line_segments(f"/layers/trails/{v.sysid}", segments, colors=colour, thickness=2.0,
                                             thickness_units="screen")
         drawn["trail"] = len(v.trail)
 
-    def _draw_sonar(self, v: VehicleState, root: str) -> None:
+    def _draw_sonar(self, v: VehicleState) -> None:
         now = self.clock()
         rays = []
         for sonar in v.sonar.values():
@@ -208,14 +291,15 @@ class SceneView:
             end = tuple(o + d * length for o, d in zip(sonar.origin, sonar.direction, strict=True))
             rays.append((sonar.origin, end))
         if rays:
-            self.server.scene.add_line_segments(f"{root}/rays", np.array(rays, dtype=np.float32),
+            self.server.scene.add_line_segments(f"/layers/beams/{v.sysid}", np.array(rays, dtype=np.float32),
                                                 colors=(255, 80, 80), thickness=1.5, thickness_units="screen")
         if v.hits:
-            self.server.scene.add_point_cloud(f"{root}/hits", np.array(v.hits, dtype=np.float32),
+            self.server.scene.add_point_cloud(f"/layers/echoes/{v.sysid}", np.array(v.hits, dtype=np.float32),
                                               colors=(255, 60, 60), point_size=0.12)
 
-    def _draw_mission(self, v: VehicleState, root: str, drawn: dict) -> None:
+    def _draw_mission(self, v: VehicleState, drawn: dict) -> None:
         scene = self.server.scene
+        root = f"/layers/waypoints/{v.sysid}"
         if v.home is not None and drawn["home"] != v.home:
             base = self.fleet.ground_height(*v.home)
             scene.add_icosphere(f"{root}/home", radius=0.35, color=(60, 220, 90), position=(*v.home, base + 0.1))
@@ -226,16 +310,16 @@ class SceneView:
             drawn["path"] = path
             if len(path) >= 2:
                 points = np.array([(x, y, height) for x, y in path], dtype=np.float32)
-                scene.add_line_segments(f"{root}/path", np.stack([points[:-1], points[1:]], axis=1),
+                scene.add_line_segments(f"/layers/paths/{v.sysid}", np.stack([points[:-1], points[1:]], axis=1),
                                         colors=(255, 230, 0), thickness=3.0, thickness_units="screen")
             else:
-                scene.remove_by_name(f"{root}/path")
+                scene.remove_by_name(f"/layers/paths/{v.sysid}")
         if v.waypoints and drawn.get("waypoints") != v.waypoints:
             drawn["waypoints"] = list(v.waypoints)
             points = np.array([(x, y, height) for x, y in v.waypoints], dtype=np.float32)
-            scene.add_point_cloud(f"{root}/waypoints", points, colors=(80, 200, 255), point_size=0.6)
+            scene.add_point_cloud(f"{root}/points", points, colors=(80, 200, 255), point_size=0.6)
 
-    def _draw_map(self, v: VehicleState, root: str, drawn: dict, height: float) -> None:
+    def _draw_map(self, v: VehicleState, drawn: dict, height: float) -> None:
         stream_version = (v.map_stream.version, v.own_map.version if v.own_map is not None else 0)
         if drawn["map"] == stream_version:
             return
@@ -258,8 +342,11 @@ class SceneView:
         image = state_image(part)
         width, depth = (c1 - c0) / resolution, (r1 - r0) / resolution
         centre = (origin[0] + (c0 + c1) / 2 / resolution, origin[1] + (r0 + r1) / 2 / resolution, height - 0.05)
-        self.server.scene.add_image(f"{root}/map", image, render_width=width, render_height=depth,
-                                    format="png", position=centre)
+        for level in self._levels:  # one picture per opacity some viewer uses (viser's images have none)
+            faded = image.copy()
+            faded[..., 3] = (faded[..., 3] * level).astype(np.uint8)
+            self.server.scene.add_image(f"{opacity_root(level)}/{v.sysid}", faded, render_width=width,
+                                        render_height=depth, format="png", position=centre)
 
 
 def _refuse_share(*args, **kwargs) -> None:

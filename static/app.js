@@ -741,8 +741,12 @@ function onMessage(event) {
   let msg;
   try { msg = JSON.parse(event.data); } catch { return; }
   if (!msg || typeof msg !== "object") return;
-  if (msg.type === "vehicles") render(msg);
-  else if (msg.type === "target" && isNum(msg.x) && isNum(msg.y)) {
+  if (msg.type === "vehicles") {
+    render(msg);
+    document.dispatchEvent(new CustomEvent("station-vehicles", { detail: state.vehicles }));
+  } else if (msg.type === "view" || msg.type === "view-error") {
+    document.dispatchEvent(new CustomEvent("station-view", { detail: msg }));  // view3d.js's answers
+  } else if (msg.type === "target" && isNum(msg.x) && isNum(msg.y)) {
     state.target = { x: msg.x, y: msg.y };
     renderTarget(state.target);
   }
@@ -761,6 +765,10 @@ function connect() {
     if (state.token && state.auth === "unverified") checkToken(state.token);
     else if (everConnected && state.token && state.auth === "valid") checkToken(state.token, true);
     everConnected = true;
+    // view3d.js talks to the station about this page's own 3D view over this socket
+    const open = socket;
+    document.dispatchEvent(new CustomEvent("station-socket", { detail: {
+      viewerId, send: (request) => open.readyState === WebSocket.OPEN && open.send(JSON.stringify(request)) } }));
   });
   socket.addEventListener("message", onMessage);
   const mine = socket;

@@ -167,7 +167,7 @@ class Page:
     def wait_for_view(self, tmp_path: Path, sysid: int) -> None:
         """Until the 3D view has been sent the scene and the vehicle, and shows the coloured scene."""
         root = f"/vehicles/{sysid}"
-        wanted = {"/scene", f"{root}/body", f"{root}/body/hull", f"{root}/trail"}
+        wanted = {"/layers/scene/mesh", f"{root}/body", f"{root}/body/hull", f"/layers/trails/{sysid}"}
         self.poll(lambda: wanted <= {name for _, name in self.scene_nodes}, 45,
                   "the scene and the vehicle reach the 3D view")
         shots: list[tuple[int, float]] = []

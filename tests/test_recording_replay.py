@@ -759,7 +759,7 @@ def test_a_replayed_old_log_draws_its_sonar_beams(experiment_run, monkeypatch):
         replay.playing = False
         replay.seek(replay.duration / 2)  # mid-scan
         station.view.draw()
-        assert "/vehicles/1/rays" in drawn
+        assert "/layers/beams/1" in drawn
     finally:
         station.close()
 

@@ -110,19 +110,20 @@ def test_a_session_recording_names_the_stations_scene_first(recorded):
 def test_a_station_without_a_scene_replays_a_recording_in_its_scene(recorded, bare):
     running, api = bare
     shutil.copy(recorded, running.station.record_dir / recorded.name)
-    assert "/scene" not in view_nodes(running.station.view.port, seconds=2.0)  # no scene of its own
+    assert "/layers/scene/mesh" not in view_nodes(running.station.view.port, seconds=2.0)  # no scene of its own
     status = replay(running, api, recorded.name)
     try:
         assert status["scene"] == {"name": "default.wrl", "sha256": DEFAULT_DIGEST, "found": True,
                                    "shown": "default.wrl", "note": "default.wrl found in the bundled scenes"}
         assert api.get("/api/replay").json()["replay"]["scene"]["found"] is True
-        assert "/scene" in view_nodes(running.station.view.port, "/scene")
+        assert "/layers/scene/mesh" in view_nodes(running.station.view.port, "/layers/scene/mesh")
         api.post("/api/replay/control", json={"seek": 2.0, "play": False}, headers=api.operator)
         position = api.vehicle(1)["position"]  # placed by the scene's datum, not at the first home heard
         assert (position["x"], position["y"]) == (pytest.approx(START[0], abs=0.3), pytest.approx(START[1], abs=0.3))
     finally:
         stop(api)
-    assert "/scene" not in view_nodes(running.station.view.port, seconds=2.0)  # back to the live view's none
+    # back to the live view's none
+    assert "/layers/scene/mesh" not in view_nodes(running.station.view.port, seconds=2.0)
 
 
 def crafted_log(path: Path, text: str) -> Path:
@@ -156,7 +157,8 @@ def test_a_recording_whose_scene_is_missing_or_differs_says_so(bare, text, found
     try:
         assert status["scene"]["found"] is found and status["scene"]["shown"] == shown
         assert says in status["scene"]["note"]
-        assert ("/scene" in view_nodes(running.station.view.port, "/scene", 2.0)) is (shown is not None)
+        mesh = "/layers/scene/mesh"
+        assert (mesh in view_nodes(running.station.view.port, mesh, 2.0)) is (shown is not None)
     finally:
         stop(api)
 
@@ -174,7 +176,7 @@ def test_a_recording_naming_a_path_loads_nothing(bare, name):
     try:
         assert status["scene"]["name"] is None and status["scene"]["shown"] is None
         assert status["scene"]["note"] == "the recording names no scene"
-        assert "/scene" not in view_nodes(running.station.view.port, seconds=1.5)
+        assert "/layers/scene/mesh" not in view_nodes(running.station.view.port, seconds=1.5)
     finally:
         stop(api)
 
@@ -271,7 +273,7 @@ def exported(recorded, bare, tmp_path_factory) -> Path:
 
 def test_an_export_carries_the_recordings_scene_and_a_telemetry_label(exported):
     messages = embedded_messages(exported.read_text())
-    assert any(m.get("name") == "/scene" and m.get("type") == "GlbMessage" for m in messages)  # the mesh
+    assert any(m.get("name") == "/layers/scene/mesh" and m.get("type") == "GlbMessage" for m in messages)  # the mesh
     label = [text for m in messages if m.get("name") == "/telemetry/1" for text in texts_in(m)]
     panels = [text for text in label if "battery" in text]
     assert panels, label

@@ -1,0 +1,181 @@
+// scanstation: this page's own 3D view — camera mode, selected vehicle, layers, map opacity, keys and
+// zoom towards the cursor. It asks the station over the page's /ws socket (app.js hands it over in a
+// "station-socket" event); the station moves this viewer's camera alone, and answers with what it now
+// does ("view") or why not ("view-error"). No inline script, no eval: the page's policy forbids both.
+
+const MODES = ["orbit", "follow", "onboard", "top"];
+const KEYS = { 1: "orbit", 2: "follow", 3: "onboard", 4: "top" };
+const ACTION_KEYS = { f: "fit", v: "vehicle" };
+const ZOOM_EVERY_MS = 50;  // wheel steps are summed and sent at most this often
+
+const view = {
+  send: null,            // the socket's send, while it is open
+  mode: "orbit",
+  sysid: null,           // the selected vehicle (the page's selection, else the first vehicle)
+  chosen: null,          // a vehicle the operator selected explicitly
+  vehicles: [],
+  zoom: null,            // {x, y, steps} not yet sent
+};
+
+const $ = (sel, root = document) => root.querySelector(sel);
+
+function send(request) {
+  if (view.send) view.send(request);
+}
+
+function layers() {
+  const out = {};
+  for (const box of document.querySelectorAll("#view3d input[data-layer]")) out[box.dataset.layer] = box.checked;
+  return out;
+}
+
+function opacity() {
+  return Number($("#map-opacity").value);
+}
+
+function showError(text) {
+  const ack = $("#view3d .ack");
+  ack.className = text ? "ack bad" : "ack";
+  ack.textContent = text;
+}
+
+function renderMode(mode) {
+  view.mode = mode;
+  for (const button of document.querySelectorAll("#view3d [data-camera-mode]")) {
+    button.setAttribute("aria-pressed", String(button.dataset.cameraMode === mode));
+  }
+}
+
+function renderVehicle() {
+  const text = view.sysid == null ? "no vehicle yet" : `camera on vehicle ${view.sysid}`;
+  if ($("#view3d-vehicle").textContent !== text) $("#view3d-vehicle").textContent = text;
+}
+
+function setMode(mode) {
+  if (!MODES.includes(mode)) return;
+  renderMode(mode);
+  send({ type: "camera", mode });
+}
+
+function act(action) {
+  send({ type: "camera", action });
+}
+
+/** The vehicle the camera follows: the operator's choice while it exists, else the first one. */
+function select() {
+  const ids = view.vehicles.map((v) => v.sysid);
+  const sysid = ids.includes(view.chosen) ? view.chosen : ids.length ? ids[0] : null;
+  if (sysid !== view.sysid) {
+    view.sysid = sysid;
+    send({ type: "select", sysid });
+  }
+  renderVehicle();
+}
+
+function sendAll() {
+  send({ type: "camera", mode: view.mode });
+  send({ type: "select", sysid: view.sysid });
+  send({ type: "layers", layers: layers(), opacity: opacity() });
+}
+
+// ---------------------------------------------------------------------------------------------
+// Keys and the wheel, in the page and inside the 3D view's frame (same origin, so reachable from here)
+
+function onKey(event) {
+  if (event.ctrlKey || event.metaKey || event.altKey || event.repeat) return;
+  const target = event.target;
+  if (target && target.closest && target.closest("input, select, textarea, [contenteditable]")) return;
+  const key = event.key.toLowerCase();
+  if (KEYS[key]) setMode(KEYS[key]);
+  else if (ACTION_KEYS[key]) act(ACTION_KEYS[key]);
+  else return;
+  event.preventDefault();
+}
+
+/** viser zooms towards its orbit centre and offers no zoom-to-cursor: the wheel over its canvas is taken
+ * here and sent to the station, which moves the camera towards the point under the cursor. */
+function onWheel(event) {
+  const canvas = event.target && event.target.closest ? event.target.closest("canvas") : null;
+  if (!canvas) return;  // viser's own panels scroll as usual
+  event.preventDefault();
+  event.stopImmediatePropagation();
+  const rect = canvas.getBoundingClientRect();
+  const x = ((event.clientX - rect.left) / rect.width) * 2 - 1;
+  const y = 1 - ((event.clientY - rect.top) / rect.height) * 2;
+  const lines = event.deltaMode === 1 ? event.deltaY * 33 : event.deltaMode === 2 ? event.deltaY * 400 : event.deltaY;
+  const steps = -lines / 100;
+  if (!Number.isFinite(x) || !Number.isFinite(y) || !Number.isFinite(steps)) return;
+  if (!view.zoom) {
+    view.zoom = { x, y, steps: 0 };
+    setTimeout(flushZoom, ZOOM_EVERY_MS);
+  }
+  Object.assign(view.zoom, { x, y, steps: view.zoom.steps + steps });
+}
+
+function flushZoom() {
+  const zoom = view.zoom;
+  view.zoom = null;
+  if (!zoom) return;
+  const clamp = (v, low, high) => Math.min(high, Math.max(low, v));
+  send({ type: "zoom", x: clamp(zoom.x, -1, 1), y: clamp(zoom.y, -1, 1), steps: clamp(zoom.steps, -20, 20) });
+}
+
+function hookFrame() {
+  const frame = $("#view");
+  const attach = () => {
+    let win;
+    try { win = frame.contentWindow; void win.document; } catch { return; }  // not ours (never, same origin)
+    if (!win || win.__view3dHooked) return;
+    win.__view3dHooked = true;
+    win.addEventListener("keydown", onKey, true);
+    win.addEventListener("wheel", onWheel, { capture: true, passive: false });
+  };
+  frame.addEventListener("load", attach);
+  attach();
+}
+
+// ---------------------------------------------------------------------------------------------
+
+function main() {
+  for (const button of document.querySelectorAll("#view3d [data-camera-mode]")) {
+    button.addEventListener("click", () => setMode(button.dataset.cameraMode));
+  }
+  for (const button of document.querySelectorAll("#view3d [data-camera-action]")) {
+    button.addEventListener("click", () => act(button.dataset.cameraAction));
+  }
+  for (const box of document.querySelectorAll("#view3d input[data-layer]")) {
+    box.addEventListener("change", () => send({ type: "layers", layers: { [box.dataset.layer]: box.checked } }));
+  }
+  $("#map-opacity").addEventListener("change", () => send({ type: "layers", opacity: opacity() }));
+  window.addEventListener("keydown", onKey);
+
+  document.addEventListener("station-socket", (event) => {
+    view.send = event.detail && typeof event.detail.send === "function" ? event.detail.send : null;
+    sendAll();  // a new socket (the station may have restarted): tell it everything again
+  });
+  document.addEventListener("station-vehicles", (event) => {
+    view.vehicles = Array.isArray(event.detail) ? event.detail.filter((v) => v && Number.isInteger(v.sysid)) : [];
+    select();
+  });
+  // the panel's selection (operator.js fires this on window with {sysid}; window hears it from document too)
+  window.addEventListener("vehicle-selected", (event) => {
+    const detail = event.detail;
+    const sysid = Number(detail && typeof detail === "object" ? detail.sysid : detail);
+    if (!Number.isInteger(sysid)) return;
+    view.chosen = sysid;
+    select();
+  });
+  document.addEventListener("station-view", (event) => {
+    const msg = event.detail || {};
+    if (msg.type === "view-error") {
+      showError(`3D view: ${String(msg.detail ?? "refused")}`);
+    } else {
+      showError("");
+      if (MODES.includes(msg.mode)) renderMode(msg.mode);
+    }
+  });
+  hookFrame();
+  renderVehicle();
+}
+
+main();

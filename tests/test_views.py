@@ -1,0 +1,86 @@
+"""A page's requests for its own 3D view (groundstation/views.py): checked, applied to that viewer only,
+refused with a fixed message that never repeats what was sent; and over a real /ws stream."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from harness import RunningStation, wait_wall
+from websockets.sync.client import connect as ws_connect
+
+from groundstation.views import MAX_REQUEST, ViewRequestError, Views, parse
+
+VIEWER = "viewer-views-test-0001"
+HOSTILE = "<img src=x onerror=alert(1)>"
+
+
+def test_good_requests_change_that_viewer_alone():
+    views = Views()
+    answer = views.apply("a" * 16, json.dumps({"type": "camera", "mode": "follow"}))
+    assert answer["mode"] == "follow"
+    views.apply("a" * 16, json.dumps({"type": "select", "sysid": 3}))
+    views.apply("a" * 16, json.dumps({"type": "layers", "layers": {"trails": False}, "opacity": 0.3}))
+    mine = views.get("a" * 16)
+    assert (mine.mode, mine.sysid, mine.layers["trails"], mine.layers["map"], mine.opacity) == \
+        ("follow", 3, False, True, 0.3)
+    assert views.get("b" * 16) is None  # another viewer has nothing of it
+    views.apply("a" * 16, json.dumps({"type": "camera", "action": "fit"}))
+    assert views.get("a" * 16).mode == "orbit"  # a one-shot move leaves the camera free
+    assert views.take_action("a" * 16) == "fit" and views.take_action("a" * 16) is None
+    views.apply("a" * 16, json.dumps({"type": "zoom", "x": 0.5, "y": -0.25, "steps": 2}))
+    (zoom,) = views.take_zooms("a" * 16)
+    assert (zoom.x, zoom.y, zoom.steps) == (0.5, -0.25, 2.0)
+
+
+@pytest.mark.parametrize("text", [
+    "", "not json", "[]", "null", json.dumps({"type": HOSTILE}),
+    json.dumps({"type": "camera", "mode": HOSTILE}), json.dumps({"type": "camera", "action": HOSTILE}),
+    json.dumps({"type": "camera"}), json.dumps({"type": "camera", "mode": "orbit", HOSTILE: 1}),
+    json.dumps({"type": "select", "sysid": 0}), json.dumps({"type": "select", "sysid": 256}),
+    json.dumps({"type": "select", "sysid": "1"}), json.dumps({"type": "select", "sysid": True}),
+    json.dumps({"type": "select", "sysid": 1.5}),
+    json.dumps({"type": "layers", "layers": {HOSTILE: True}}), json.dumps({"type": "layers", "layers": {"map": 1}}),
+    json.dumps({"type": "layers", "opacity": 0.5}), '{"type": "layers", "opacity": NaN}',
+    json.dumps({"type": "zoom", "x": 2, "y": 0, "steps": 1}), '{"type": "zoom", "x": 0, "y": 0, "steps": Infinity}',
+    json.dumps({"type": "zoom", "x": 0, "y": 0, "steps": 1e9}), json.dumps({"type": "zoom", "x": 0, "y": 0}),
+    json.dumps({"type": "camera", "mode": "x" * MAX_REQUEST}),
+])
+def test_bad_requests_are_refused_without_echo(text):
+    views = Views()
+    with pytest.raises(ViewRequestError) as refused:
+        views.apply("a" * 16, text)
+    assert HOSTILE not in str(refused.value) and "xxxx" not in str(refused.value)
+    settings = views.get("a" * 16)
+    assert settings is None or (settings.mode, settings.sysid, settings.opacity) == ("orbit", None, 1.0)
+
+
+def test_parse_keeps_only_known_keys():
+    assert parse('{"type": "select", "sysid": null}') == {"type": "select", "sysid": None}
+    assert parse('{"type": "layers", "layers": {"beams": false}}') == {"type": "layers", "layers": {"beams": False}}
+
+
+def test_over_the_stream_a_page_is_answered_alone(tmp_path):
+    with RunningStation(None, tmp_path, urls=[]) as station:
+        url = f"ws://127.0.0.1:{station.http_port}"
+
+        def answer(stream) -> dict:
+            while True:
+                note = json.loads(stream.recv(timeout=10))
+                if note["type"] in ("view", "view-error"):
+                    return note
+
+        with ws_connect(f"{url}/ws?viewer={VIEWER}", origin=station.base) as mine, \
+                ws_connect(f"{url}/ws", origin=station.base) as anonymous:
+            mine.send(json.dumps({"type": "camera", "mode": "top"}))
+            assert answer(mine)["mode"] == "top"
+            assert station.station.view.views.get(VIEWER).mode == "top"
+            mine.send(json.dumps({"type": "camera", "mode": HOSTILE}))
+            refused = answer(mine)
+            assert refused["type"] == "view-error" and HOSTILE not in refused["detail"]
+            assert station.station.view.views.get(VIEWER).mode == "top"  # unchanged
+            anonymous.send(json.dumps({"type": "camera", "mode": "top"}))
+            assert answer(anonymous) == {"type": "view-error",
+                                         "detail": "this stream has no viewer id: open it with ?viewer=ID"}
+        views = station.station.view.views
+        wait_wall(lambda: views.get(VIEWER) is None, 10, "the page went: its settings go with it")
