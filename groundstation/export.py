@@ -35,6 +35,9 @@ def export_html(path: str | Path, scene: Scene | None, datum: Datum | None, grou
     view = SceneView(fleet, scene, clock=lambda: replay.now)
     try:
         serializer = view.server.get_scene_serializer()
+        # no environment map in the file: viser hides the canvas until one is decoded, which in software WebGL
+        # often never ends (the exported page stayed blank in one headless run of two); its lights remain
+        view.server.scene.configure_environment_map(None)
         frame = max(MIN_FRAME, replay.duration / MAX_FRAMES)
         telemetry = TelemetryLabels(view, replay)
         view.draw()
