@@ -22,6 +22,18 @@ GROUND = vrml_box(0, 0, -0.05, 200, 200, 0.1)  # top at z = 0
 NORTH_WALL = vrml_box(0, 10, 2, 20, 0.2, 6)  # south face at y = 9.9, x from -10 to 10, up to z = 5
 
 
+@pytest.fixture(scope="module")
+def browser():
+    """Debian's headless Chromium (see harness.launch_chromium), one per test module."""
+    from harness import launch_chromium
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        chromium = launch_chromium(playwright)
+        yield chromium
+        chromium.close()
+
+
 @pytest.fixture
 def box():
     """The VRML text of a Box: ``box(x, y, z, sx, sy, sz, rotation="")``."""

@@ -33,7 +33,6 @@ from harness import (
     CHROMIUM,
     RunningSim,
     RunningStation,
-    launch_chromium,
     load_default_scene,
     start_sim,
     wait_wall,
@@ -48,7 +47,7 @@ if not Path(CHROMIUM).exists():
     pytest.skip("needs Debian's chromium at /usr/bin/chromium (./scripts/test.sh installs it)", allow_module_level=True)
 
 from playwright.sync_api import TimeoutError as PlaywrightTimeout  # noqa: E402 - once Chromium is known to exist
-from playwright.sync_api import expect, sync_playwright  # noqa: E402
+from playwright.sync_api import expect  # noqa: E402
 
 TOKEN = "browser-test-token-4f2a"
 SPEEDUP = 5.0
@@ -102,14 +101,6 @@ def copters(scene, station):
     yield start
     for copter in started:
         copter.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with sync_playwright() as playwright:
-        chromium = launch_chromium(playwright)
-        yield chromium
-        chromium.close()
 
 
 class Page:

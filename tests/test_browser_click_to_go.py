@@ -16,7 +16,6 @@ from playwright.sync_api import expect  # noqa: E402
 from test_browser import (  # noqa: E402, F401 - fixtures are used by name
     FLYER,
     TOKEN,
-    browser,
     browser_page,
     copters,
     flyer,

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from harness import CHROMIUM, RunningStation, launch_chromium, load_default_scene, start_sim, wait_wall
+from harness import CHROMIUM, RunningStation, load_default_scene, start_sim, wait_wall
 from PIL import Image
 
 from vehicle.agent.settings import Settings
@@ -34,7 +34,7 @@ pytestmark = pytest.mark.browser
 if not Path(CHROMIUM).exists():
     pytest.skip("needs Debian's chromium at /usr/bin/chromium (./scripts/test.sh installs it)", allow_module_level=True)
 
-from playwright.sync_api import expect, sync_playwright  # noqa: E402 - once Chromium is known to exist
+from playwright.sync_api import expect  # noqa: E402 - once Chromium is known to exist
 
 TOKEN = "operator-view-test-token"
 SPEEDUP = 5.0
@@ -64,14 +64,6 @@ def copters(scene, station):
     yield flying, idle
     flying.stop()
     idle.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with sync_playwright() as playwright:
-        chromium = launch_chromium(playwright)
-        yield chromium
-        chromium.close()
 
 
 @pytest.fixture

@@ -21,7 +21,7 @@ import msgspec
 import numpy as np
 import pytest
 import zstandard
-from harness import CHROMIUM, RunningStation, launch_chromium, load_default_scene, start_sim, take_off, wait_wall
+from harness import CHROMIUM, RunningStation, load_default_scene, start_sim, take_off, wait_wall
 from PIL import Image
 
 from groundstation import camera
@@ -34,7 +34,7 @@ if not Path(CHROMIUM).exists():
     pytest.skip("needs Debian's chromium at /usr/bin/chromium (./scripts/test.sh installs it)", allow_module_level=True)
 
 from playwright.sync_api import TimeoutError as PlaywrightTimeout  # noqa: E402 - once Chromium is known to exist
-from playwright.sync_api import expect, sync_playwright  # noqa: E402
+from playwright.sync_api import expect  # noqa: E402
 
 TOKEN = "view3d-test-token-77c1"
 GROUNDED, HOVERING = 1, 2
@@ -64,14 +64,6 @@ def vehicles(station):
     finally:
         for sim in sims:
             sim.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with sync_playwright() as playwright:
-        chromium = launch_chromium(playwright)
-        yield chromium
-        chromium.close()
 
 
 class View:

@@ -20,7 +20,7 @@ import msgspec
 import pytest
 import viser
 import websockets
-from harness import CHROMIUM, TOKEN, RunningStation, launch_chromium, small_scene, start_sim, wait_wall
+from harness import CHROMIUM, TOKEN, RunningStation, small_scene, start_sim, wait_wall
 from websockets.sync.client import connect as ws_connect
 
 from groundstation.security import MAX_BODY, Access
@@ -324,16 +324,6 @@ def test_a_session_cookie_lets_a_browser_watch(guarded):
 # ---- in the browser -------------------------------------------------------------------------------------------
 chromium_needed = pytest.mark.skipif(
     not Path(CHROMIUM).exists(), reason="needs Debian's chromium at /usr/bin/chromium (scripts/test.sh installs it)")
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        chromium = launch_chromium(playwright)
-        yield chromium
-        chromium.close()
 
 
 @chromium_needed
