@@ -6,7 +6,7 @@ settings written into the copy's pyproject.toml, then ``mutmut run`` there, and 
 score: the share of mutants some test kills (a timeout counts as killed: the mutant
 hung the code). Surviving mutants are written, as diffs, to
 ``out/mutants/NAME/survivors.txt``; every one of them is either killed by a test or
-listed with the reason it is equivalent in ``scripts/equivalent-mutants.md``.
+listed with the reason it is equivalent in ``scripts/equivalent-mutants/MODULE.md``.
 
 Two things mutmut needs help with here:
 - mutmut mutates undecorated functions and methods only. The compiled loops carry
@@ -49,7 +49,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "out" / "mutants"
-EQUIVALENT = ROOT / "scripts" / "equivalent-mutants.md"  # surviving mutants shown to be equivalent, with why
+EQUIVALENT = ROOT / "scripts" / "equivalent-mutants"  # per module: surviving mutants shown equivalent, with why
 COPIED = ["vehicle", "groundstation", "tests", "static", "scenes", "pyproject.toml", "README.md"]
 NUMBA_DECORATOR = re.compile(r"^\s*@numba\.n?jit\b.*$")
 KILLED = {"killed", "timeout", "caught by type check", "segfault"}
@@ -62,20 +62,70 @@ class Module:
     tests: list[str]  # pytest arguments: the fast, relevant subset that is the runner's test command
     focus: dict[str, list[str]] = field(default_factory=dict)  # file: the functions mutated (default: all)
     jit: bool = True  # False: NUMBA_DISABLE_JIT=1 (the module's compiled loops run as Python)
+    jobs: int = 0  # mutants tested at once (0: --jobs); more than the cores where the tests wait on sockets
 
 
 MODULES = [
-    Module("collision", ["vehicle/world/collision.py"], ["tests/test_collision.py"], jit=False),
+    Module(
+        "collision",
+        ["vehicle/world/collision.py"],
+        ["tests/test_collision.py"],
+        focus={
+            "vehicle/world/collision.py": [
+                "_squared_distance",
+                "_segment_segment_distance",
+                "_segment_crosses_triangle",
+                "_point_triangle_distance",
+                "point_triangle_distance",
+                "segment_triangle_distance",
+                "_to_segment",
+                "Collider.sweep",
+                "Collider.clearance",
+                "Collider.touches",
+                "TriangleGrid.candidates",
+            ]
+        },
+        jit=False,
+    ),
     Module(
         "memory map",
         ["vehicle/mapping/memory_map.py", "vehicle/mapping/tracing.py"],
         ["tests/test_memory_map.py"],
+        focus={
+            "vehicle/mapping/memory_map.py": [
+                "MemoryMap.add_readings",
+                "MemoryMap.mark_body",
+                "MemoryMap._note_changes",
+                "MemoryMap.take_changes",
+                "states_of",
+            ],
+            "vehicle/mapping/tracing.py": ["project", "free_cells", "_add_line", "_trace", "_clip", "_cell"],
+        },
         jit=False,
     ),
     Module(
         "map stream",
         ["vehicle/protocol/mapstream.py"],
         ["tests/test_mapstream.py", "tests/test_regressions_mapstream.py"],
+        focus={
+            "vehicle/protocol/mapstream.py": [
+                "MapStreamer.tick",
+                "MapStreamer.deltas",
+                "MapStreamer.snapshot",
+                "MapStreamer.snapshot_parts",
+                "_unpack_cells",
+                "_inflate",
+                "_varint",
+                "_varint_codes",
+                "_read_varints",
+                "_nonzero_box",
+                "_chunks",
+                "MapReceiver.feed",
+                "MapReceiver._delta",
+                "MapReceiver._apply",
+                "MapReceiver._snapshot_chunk",
+            ]
+        },
     ),
     Module(
         "planning",
@@ -112,11 +162,9 @@ MODULES = [
                     "set_current",
                     "step",
                     "_touchdown",
-                    "_navigate",
                     "_return_home",
                     "_land_here",
                     "_advance",
-                    "_auto",
                 )
             ]
         },
@@ -126,6 +174,7 @@ MODULES = [
         ["vehicle/sim/endpoint.py"],
         ["tests/test_vehicle_mavlink.py", "-k", "failsafe"],
         focus={"vehicle/sim/endpoint.py": ["Endpoint._gcs_heard", "Endpoint._check_failsafe"]},
+        jobs=8,
     ),
     Module(
         "command ACK",
@@ -140,6 +189,7 @@ MODULES = [
             "groundstation/link.py": ["Link.request", "Link.command", "Link.command_int"],
             "vehicle/agent/mavlink_controller.py": ["MavlinkController._acknowledged"],
         },
+        jobs=6,
     ),
     Module(
         "authentication",
@@ -153,6 +203,24 @@ MODULES = [
             "(token or auth or host or origin or loopback or session or body or nosniff or watching)"
             " and not streams_leave and not racing_client and not without_tls_warns",
         ],
+        focus={
+            "groundstation/security.py": [
+                "is_loopback",
+                "_same",
+                "Access.for_host",
+                "Access.is_operator",
+                "Access.may_view",
+                "Access.session_value",
+                "Access.grants_session",
+                "Access.host_allowed",
+                "same_origin",
+                "_cookie",
+                "Gate.__call__",
+                "Gate._refusal",
+                "Gate._capped",
+            ]
+        },
+        jobs=4,
     ),
     Module(
         "replay seek",
@@ -163,11 +231,36 @@ MODULES = [
             "experiment_log or backwards or after_a_seek or lost_snapshot "
             "or truncated or cut_in or corrupt or is_refused or index_is_exact or foreign_plane",
         ],
+        focus={
+            "groundstation/replay.py": [
+                "Replay.seek",
+                "Replay._needed",
+                "Replay._snapshot_start",
+                "Replay._chunk_header",
+                "Replay._apply",
+                "Replay.advance",
+                "Replay.step",
+            ]
+        },
     ),
     Module(
         "hostile-input guards",
         ["vehicle/protocol/links.py"],
         ["tests/test_links.py", "tests/test_hostile_mavlink.py", "-k", "not two_byte_datagram_flood and not the_page"],
+        focus={
+            "vehicle/protocol/links.py": [
+                "_Signed._admit",
+                "_restart",
+                "UdpLink.recv_msg",
+                "UdpLink._read",
+                "UdpLink._forget",
+                "UdpLink.write",
+                "StreamLink._open",
+                "StreamLink._down",
+                "StreamLink.recv_msg",
+            ]
+        },
+        jobs=4,
     ),
 ]
 
@@ -212,34 +305,43 @@ def slug(name: str) -> str:
 
 
 def only_mutate_in(text: str, functions: list[str]) -> str:
-    """``text`` with ``# pragma: no mutate`` on every line outside the named functions (``Class.method``,
-    ``outer.inner``) where a comment can go (not inside a string, not after a backslash)."""
-    spans = []
+    """``text`` with ``# pragma: no mutate block`` on the header of every function and class that neither is
+    nor holds one of the named functions (``Class.method``, ``outer.inner``): mutmut then skips them whole."""
+    lines = text.split("\n")
+    found = set()
+    colons = {}  # a compound statement's first line -> the line of the colon that opens its body
+    tokens = list(tokenize.generate_tokens(io.StringIO(text).readline))
+
+    def header_end(node) -> int:
+        body_line = node.body[0].lineno
+        return max(
+            t.start[0]
+            for t in tokens
+            if t.type == tokenize.OP
+            and t.string == ":"
+            and node.lineno <= t.start[0] <= body_line
+            and t.start < (body_line, node.body[0].col_offset)
+        )
 
     def visit(node, prefix: str) -> None:
         for child in ast.iter_child_nodes(node):
-            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
-                name = f"{prefix}{child.name}"
-                if name in functions:
-                    spans.append((child.lineno, child.end_lineno))
+            if not isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                visit(child, prefix)
+                continue
+            name = f"{prefix}{child.name}"
+            if name in functions:
+                found.add(name)
+            elif any(f.startswith(f"{name}.") for f in functions):
                 visit(child, f"{name}.")
             else:
-                visit(child, prefix)
+                colons[child.lineno] = header_end(child)
 
     visit(ast.parse(text), "")
-    missing = len(functions) - len(spans)
+    missing = sorted(set(functions) - found)
     if missing:
-        raise SystemExit(f"focus: {missing} of {functions} not found")
-    inside = {line for start, end in spans for line in range(start, end + 1)}
-    ends = set()  # lines where a logical or physical line ends outside a string
-    for token in tokenize.generate_tokens(io.StringIO(text).readline):
-        if token.type in (tokenize.NEWLINE, tokenize.NL) and token.start[0] not in inside:
-            ends.add(token.start[0])
-    lines = text.split("\n")
-    for number in ends:
-        line = lines[number - 1]
-        if line.strip() and "#" not in line:
-            lines[number - 1] = line + "  # pragma: no mutate"
+        raise SystemExit(f"focus: {missing} not found")
+    for number in colons.values():
+        lines[number - 1] += " # pragma: no mutate block" if "#" in lines[number - 1] else "  # pragma: no mutate block"
     return "\n".join(lines)
 
 
@@ -254,7 +356,7 @@ def run(module: Module, python: str, jobs: int) -> dict:
     started = time.monotonic()
     with open(work / "mutmut.log", "w") as log:
         subprocess.run(
-            mutmut + ["run", "--max-children", str(jobs)],
+            mutmut + ["run", "--max-children", str(module.jobs or jobs)],
             cwd=work,
             env=env,
             stdout=log,
@@ -315,11 +417,10 @@ def report(module: Module) -> dict:
 
 
 def equivalent_names() -> set[str]:
-    """The mutant names listed in scripts/equivalent-mutants.md (names change when their function does: a
+    """The mutant names listed in scripts/equivalent-mutants/*.md (names change when their function does: a
     listed mutant that no longer survives under its name shows up as open again)."""
-    if not EQUIVALENT.exists():
-        return set()
-    return set(re.findall(r"[\w.\u01c1]+__mutmut_\d+", EQUIVALENT.read_text()))
+    text = "".join(path.read_text() for path in sorted(EQUIVALENT.glob("*.md")))
+    return set(re.findall(r"[\w.\u01c1]+__mutmut_\d+", text))
 
 
 def results(work: Path) -> dict[str, str]:
@@ -373,7 +474,7 @@ def main() -> None:
     )
     print(
         "\nscore: killed / mutants (a timeout counts as killed); survived: no test failed;"
-        " equivalent: survivors listed with a reason in scripts/equivalent-mutants.md;"
+        " equivalent: survivors listed with a reason in scripts/equivalent-mutants/;"
         " open: survivors neither killed nor listed"
     )
     for row in rows:
