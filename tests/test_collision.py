@@ -508,3 +508,26 @@ def test_contact_is_found_to_a_millionth_of_the_step(wall_scene):
     contact = collider.sweep((0.0, start, 4.0), (0.0, start + 0.5 / exact, 4.0))
     assert contact is not None
     assert 0.0 <= contact.fraction - exact <= 2.0**-20
+
+
+def test_a_point_past_b_of_a_triangle_leaning_past_b_is_nearest_to_edge_bc():
+    """Ericson's edge-ab region needs the point on a's side of b (d3 <= 0). Where c leans past b along ab (an
+    obtuse angle at b), a point just past b lies in edge bc's region, and its true distance is larger than
+    its distance to the line through a and b: taking edge ab there would report the body too close."""
+    from trimesh.triangles import closest_point
+
+    triangle = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [3.0, 1.0, 0.0]])
+    points = np.array([[1.5, -0.5, 0.0], [1.2, -0.1, 0.3], [1.9, -0.2, -0.4], [1.05, -0.9, 0.0]])
+    for point in points:
+        expected = np.linalg.norm(point - closest_point(triangle[None], point[None])[0])
+        assert point_triangle_distance(point, triangle[None])[0] == pytest.approx(expected, rel=1e-12)
+    assert point_triangle_distance(points[0], triangle[None])[0] == pytest.approx(math.sqrt(0.45))
+
+
+def test_contact_is_found_within_a_millionth_of_the_step_past_the_first_touch(wall_scene):
+    """20 halvings of the step: the contact returned touches, and lies at most 2**-20 of the step past the
+    exact first touching position (here 9.6 m along a 12 m step, a fraction of 0.8)."""
+    collider = Collider(wall_scene.mesh, RADIUS)
+    contact = collider.sweep((0.0, 0.0, 4.0), (0.0, 12.0, 4.0))
+    exact = (WALL_FACE_Y - RADIUS) / 12.0
+    assert 0.0 <= contact.fraction - exact <= 2**-20 + 1e-12
