@@ -692,3 +692,36 @@ def test_an_absurdly_long_beam_along_or_near_an_edge_marks_what_a_shorter_one_ac
     short = beam(50.0)  # ends beyond the north edge; short enough not to be cut
     assert (short == FREE).sum() >= 17
     assert np.array_equal(beam(1e6), short)
+
+
+# ---- against the mutants still open after the focus (issue 14) ------------------------------------------------
+def test_single_precision_origins_far_off_the_map_are_cut_to_it_as_double_ones_are():
+    """An origin in single precision is the float64 value it holds: a line from 10 000 km west is cut to the
+    map's square in double precision and marks the whole row, edge to edge (cut in float32, where one unit
+    in the last place is 1 m there, it would stop 0.35 m short of the east edge)."""
+    for dtype in (np.float64, np.float32):
+        m = MemoryMap((0.35, 0.0), space_size=10.0, resolution=10.0)  # x from -9.65 to 10.35
+        assert m.add_readings(np.array([[-1e7, 0.05, 4.0]], dtype), np.array([EAST]), np.array([2e7]),
+                              np.array([4e7])) == 0  # the echo lies 10 000 km east, off the map
+        row = m.cell_of(0.0, 0.05)[0]
+        assert np.array_equal(np.argwhere(m.free), [(row, col) for col in range(200)]), dtype
+        assert m.detections == 0
+
+
+def test_occupied_version_moves_by_one_when_a_cell_fades_out_of_the_occupied_set(grid):
+    """Ceasing to be occupied changes the occupied set once, like becoming occupied: one step of the version
+    on the pass that takes the cell below OCCUPIED_AT, none on the others; one step, too, for an update in
+    which one cell fades out and another becomes occupied."""
+    grid.add_reading(ORIGIN, EAST, 3.0, 40.0)  # (10, 13) occupied, at HIT
+    steps, values = [], []
+    for _ in range(4):
+        before = grid.occupied_version
+        grid.add_reading(ORIGIN, EAST, None, 40.0)  # passes it, no echo
+        steps.append(grid.occupied_version - before)
+        values.append(int(grid.grid[10, 13]))
+    assert values == [6, 3, 0, -3] and steps == [0, 1, 0, 0]
+    grid.add_reading(ORIGIN, EAST, 3.0, 40.0)  # (10, 13) occupied again, at 6
+    before = grid.occupied_version
+    grid.add_reading(ORIGIN, EAST, 5.0, 40.0)  # (10, 13) fades to 3, (10, 15) becomes occupied
+    assert grid.occupied_version == before + 1
+    assert grid.grid[10, 13] == 3 and grid.occupied[10, 15] and grid.detections == 1
