@@ -8,7 +8,7 @@ hung the code). Surviving mutants are written, as diffs, to
 ``out/mutants/NAME/survivors.txt``; every one of them is either killed by a test or
 listed with the reason it is equivalent in ``scripts/equivalent-mutants/MODULE.md``.
 
-Two things mutmut needs help with here:
+What mutmut needs help with here:
 - mutmut mutates undecorated functions and methods only. The compiled loops carry
   ``@numba.njit``, which ``NUMBA_DISABLE_JIT=1`` turns into a no-op anyway, so in the
   copy those decorator lines are taken off and the loops run (and are mutated) as
@@ -20,13 +20,13 @@ Two things mutmut needs help with here:
 - Planning keeps its JIT: run as plain Python, the compiled A* (``_astar_cells`` and its heap) makes the
   module's tests take over an hour under mutation. Its compiled loops are therefore not mutated; they
   are checked instead against the very paths pyastar2d returned on 200 seeded grids
-  (``test_search_returns_pyastar2d_paths``) and against 4-connectivity on noisy grids; everything
-  around them (``astar``, ``plan``, inflation, smoothing, the escape, the planner) is mutated.
+  (``test_search_returns_pyastar2d_paths``) and against 4-connectivity on noisy grids; what
+  ``astar`` does around them (its checks, corner cuts, pinches, the fallback, the escape) is mutated.
 - Tests that start the station or a vehicle as a subprocess are left out: the mutated code runs
   only under mutmut's own process.
-- Where only part of a file matters (the GCS
-  failsafe in the endpoint, the command ACK path), every line outside the named
-  functions gets a ``# pragma: no mutate`` in the copy.
+- Each module names the functions it mutates (``focus``); in the copy every other function and
+  class gets ``# pragma: no mutate block`` on its header line, which mutmut 3.8 honours for the
+  whole body (a per-line pragma does not hold it).
 
 Usage: python scripts/mutants.py [NAME ...] [--jobs N]; no names runs every module.
 """

@@ -9,7 +9,8 @@ import re
 import numpy as np
 import pytest
 
-from vehicle.protocol.geodesy import heading_of, wrap_pi
+from vehicle.protocol.frames import Pose
+from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
 from vehicle.protocol.mission import (
     DO_CHANGE_SPEED,
     NAV_LAND,
@@ -20,8 +21,17 @@ from vehicle.protocol.mission import (
     MissionItem,
 )
 from vehicle.protocol.modes import MODES, STOP_MODE, Kind, mode_name, mode_number
-from vehicle.sim.autopilot import ACCEPTED, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, VELOCITY_TIMEOUT
-from vehicle.sim.physics import Limits
+from vehicle.sim.autopilot import (
+    ACCEPTED,
+    DENIED,
+    FAILED,
+    TEMPORARILY_REJECTED,
+    UNSUPPORTED,
+    VELOCITY_TIMEOUT,
+    Autopilot,
+)
+from vehicle.sim.avoidance import MARGIN
+from vehicle.sim.physics import Body, Limits
 from vehicle.sim.simulation import Simulation
 from vehicle.world.sonar import Sonar
 
@@ -72,6 +82,7 @@ def texts(world: Simulation) -> list[str]:
 
 
 # ---- arming and take-off ----------------------------------------------------------------------
+
 
 def test_copter_boots_disarmed_on_the_ground_in_guided(flat_scene):
     world = Simulation(flat_scene, Kind.COPTER, start=(2.0, 3.0), heading=90.0)
@@ -153,6 +164,7 @@ def test_arming_refused_in_land_unless_forced(flat_scene):
 
 # ---- modes ------------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
 def test_unknown_mode_name_is_unsupported(kind, flat_scene):
     autopilot = Simulation(flat_scene, kind).autopilot
@@ -173,10 +185,21 @@ def test_mode_names_are_case_insensitive(flat_scene):
 
 
 def test_mode_numbers_are_ardupilots():
-    assert {name: mode_number(Kind.ROVER, name) for name in ("HOLD", "LOITER", "AUTO", "RTL", "GUIDED")} == \
-        {"HOLD": 4, "LOITER": 5, "AUTO": 10, "RTL": 11, "GUIDED": 15}
-    assert {name: mode_number(Kind.COPTER, name) for name in ("AUTO", "GUIDED", "LOITER", "RTL", "LAND", "BRAKE")} \
-        == {"AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6, "LAND": 9, "BRAKE": 17}
+    assert {name: mode_number(Kind.ROVER, name) for name in ("HOLD", "LOITER", "AUTO", "RTL", "GUIDED")} == {
+        "HOLD": 4,
+        "LOITER": 5,
+        "AUTO": 10,
+        "RTL": 11,
+        "GUIDED": 15,
+    }
+    assert {name: mode_number(Kind.COPTER, name) for name in ("AUTO", "GUIDED", "LOITER", "RTL", "LAND", "BRAKE")} == {
+        "AUTO": 3,
+        "GUIDED": 4,
+        "LOITER": 5,
+        "RTL": 6,
+        "LAND": 9,
+        "BRAKE": 17,
+    }
     assert all(mode_name(kind, number) == name for kind in Kind for name, number in MODES[kind].items())
     assert mode_name(Kind.COPTER, 99) is None
     with pytest.raises(ValueError, match="no mode"):
@@ -185,6 +208,7 @@ def test_mode_numbers_are_ardupilots():
 
 
 # ---- GUIDED: goto, velocity, yaw, speed ---------------------------------------------------------
+
 
 @pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
 def test_goto_turns_first_then_moves(kind, flat_scene):
@@ -207,8 +231,9 @@ def test_goto_turns_first_then_moves(kind, flat_scene):
 def test_goto_reaches_the_target_and_holds(kind, flat_scene):
     world = vehicle(kind, flat_scene)
     world.autopilot.goto(20.0, -20.0)
-    step_until(world, lambda: math.hypot(world.pose.x - 20, world.pose.y + 20) < 0.15 and world.body.speed < 0.01,
-               limit=40.0)
+    step_until(
+        world, lambda: math.hypot(world.pose.x - 20, world.pose.y + 20) < 0.15 and world.body.speed < 0.01, limit=40.0
+    )
     world.run_for(10.0)
     assert (world.pose.x, world.pose.y) == pytest.approx((20.0, -20.0), abs=0.15)
     assert world.body.speed < 0.01
@@ -314,18 +339,21 @@ def test_set_speed_changes_cruise_and_refuses_out_of_range(flat_scene):
 
 # ---- AUTO missions ----------------------------------------------------------------------------
 
+
 def test_auto_mission_visits_waypoints_in_order_with_speed_changes(flat_scene):
     world = Simulation(flat_scene, Kind.COPTER)
     autopilot = world.autopilot
-    autopilot.set_mission([
-        MissionItem(NAV_WAYPOINT),  # home, replaced
-        MissionItem(NAV_TAKEOFF, alt=ALTITUDE),  # 1
-        position_item(world, NAV_WAYPOINT, 20.0, 0.0),  # 2
-        MissionItem(DO_CHANGE_SPEED, param1=1, param2=4.0),  # 3
-        position_item(world, NAV_WAYPOINT, 20.0, 25.0),  # 4
-        position_item(world, NAV_WAYPOINT, 0.0, 25.0, param2=0.5),  # 5: tighter acceptance radius
-        position_item(world, NAV_LOITER_UNLIM, 0.0, 10.0),  # 6
-    ])
+    autopilot.set_mission(
+        [
+            MissionItem(NAV_WAYPOINT),  # home, replaced
+            MissionItem(NAV_TAKEOFF, alt=ALTITUDE),  # 1
+            position_item(world, NAV_WAYPOINT, 20.0, 0.0),  # 2
+            MissionItem(DO_CHANGE_SPEED, param1=1, param2=4.0),  # 3
+            position_item(world, NAV_WAYPOINT, 20.0, 25.0),  # 4
+            position_item(world, NAV_WAYPOINT, 0.0, 25.0, param2=0.5),  # 5: tighter acceptance radius
+            position_item(world, NAV_LOITER_UNLIM, 0.0, 10.0),  # 6
+        ]
+    )
     autopilot.arm()
     assert autopilot.set_mode("AUTO") == ACCEPTED
     assert not autopilot.mission_running  # a copter on the ground waits for MISSION_START
@@ -353,8 +381,13 @@ def test_auto_mission_visits_waypoints_in_order_with_speed_changes(flat_scene):
 def test_auto_nav_land_lands_at_its_position_and_disarms(flat_scene):
     world = Simulation(flat_scene, Kind.COPTER)
     autopilot = world.autopilot
-    autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=3.0),
-                           position_item(world, NAV_LAND, 8.0, 6.0, alt=0.0)])
+    autopilot.set_mission(
+        [
+            MissionItem(NAV_WAYPOINT),
+            MissionItem(NAV_TAKEOFF, alt=3.0),
+            position_item(world, NAV_LAND, 8.0, 6.0, alt=0.0),
+        ]
+    )
     autopilot.arm()
     autopilot.set_mode("AUTO")
     autopilot.start_mission()
@@ -369,8 +402,14 @@ def test_auto_nav_land_lands_at_its_position_and_disarms(flat_scene):
 def test_auto_return_to_launch_brings_a_copter_home_and_lands(flat_scene):
     world = Simulation(flat_scene, Kind.COPTER, start=(3.0, 4.0))
     autopilot = world.autopilot
-    autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=ALTITUDE),
-                           position_item(world, NAV_WAYPOINT, 15.0, 4.0), MissionItem(NAV_RETURN_TO_LAUNCH)])
+    autopilot.set_mission(
+        [
+            MissionItem(NAV_WAYPOINT),
+            MissionItem(NAV_TAKEOFF, alt=ALTITUDE),
+            position_item(world, NAV_WAYPOINT, 15.0, 4.0),
+            MissionItem(NAV_RETURN_TO_LAUNCH),
+        ]
+    )
     autopilot.arm()
     autopilot.set_mode("AUTO")
     autopilot.start_mission()
@@ -384,8 +423,14 @@ def test_auto_return_to_launch_brings_a_copter_home_and_lands(flat_scene):
 def test_auto_rover_starts_on_entering_auto_and_returns_home_to_hold(flat_scene):
     world = Simulation(flat_scene, Kind.ROVER, start=(3.0, 4.0))
     autopilot = world.autopilot
-    autopilot.set_mission([MissionItem(NAV_WAYPOINT), position_item(world, NAV_WAYPOINT, 12.0, 4.0),
-                           position_item(world, NAV_WAYPOINT, 12.0, 12.0), MissionItem(NAV_RETURN_TO_LAUNCH)])
+    autopilot.set_mission(
+        [
+            MissionItem(NAV_WAYPOINT),
+            position_item(world, NAV_WAYPOINT, 12.0, 4.0),
+            position_item(world, NAV_WAYPOINT, 12.0, 12.0),
+            MissionItem(NAV_RETURN_TO_LAUNCH),
+        ]
+    )
     autopilot.arm()
     autopilot.set_mode("AUTO")
     assert autopilot.mission_running
@@ -401,9 +446,14 @@ def test_auto_rover_starts_on_entering_auto_and_returns_home_to_hold(flat_scene)
 def test_auto_loiter_unlimited_holds_forever(flat_scene):
     world = Simulation(flat_scene, Kind.COPTER)
     autopilot = world.autopilot
-    autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=ALTITUDE),
-                           position_item(world, NAV_LOITER_UNLIM, -6.0, 5.0),
-                           position_item(world, NAV_WAYPOINT, 10.0, 10.0)])
+    autopilot.set_mission(
+        [
+            MissionItem(NAV_WAYPOINT),
+            MissionItem(NAV_TAKEOFF, alt=ALTITUDE),
+            position_item(world, NAV_LOITER_UNLIM, -6.0, 5.0),
+            position_item(world, NAV_WAYPOINT, 10.0, 10.0),
+        ]
+    )
     autopilot.arm()
     autopilot.set_mode("AUTO")
     autopilot.start_mission()
@@ -425,8 +475,13 @@ def test_start_mission_refused_outside_auto_and_without_items(flat_scene):
 def test_unsupported_mission_items_are_skipped_with_a_warning(flat_scene):
     world = Simulation(flat_scene, Kind.ROVER)
     autopilot = world.autopilot
-    autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(183),  # DO_SET_SERVO
-                           position_item(world, NAV_WAYPOINT, 0.0, 8.0)])
+    autopilot.set_mission(
+        [
+            MissionItem(NAV_WAYPOINT),
+            MissionItem(183),  # DO_SET_SERVO
+            position_item(world, NAV_WAYPOINT, 0.0, 8.0),
+        ]
+    )
     autopilot.arm()
     autopilot.set_mode("AUTO")
     world.run_for(15.0)
@@ -435,6 +490,7 @@ def test_unsupported_mission_items_are_skipped_with_a_warning(flat_scene):
 
 
 # ---- RTL, LAND, stopping ------------------------------------------------------------------------
+
 
 def test_rtl_copter_returns_home_lands_and_disarms(flat_scene):
     world = armed_copter(flat_scene, start=(2.0, -3.0))
@@ -491,8 +547,9 @@ def test_a_stop_before_an_obstacle_is_told_once_with_where(wall_scene):
     told = [text for text in texts(world) if text.startswith("Go here:")]
     assert len(told) == 1, told
     assert "stopped short of (0.0, 20.0)" in told[0]
-    distance, x, y = (float(v) for v in re.search(r"obstacle ([\d.]+) m ahead at \(([-\d.]+), ([-\d.]+)\)",
-                                                   told[0]).groups())
+    distance, x, y = (
+        float(v) for v in re.search(r"obstacle ([\d.]+) m ahead at \(([-\d.]+), ([-\d.]+)\)", told[0]).groups()
+    )
     assert 0.3 < distance < 2.5 and abs(y - 9.9) < 0.3 and abs(x) < 1.0
 
 
@@ -534,8 +591,9 @@ def test_land_mode_lands_in_place_and_disarms(flat_scene):
     assert world.pose.z == pytest.approx(REST_Z, abs=0.01)
 
 
-@pytest.mark.parametrize(("kind", "mode"), [(Kind.COPTER, "BRAKE"), (Kind.COPTER, "LOITER"),
-                                            (Kind.ROVER, "HOLD"), (Kind.ROVER, "LOITER")])
+@pytest.mark.parametrize(
+    ("kind", "mode"), [(Kind.COPTER, "BRAKE"), (Kind.COPTER, "LOITER"), (Kind.ROVER, "HOLD"), (Kind.ROVER, "LOITER")]
+)
 def test_stop_modes_stop_in_place(kind, mode, flat_scene):
     world = vehicle(kind, flat_scene)
     world.autopilot.goto(0.0, 60.0)
@@ -586,6 +644,7 @@ def test_forced_disarm_in_the_air_makes_a_copter_fall_to_the_ground(flat_scene):
 
 # ---- ground following, determinism, avoidance ----------------------------------------------------
 
+
 @pytest.fixture
 def hill_scene(make_scene):
     """An ElevationGrid: flat at z = 0 for x < 0, rising 0.2 m per m eastwards to z = 2 at x = 10, then flat."""
@@ -594,7 +653,8 @@ def hill_scene(make_scene):
     values = " ".join(f"{h:g}" for h in np.tile(heights, 5))
     return make_scene(
         "Transform { translation -20 10 0 rotation 1 0 0 1.5708 children Shape { geometry ElevationGrid {"
-        f" xDimension 41 zDimension 5 xSpacing 1 zSpacing 5 height [ {values} ] }} }} }}\n")
+        f" xDimension 41 zDimension 5 xSpacing 1 zSpacing 5 height [ {values} ] }} }} }}\n"
+    )
 
 
 def test_rover_follows_uneven_ground(hill_scene):
@@ -641,8 +701,15 @@ def trajectory(scene) -> list[tuple]:
         world.autopilot.goto(*target)
         for _ in range(200):
             readings = world.step()
-            out.append((*world.pose.xyz(), world.pose.yaw, world.pose.pitch, world.pose.roll,
-                        tuple(r.distance for r in readings)))
+            out.append(
+                (
+                    *world.pose.xyz(),
+                    world.pose.yaw,
+                    world.pose.pitch,
+                    world.pose.roll,
+                    tuple(r.distance for r in readings),
+                )
+            )
     return out
 
 
@@ -846,3 +913,330 @@ def test_a_copter_landing_at_the_end_of_its_mission_disarms_with_the_mission_ove
     assert autopilot.mission_running is False and reached(world) == [1, 2]
     assert autopilot.current == len(autopilot.mission)
     assert texts(world)[-2:] == ["Mission complete", "Landed; disarming"]
+
+
+# ---- against the surviving mutants of the autopilot modes ------------------------------------------------
+def test_takeoff_to_one_metre_is_accepted_and_flown(flat_scene):
+    """Only a take-off altitude of zero or less is refused: a low take-off to 1 m is flown."""
+    world = Simulation(flat_scene, Kind.COPTER)
+    world.autopilot.arm()
+    assert world.autopilot.takeoff(1.0) == ACCEPTED
+    world.run_for(5.0)
+    assert world.autopilot.altitude == pytest.approx(1.0, abs=0.1) and world.autopilot.flying
+
+
+@pytest.mark.parametrize("mode", ["RTL", "LAND"])
+def test_arming_a_copter_in_rtl_or_land_is_refused_with_a_critical_message_naming_the_mode(flat_scene, mode):
+    """A copter cannot be armed in RTL or LAND; the operator is told which mode, as a critical message."""
+    world = Simulation(flat_scene, Kind.COPTER)
+    assert world.autopilot.set_mode(mode) == ACCEPTED
+    assert world.autopilot.arm() == FAILED
+    assert world.autopilot.armed is False
+    assert said(world) == [(f"Arm: mode {mode} not armable", 2)]  # MAV_SEVERITY_CRITICAL
+
+
+def test_a_forced_disarm_ends_the_take_off(flat_scene):
+    """Disarmed during a GUIDED take-off, a copter no longer counts as taking off."""
+    world = Simulation(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.arm()
+    autopilot.takeoff(4.0)
+    world.run_for(0.5)
+    assert autopilot.taking_off is True
+    assert autopilot.disarm(force=True) == ACCEPTED
+    assert autopilot.taking_off is False
+
+
+def test_mode_changes_are_counted_and_the_source_of_each_request_is_kept(flat_scene):
+    """Each change of mode counts once; a request for the mode it is already in only records its source;
+    a request without a source comes from the ground station ("gcs")."""
+    autopilot = Simulation(flat_scene, Kind.COPTER).autopilot
+    assert (autopilot.mode_changes, autopilot.mode_source) == (0, "boot")
+    assert autopilot.set_mode("LOITER") == ACCEPTED
+    assert (autopilot.mode_changes, autopilot.mode_source) == (1, "gcs")
+    assert autopilot.set_mode("LOITER", source="failsafe") == ACCEPTED  # no change of mode
+    assert (autopilot.mode_changes, autopilot.mode_source) == (1, "failsafe")
+    assert autopilot.set_mode("BRAKE", source="agent") == ACCEPTED
+    assert (autopilot.mode_changes, autopilot.mode_source) == (2, "agent")
+    assert autopilot.set_mode("GUIDED") == ACCEPTED
+    assert (autopilot.mode, autopilot.mode_changes, autopilot.mode_source) == ("GUIDED", 3, "gcs")
+
+
+@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
+def test_leaving_auto_stops_the_mission(flat_scene, kind):
+    """A running mission stops when the vehicle is switched out of AUTO."""
+    world = vehicle(kind, flat_scene)
+    autopilot = world.autopilot
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 0.0, 30.0)])
+    autopilot.set_mode("AUTO")
+    assert autopilot.start_mission() == ACCEPTED and autopilot.mission_running is True
+    world.run_for(1.0)
+    assert autopilot.set_mode("GUIDED") == ACCEPTED
+    assert autopilot.mission_running is False
+
+
+def test_a_finished_mission_is_no_longer_running(flat_scene):
+    """After its last item the mission is over: not running, current past the end, and it says so."""
+    world = Simulation(flat_scene, Kind.ROVER)
+    autopilot = world.autopilot
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 0.0, 4.0)])
+    autopilot.arm()
+    autopilot.set_mode("AUTO")
+    step_until(world, lambda: autopilot.current == len(autopilot.mission), limit=20.0)
+    assert autopilot.mission_running is False
+    assert texts(world)[-1] == "Mission complete"
+
+
+def test_land_engaged_at_speed_comes_back_to_where_it_was_engaged_and_lands_there(flat_scene):
+    """LAND holds the spot where it was engaged: a copter still braking from cruise speed flies back to it
+    (without turning round first) while it descends, and is disarmed on touching down."""
+    world = armed_copter(flat_scene)
+    world.autopilot.goto(0.0, 60.0)
+    world.run_for(10.0)
+    assert world.body.speed == pytest.approx(2.5)
+    here = (world.pose.x, world.pose.y)
+    assert world.autopilot.set_mode("LAND") == ACCEPTED
+    step_until(world, lambda: not world.autopilot.armed, limit=15.0)
+    assert math.dist((world.pose.x, world.pose.y), here) < 0.1  # braking had carried it 1.2 m on
+    assert world.autopilot.armed is False and texts(world)[-1] == "Landed; disarming"
+
+
+def test_a_vehicle_steered_by_velocity_has_no_destination_and_on_open_ground_is_not_held_back(flat_scene):
+    """Under a velocity command there is no place the vehicle is going to (unlike a goto); nothing holds it back."""
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    autopilot.goto(0.0, 10.0)
+    world.step()
+    assert autopilot.destination == (0.0, 10.0) and autopilot.blocked is False
+    autopilot.set_velocity(0.0, 2.0)
+    world.run_for(1.0)
+    assert world.body.vy > 1.0
+    assert autopilot.destination is None and autopilot.blocked is False
+
+
+def bare_autopilot(kind: Kind, ground: float = 0.0) -> Autopilot:
+    """An Autopilot on its own (no Simulation, no obstacle database), its body resting at the origin on flat
+    ground at height ``ground``, which is also home's; step it with ``autopilot.step(dt, ground)``."""
+    body = Body(kind, pose=Pose(0.0, 0.0, 0.0))
+    body.pose.z = body.rest_height(ground)
+    return Autopilot(kind, body, (0.0, 0.0, ground), Datum())
+
+
+def test_an_autopilot_without_an_obstacle_database_drives_unhindered():
+    """An Autopilot built without ``avoidance`` (its default) steers without any speed limit from obstacles."""
+    autopilot = bare_autopilot(Kind.ROVER)
+    assert autopilot.avoidance is None
+    autopilot.arm()
+    autopilot.set_mode("GUIDED")
+    assert autopilot.goto(0.0, 10.0) == ACCEPTED
+    for _ in range(400):  # 20 s
+        autopilot.step(0.05, 0.0)
+    assert (autopilot.body.pose.x, autopilot.body.pose.y) == pytest.approx((0.0, 10.0), abs=0.15)
+    assert autopilot.blocked is False
+
+
+def test_a_disarmed_rover_rests_tilted_with_the_slope_it_stands_on(hill_scene):
+    """Disarmed, a rover still settles on the ground under it: on a 0.2 slope it is pitched nose up."""
+    world = Simulation(hill_scene, Kind.ROVER, start=(5.0, 0.0), heading=90.0)  # facing up the slope
+    world.step()
+    assert not world.autopilot.armed
+    assert world.pose.pitch == pytest.approx(math.atan(0.2), abs=1e-3)
+    assert world.pose.roll == pytest.approx(0.0, abs=1e-3)
+
+
+def test_a_disarmed_copter_within_a_micrometre_of_its_resting_height_is_left_resting():
+    """A disarmed copter falls only when more than 1 micrometre above its resting height (that tolerance
+    absorbs rounding); at exactly 1 micrometre it is not dropped, at 2 it falls onto the ground."""
+    autopilot = bare_autopilot(Kind.COPTER)
+    body = autopilot.body
+    rest = body.rest_height(0.0)
+    body.pose.z = rest + 1e-6
+    for _ in range(20):
+        autopilot.step(0.05, 0.0)
+    assert body.pose.z == rest + 1e-6 and body.vz == 0.0
+    body.pose.z = rest + 2e-6
+    autopilot.step(0.05, 0.0)
+    assert body.pose.z == rest
+
+
+def test_a_copter_flown_at_a_wall_keeps_cruise_speed_until_it_must_brake_and_is_blocked_only_once_stopped(
+    wall_scene,
+):
+    """Avoidance caps the speed so the copter can still stop short, allowing one step of reaction time only:
+    it flies on at cruise speed until about 2 m from the wall, and counts as blocked only when (nearly) stopped."""
+    world = armed_copter(wall_scene)
+    world.autopilot.goto(0.0, 20.0)
+    speed_at_8 = None
+    for _ in range(round(30.0 / world.dt)):
+        world.step()
+        if speed_at_8 is None and world.pose.y >= 8.0:
+            speed_at_8 = world.body.speed
+        if world.autopilot.blocked:
+            assert world.body.speed < 0.3, f"blocked at {world.body.speed:.2f} m/s, y = {world.pose.y:.2f}"
+    assert speed_at_8 == pytest.approx(2.5)  # 1.9 m before the wall
+    assert world.autopilot.blocked and world.body.speed < 0.01
+    assert world.pose.y > 9.3
+
+
+@pytest.mark.parametrize(
+    ("wall", "target"), [((0, 10, 2, 20, 0.2, 6), (0.0, 20.0)), ((10, 0, 2, 0.2, 20, 6), (20.0, 0.0))]
+)
+def test_a_fast_head_on_approach_stops_the_avoidance_margin_short_of_the_wall(make_scene, box, wall, target):
+    """At 4 m/s straight at a wall to the north or to the east, the speed cap (with its reaction time for the
+    speed in either direction) stops the copter at least the avoidance margin short of the wall."""
+    world = armed_copter(make_scene(box(0, 0, -0.05, 200, 200, 0.1), box(*wall)))
+    world.autopilot.set_speed(4.0)
+    world.autopilot.goto(*target)
+    nearest = math.inf
+    for _ in range(round(20.0 / world.dt)):
+        world.step()
+        nearest = min(nearest, 9.9 - max(world.pose.x, world.pose.y) - world.limits.radius)
+    assert world.collision is None
+    assert MARGIN <= nearest < MARGIN + 0.1
+
+
+def creeping_rover(flat_scene, speed: float) -> Simulation:
+    """A rover at rest at the origin facing north, with one remembered echo ahead placed so that avoidance
+    caps its speed northwards at exactly ``speed`` (its acceleration is chosen to make that exact)."""
+    gap = 2.0**-10  # m between the body (radius and margin) and the echo
+    limits = Limits(accel=speed * speed / (2 * gap))  # sqrt(2 * accel * gap) == speed
+    world = armed_rover(flat_scene, limits=limits)
+    avoidance = world.avoidance
+    corridor = avoidance.body_radius + avoidance.margin
+    assert (corridor + gap) - corridor == gap and math.sqrt(2 * avoidance.accel * gap) == speed
+    avoidance.add(0.0, corridor + gap, world.time)
+    assert world.body.speed == 0.0 and world.pose.yaw == 0.0
+    return world
+
+
+def test_asking_for_exactly_the_speed_that_still_stops_short_is_not_held_back(flat_scene):
+    """Avoidance slows a vehicle only when it asks for more than it can still stop at: asking for exactly
+    that speed (here 0.04 m/s) it is not held back."""
+    world = creeping_rover(flat_scene, 0.04)
+    assert world.autopilot.set_velocity(0.0, 0.04) == ACCEPTED
+    world.step()
+    assert world.autopilot.blocked is False
+    assert world.body.vy == pytest.approx(0.04)
+
+
+def test_a_vehicle_held_back_to_0_05_m_s_is_not_yet_blocked(flat_scene):
+    """A vehicle counts as blocked only when avoidance lets it move at less than 0.05 m/s: at exactly
+    0.05 m/s it still moves and is not blocked."""
+    world = creeping_rover(flat_scene, 0.05)
+    assert world.autopilot.set_velocity(0.0, 1.0) == ACCEPTED
+    world.step()
+    assert world.autopilot.blocked is False
+    assert world.body.vy == pytest.approx(0.05)
+
+
+@pytest.mark.parametrize(
+    ("start", "home", "reached_at_once"),
+    [
+        ((0.0, 0.0), (0.2, 0.0), True),  # within 0.3 m: home
+        ((0.0, 0.0), (0.3, 0.0), False),  # exactly 0.3 m: not yet
+        ((6.0, 5.0), (-6.0, 5.0), False),  # 12 m west of home
+        ((-6.0, -5.0), (-6.0, 5.0), False),  # 10 m south of home
+    ],
+)
+def test_rtl_counts_home_as_reached_within_less_than_0_3_m_of_it(flat_scene, start, home, reached_at_once):
+    """RTL takes home as reached as soon as the vehicle is less than 0.3 m from it (x and y), and not before."""
+    world = armed_copter(flat_scene, start=start)
+    autopilot = world.autopilot
+    autopilot.rtl_altitude = 3.0  # below the copter: no climb first
+    autopilot.home = (*home, 0.0)
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    world.step()
+    assert ("Reached home" in texts(world)) is reached_at_once
+    if not reached_at_once:
+        step_until(world, lambda: "Reached home" in texts(world), limit=20.0)
+        assert math.dist((world.pose.x, world.pose.y), home) < 0.3
+
+
+def test_rtl_climbs_straight_up_to_within_0_2_m_of_its_height_even_when_facing_home(flat_scene):
+    """RTL's climb goes on (straight up) until within 0.2 m of the RTL height, even when the copter already
+    faces home and need not turn: only then does it fly home."""
+    world = armed_copter(flat_scene)
+    world.autopilot.goto(0.0, -10.0)
+    world.run_for(10.0)
+    assert world.autopilot.set_yaw(0.0) == ACCEPTED  # face north, towards home
+    world.run_for(3.0)
+    spot = (world.pose.x, world.pose.y)
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    while world.pose.z < 14.79:
+        assert world.time < 60.0
+        world.step()
+        assert math.dist((world.pose.x, world.pose.y), spot) < 0.01, f"moving off at {world.pose.z:.2f} m"
+    step_until(world, lambda: not world.autopilot.armed, limit=40.0)
+    assert math.hypot(world.pose.x, world.pose.y) < 0.3
+
+
+def test_rtl_ends_its_climb_at_exactly_0_2_m_below_the_rtl_height():
+    """The climb ends once the copter is no more than 0.2 m below the RTL height: from exactly 0.2 m below,
+    RTL goes straight on to home (here right where the copter stands: it is reached at the first step)."""
+    autopilot = bare_autopilot(Kind.COPTER, ground=-0.05)  # resting at z = 0.3
+    autopilot.rtl_altitude = 0.55  # the RTL height: z = 0.5, exactly 0.2 m above the copter
+    autopilot.arm()
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    assert autopilot.home[2] + autopilot.rtl_altitude - autopilot.body.pose.z == 0.2
+    autopilot.step(0.05, -0.05)
+    assert [event.text for event in autopilot.events][-1] == "Reached home"
+
+
+def test_a_copter_knocked_off_its_spot_during_the_rtl_climb_goes_back_to_it(flat_scene):
+    """While RTL climbs, the copter holds its spot: pushed off it by a gust it flies back, then goes home."""
+    world = armed_copter(flat_scene, start=(2.0, -3.0))
+    world.autopilot.goto(12.0, -3.0)
+    world.run_for(10.0)
+    spot = (world.pose.x, world.pose.y)
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    world.run_for(1.0)
+    world.body.vx = 3.0  # a gust
+    world.run_for(1.0)
+    assert math.dist((world.pose.x, world.pose.y), spot) > 1.0
+    step_until(world, lambda: math.dist((world.pose.x, world.pose.y), spot) < 0.1, limit=5.0)
+    assert world.pose.z < 14.0  # still climbing
+    step_until(world, lambda: not world.autopilot.armed, limit=60.0)
+    assert math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 0.3
+
+
+def test_a_rover_knocked_off_home_after_rtl_stops_near_it_and_stays_armed(flat_scene):
+    """A rover that reached home holds there: pushed on past it, it stops (it cannot back up) and stays armed."""
+    world = armed_rover(flat_scene, start=(2.0, -3.0))
+    world.autopilot.goto(2.0, 10.0)
+    world.run_for(10.0)
+    world.autopilot.set_mode("RTL")
+    step_until(world, lambda: "Reached home" in texts(world), limit=30.0)
+    world.run_for(3.0)
+    heading = world.pose.yaw
+    world.body.vx, world.body.vy = 2.0 * math.sin(heading), 2.0 * math.cos(heading)  # a shove forwards
+    world.run_for(5.0)
+    assert world.body.speed < 0.01 and world.autopilot.armed
+    assert 0.15 < math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 1.0
+
+
+def test_rtl_announces_its_climb_only_when_more_than_half_a_metre_below_the_rtl_height(make_scene, box):
+    """Entering RTL, a copter says it climbs only when the RTL height is more than 0.5 m above it."""
+    world = armed_copter(make_scene(box(0, 0, -0.5, 200, 200, 1)))  # its top exactly at 0
+    autopilot = world.autopilot
+    assert autopilot.home[2] == 0.0
+    autopilot.rtl_altitude = world.pose.z + 0.5
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    assert not any(text.startswith("RTL: climbing") for text in texts(world))
+    autopilot.set_mode("GUIDED")
+    autopilot.rtl_altitude = world.pose.z + 1.0
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    assert texts(world)[-1] == f"RTL: climbing to {world.pose.z + 1.0:.0f} m, then home"
+
+
+def test_rtl_tells_the_height_it_climbs_to_above_the_start_ground(make_scene, box):
+    """The climb RTL announces is to RTL_ALT above the start's ground, here on top of a 2 m plinth."""
+    scene = make_scene(box(0, 0, -0.05, 100, 100, 0.1), box(0, 0, 1, 6, 6, 2))
+    world = armed_copter(scene)
+    assert world.home[2] == pytest.approx(2.0)
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    assert texts(world)[-1] == "RTL: climbing to 15 m, then home"
+    highest = world.pose.z
+    for _ in range(round(12.0 / world.dt)):
+        world.step()
+        highest = max(highest, world.pose.z)
+    assert highest == pytest.approx(17.0, abs=0.3)

@@ -47,8 +47,15 @@ class ScriptedVehicle:
         while not self._stop.is_set():
             if time.monotonic() - beat > 0.2:
                 beat = time.monotonic()
-                self.send(self.mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                                                    mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 4))
+                self.send(
+                    self.mav.heartbeat_encode(
+                        mavlink.MAV_TYPE_QUADROTOR,
+                        mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                        mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                        4,
+                        4,
+                    )
+                )
             try:
                 data, _ = self.socket.recvfrom(65535)
             except (TimeoutError, OSError):
@@ -56,6 +63,7 @@ class ScriptedVehicle:
             for message in self.parser.parse_buffer(data) or []:
                 if message.get_type() not in ("COMMAND_LONG", "COMMAND_INT"):
                     continue
+                message.arrived = time.monotonic()  # when this vehicle got it (for the time between tries)
                 self.received.append(message)
                 script = self.answers.get(message.command, [mavlink.MAV_RESULT_ACCEPTED])
                 answer = script.pop(0) if len(script) > 1 else script[0]
@@ -110,11 +118,13 @@ def test_a_command_never_answered_gives_up_after_its_tries():
 
 def test_only_the_ack_of_this_command_from_this_vehicle_answers_it():
     """An ACK of another command, or of this command by another vehicle, is no answer."""
+
     def wrong_acks(vehicle, message):
         vehicle.ack(mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_RESULT_ACCEPTED)  # another command
         other = mavlink.MAVLink(None, srcSystem=2, srcComponent=1)
-        vehicle.socket.sendto(other.command_ack_encode(TAKEOFF, mavlink.MAV_RESULT_ACCEPTED, 0, 0, 255, 0)
-                              .pack(other), vehicle.target)  # another vehicle
+        vehicle.socket.sendto(
+            other.command_ack_encode(TAKEOFF, mavlink.MAV_RESULT_ACCEPTED, 0, 0, 255, 0).pack(other), vehicle.target
+        )  # another vehicle
 
     with station_and_vehicle() as (link, vehicle):
         vehicle.answers[TAKEOFF] = [wrong_acks, mavlink.MAV_RESULT_FAILED]
@@ -122,12 +132,15 @@ def test_only_the_ack_of_this_command_from_this_vehicle_answers_it():
         assert len(vehicle.tries(TAKEOFF)) == 2
 
 
-@pytest.mark.parametrize(("result", "word"), [
-    (mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "temporarily rejected"),
-    (mavlink.MAV_RESULT_UNSUPPORTED, "unsupported"),
-    (mavlink.MAV_RESULT_IN_PROGRESS, "in progress"),
-    (99, "result 99"),
-])
+@pytest.mark.parametrize(
+    ("result", "word"),
+    [
+        (mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "temporarily rejected"),
+        (mavlink.MAV_RESULT_UNSUPPORTED, "unsupported"),
+        (mavlink.MAV_RESULT_IN_PROGRESS, "in progress"),
+        (99, "result 99"),
+    ],
+)
 def test_result_words(result, word):
     with station_and_vehicle() as (link, vehicle):
         vehicle.answers[TAKEOFF] = [result]
@@ -139,8 +152,7 @@ def test_command_int_repeats_the_same_message_and_names_the_result():
         reposition = mavlink.MAV_CMD_DO_REPOSITION
         vehicle.answers[reposition] = [None, mavlink.MAV_RESULT_ACCEPTED]
         frame = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
-        result = link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0,
-                                  timeout=TIMEOUT)
+        result = link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0, timeout=TIMEOUT)
         assert result == "accepted"
         tries = vehicle.tries(reposition)
         assert len(tries) == 2
@@ -150,6 +162,7 @@ def test_command_int_repeats_the_same_message_and_names_the_result():
 def test_a_request_waits_for_the_reply_it_accepts():
     """``request`` is the path of every command and of the mission protocol: the first reply that ``accepts``."""
     with station_and_vehicle() as (link, vehicle):
+
         def answer(vehicle, message):
             vehicle.send(vehicle.mav.statustext_encode(6, b"not this"))
             vehicle.send(vehicle.mav.statustext_encode(6, b"this one"))
@@ -157,7 +170,123 @@ def test_a_request_waits_for_the_reply_it_accepts():
         command = mavlink.MAV_CMD_PREFLIGHT_CALIBRATION  # one the station never sends by itself
         vehicle.answers[command] = [answer]
         message = mavlink.MAVLink_command_long_message(1, 1, command, 0, 0, 0, 0, 0, 0, 0, 0)
-        reply = link.request(1, message, lambda m: m.get_type() == "STATUSTEXT" and m.text == "this one",
-                             timeout=TIMEOUT)
+        reply = link.request(
+            1, message, lambda m: m.get_type() == "STATUSTEXT" and m.text == "this one", timeout=TIMEOUT
+        )
         assert reply.text == "this one"
         assert len(vehicle.tries(command)) == 1
+
+
+SECOND = (0.9, 1.95)  # wall s between two tries a second apart as the vehicle receives them; two apart are >= 2 s
+
+
+def a_second_apart(first, second) -> bool:
+    """Two tries as the vehicle received them: the second came about a second after the first."""
+    return SECOND[0] < second.arrived - first.arrived < SECOND[1]
+
+
+def test_a_command_is_tried_three_times_a_second_apart_unless_told_with_its_missing_params_zero():
+    """What the station's commands rely on (commands.py gives no timeout or retries): three tries, each
+    waiting a second for the ACK; parameters not given are sent as 0."""
+    land = mavlink.MAV_CMD_NAV_LAND
+    with station_and_vehicle() as (link, vehicle):
+        vehicle.answers[TAKEOFF] = [None]
+        with pytest.raises(LinkError, match="vehicle 1 did not answer COMMAND_LONG after 3 tries"):
+            link.command(1, TAKEOFF, timeout=TIMEOUT)
+        assert [m.confirmation for m in vehicle.tries(TAKEOFF)] == [0, 1, 2]
+
+        vehicle.answers[land] = [None, mavlink.MAV_RESULT_ACCEPTED]
+        assert link.command(1, land, 2.0) == "accepted"
+        tries = vehicle.tries(land)
+        assert [m.confirmation for m in tries] == [0, 1]
+        assert a_second_apart(*tries)
+        assert all(
+            [m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7] == [2.0] + [0.0] * 6 for m in tries
+        )
+
+
+def test_command_int_is_tried_three_times_a_second_apart_as_current_and_without_autocontinue():
+    """COMMAND_INT as commands.py sends it (a goto): three tries a second apart unless told, each with
+    current and autocontinue 0 (fields MAVLink leaves unused in COMMAND_INT, to be sent as 0)."""
+    reposition = mavlink.MAV_CMD_DO_REPOSITION
+    frame = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+    with station_and_vehicle() as (link, vehicle):
+        vehicle.answers[reposition] = [None]
+        with pytest.raises(LinkError, match="vehicle 1 did not answer COMMAND_INT after 3 tries"):
+            link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0, timeout=TIMEOUT)
+        assert len(vehicle.tries(reposition)) == 3
+
+        vehicle.received.clear()
+        vehicle.answers[reposition] = [None, mavlink.MAV_RESULT_ACCEPTED]
+        assert link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0) == "accepted"
+        tries = vehicle.tries(reposition)
+        assert len(tries) == 2
+        assert a_second_apart(*tries)
+        assert all((m.current, m.autocontinue) == (0, 0) for m in tries)
+
+
+def test_command_int_is_answered_only_by_the_ack_of_its_command_and_names_a_result_it_has_no_word_for():
+    """An ACK of another command is no answer to a COMMAND_INT; an unknown result is given by its number."""
+    reposition = mavlink.MAV_CMD_DO_REPOSITION
+
+    def another_commands_ack(vehicle, message):
+        vehicle.ack(mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_RESULT_ACCEPTED)
+
+    with station_and_vehicle() as (link, vehicle):
+        vehicle.answers[reposition] = [another_commands_ack, 99]
+        result = link.command_int(
+            1,
+            reposition,
+            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            [-1.0, 0, 0, 0],
+            123456789,
+            987654321,
+            5.0,
+            timeout=TIMEOUT,
+        )
+        assert result == "result 99"
+        assert len(vehicle.tries(reposition)) == 2
+
+
+def test_a_request_is_sent_again_unchanged_three_times_a_second_apart_unless_told():
+    """``request`` (the mission protocol's path) resends the very message, waits a second per try and tries
+    three times, unless told otherwise."""
+    command = mavlink.MAV_CMD_PREFLIGHT_CALIBRATION  # one the station never sends by itself
+    message = mavlink.MAVLink_command_long_message(1, 1, command, 0, 0, 0, 0, 0, 0, 0, 0)
+
+    def accepts(m):
+        return m.get_type() == "STATUSTEXT" and m.text == "calibrated"
+
+    def answer(vehicle, message):
+        vehicle.send(vehicle.mav.statustext_encode(6, b"calibrated"))
+
+    with station_and_vehicle() as (link, vehicle):
+        vehicle.answers[command] = [None]
+        with pytest.raises(LinkError, match="vehicle 1 did not answer COMMAND_LONG after 3 tries"):
+            link.request(1, message, accepts, timeout=TIMEOUT)
+        assert [m.confirmation for m in vehicle.tries(command)] == [0, 0, 0]
+
+        vehicle.received.clear()
+        vehicle.answers[command] = [None, answer]
+        assert link.request(1, message, accepts).text == "calibrated"
+        tries = vehicle.tries(command)
+        assert [m.confirmation for m in tries] == [0, 0]
+        assert a_second_apart(*tries)
+
+
+def test_a_command_goes_only_to_the_vehicle_it_is_for():
+    """Two vehicles on one link: a command to one is sent to where that one was heard, not to both."""
+    with station_and_vehicle() as (link, first):
+        second = ScriptedVehicle(first.target[1], sysid=2)
+        second._thread.start()
+        try:
+            wait_wall(lambda: link.fleet.get(2) is not None and 2 in link.route, 5, "the second vehicle heard")
+            assert link.command(1, TAKEOFF, 0, 0, 0, 0, 0, 0, 4.0, timeout=TIMEOUT) == "accepted"
+            land = mavlink.MAV_CMD_NAV_LAND
+            assert link.command(2, land, timeout=TIMEOUT) == "accepted"  # after the first, on the same path
+            assert len(first.tries(TAKEOFF)) == 1 and not first.tries(land)
+            assert len(second.tries(land)) == 1 and not second.tries(TAKEOFF)
+        finally:
+            second._stop.set()
+            second._thread.join(timeout=2)
+            second.socket.close()

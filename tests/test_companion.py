@@ -37,11 +37,29 @@ CASTLE_START = (-40.0, 0.0)
 
 
 @contextmanager
-def autopilot(scene: Path, urls: list[str], start=(0.0, 0.0), kind: str = "copter", speedup: float = SPEEDUP,
-              extra: tuple[str, ...] = ()):
+def autopilot(
+    scene: Path,
+    urls: list[str],
+    start=(0.0, 0.0),
+    kind: str = "copter",
+    speedup: float = SPEEDUP,
+    extra: tuple[str, ...] = (),
+):
     """``vehicle sim --role autopilot`` in a process of its own, sending to ``urls``."""
-    command = [*VEHICLE, "sim", "--role", "autopilot", "--scene", str(scene), f"--start={start[0]},{start[1]}",
-               "--vehicle", kind, "--speedup", str(speedup), *extra]
+    command = [
+        *VEHICLE,
+        "sim",
+        "--role",
+        "autopilot",
+        "--scene",
+        str(scene),
+        f"--start={start[0]},{start[1]}",
+        "--vehicle",
+        kind,
+        "--speedup",
+        str(speedup),
+        *extra,
+    ]
     for url in urls:
         command += ["--mavlink", url]
     process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -53,8 +71,20 @@ def autopilot(scene: Path, urls: list[str], start=(0.0, 0.0), kind: str = "copte
 
 
 def agent_command(port: int, mission: str, scene: Path, kind: str = "copter", *extra: str) -> list[str]:
-    return [*VEHICLE, "agent", "--connect", f"udpin:127.0.0.1:{port}", "--mission", mission, "--vehicle", kind,
-            "--scene", str(scene), "--json", *extra]
+    return [
+        *VEHICLE,
+        "agent",
+        "--connect",
+        f"udpin:127.0.0.1:{port}",
+        "--mission",
+        mission,
+        "--vehicle",
+        kind,
+        "--scene",
+        str(scene),
+        "--json",
+        *extra,
+    ]
 
 
 def result_of(done) -> dict:
@@ -66,8 +96,9 @@ def result_of(done) -> dict:
 def over_mavlink(scene: Path, mission: str, start=CASTLE_START, *extra: str) -> dict:
     port = free_udp_port()
     with autopilot(scene, [f"udpout:127.0.0.1:{port}"], start):
-        done = subprocess.run(agent_command(port, mission, scene, "copter", *extra), capture_output=True, text=True,
-                              timeout=300)
+        done = subprocess.run(
+            agent_command(port, mission, scene, "copter", *extra), capture_output=True, text=True, timeout=300
+        )
     return result_of(done)
 
 
@@ -93,10 +124,28 @@ def test_search_over_mavlink_finds_what_searches_in_process_find(castle_path):
     per metre flown. Over MAVLink (commands and readings a few milliseconds late) it must land within that
     spread, and find about as many cells per metre (20 % fewer to 50 % more)."""
     scene = load_scene(castle_path)
-    nudges = [(0, 0), (0.05, 0), (-0.05, 0), (0, 0.05), (0, -0.05), (0.1, 0), (-0.1, 0), (0, 0.1), (0, -0.1),
-              (0.05, 0.05), (-0.05, -0.05), (0.05, -0.05), (-0.05, 0.05), (0.2, 0), (0, 0.2), (-0.2, 0)]
-    runs = [run_experiment(Experiment(str(castle_path), "search", start=(CASTLE_START[0] + dx, dy)), scene=scene)
-            for dx, dy in nudges]
+    nudges = [
+        (0, 0),
+        (0.05, 0),
+        (-0.05, 0),
+        (0, 0.05),
+        (0, -0.05),
+        (0.1, 0),
+        (-0.1, 0),
+        (0, 0.1),
+        (0, -0.1),
+        (0.05, 0.05),
+        (-0.05, -0.05),
+        (0.05, -0.05),
+        (-0.05, 0.05),
+        (0.2, 0),
+        (0, 0.2),
+        (-0.2, 0),
+    ]
+    runs = [
+        run_experiment(Experiment(str(castle_path), "search", start=(CASTLE_START[0] + dx, dy)), scene=scene)
+        for dx, dy in nudges
+    ]
     found = [r["detections"] for r in runs]
     per_metre = [r["detections"] / r["distance_m"] for r in runs]
     there = over_mavlink(castle_path, "search")
@@ -112,8 +161,9 @@ def test_an_agent_told_the_wrong_vehicle_refuses_to_fly_it(tmp_path):
     scene.write_text(SCENE_TEXT)
     port = free_udp_port()
     with autopilot(scene, [f"udpout:127.0.0.1:{port}"]):
-        done = subprocess.run(agent_command(port, "browse", scene, "rover"), capture_output=True, text=True,
-                              timeout=120)
+        done = subprocess.run(
+            agent_command(port, "browse", scene, "rover"), capture_output=True, text=True, timeout=120
+        )
     assert done.returncode == 1
     result = result_of(done)
     assert result["outcome"] == "error"
@@ -126,34 +176,57 @@ def test_an_operators_rtl_pauses_the_agent_and_resume_hands_control_back(tmp_pat
     scene_file = tmp_path / "yard.wrl"
     scene_file.write_text(SCENE_TEXT)
     agent_port = free_udp_port()
-    with RunningStation(small_scene(), tmp_path / "recordings") as station, station.api() as api, \
-            autopilot(scene_file, [f"udpout:127.0.0.1:{agent_port}", station.vehicle_url()], speedup=10):
-        agent = subprocess.Popen(agent_command(agent_port, "pathfind", scene_file, "copter", "--set",
-                                               "space_size=20"), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                 text=True)
+    with (
+        RunningStation(small_scene(), tmp_path / "recordings") as station,
+        station.api() as api,
+        autopilot(scene_file, [f"udpout:127.0.0.1:{agent_port}", station.vehicle_url()], speedup=10),
+    ):
+        agent = subprocess.Popen(
+            agent_command(agent_port, "pathfind", scene_file, "copter", "--set", "space_size=20"),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         try:
+
             def away(v):
                 agent_state = v["agent"] or {}
-                return agent_state.get("phase") == "mission" and v["position"] and \
-                    math.hypot(v["position"]["x"], v["position"]["y"]) > 3.0
+                return (
+                    agent_state.get("phase") == "mission"
+                    and v["position"]
+                    and math.hypot(v["position"]["x"], v["position"]["y"]) > 3.0
+                )
 
-            flying = api.wait_vehicle(1, lambda v: away(v) and v["path"] and v["map"]["occupied"], sim_timeout=120,
-                                      what="the agent flies its mission, its map and path shown")
+            flying = api.wait_vehicle(
+                1,
+                lambda v: away(v) and v["path"] and v["map"]["occupied"],
+                sim_timeout=120,
+                what="the agent flies its mission, its map and path shown",
+            )
             assert flying["agent"]["state"] == "running" and flying["agent"]["companion"]
             assert flying["map"]["source"] == "vehicle"  # the agent's own map, not one the station built
             assert flying["mode"] == "GUIDED"
 
             command_ok(api, 1, action="rtl")
-            paused = api.wait_vehicle(1, lambda v: v["agent"]["state"] == "paused", sim_timeout=30,
-                                      what="the agent pauses")
+            paused = api.wait_vehicle(
+                1, lambda v: v["agent"]["state"] == "paused", sim_timeout=30, what="the agent pauses"
+            )
             assert paused["agent"]["reason"] == "operator switched to RTL"
-            home = api.wait_vehicle(1, lambda v: math.hypot(v["position"]["x"], v["position"]["y"]) < 1.0,
-                                    sim_timeout=60, what="the vehicle flies home")
+            home = api.wait_vehicle(
+                1,
+                lambda v: math.hypot(v["position"]["x"], v["position"]["y"]) < 1.0,
+                sim_timeout=60,
+                what="the vehicle flies home",
+            )
             assert home["mode"] == "RTL" and home["agent"]["state"] == "paused"
 
             command_ok(api, 1, action="resume")  # MISSION_START to component 191, through the autopilot
-            resumed = api.wait_vehicle(1, lambda v: v["agent"]["state"] == "running" and v["mode"] == "GUIDED",
-                                       sim_timeout=30, what="the agent resumes")
+            resumed = api.wait_vehicle(
+                1,
+                lambda v: v["agent"]["state"] == "running" and v["mode"] == "GUIDED",
+                sim_timeout=30,
+                what="the agent resumes",
+            )
             assert resumed["agent"]["phase"] in ("preflight", "takeoff", "mission")
             out, err = agent.communicate(timeout=180)
         finally:
@@ -172,10 +245,16 @@ def test_an_agent_with_the_key_flies_a_signed_autopilot_that_a_signed_station_sh
     scene_file.write_text(SCENE_TEXT)
     agent_port = free_udp_port()
     signed = ("--signing-key", str(key_file))
-    with RunningStation(small_scene(), tmp_path / "recordings", signing_key=load_key(str(key_file))) as station, \
-            autopilot(scene_file, [f"udpout:127.0.0.1:{agent_port}", station.vehicle_url()], extra=signed):
-        done = subprocess.run(agent_command(agent_port, "browse", scene_file, "copter", "--set", "space_size=20",
-                                            *signed), capture_output=True, text=True, timeout=180)
+    with (
+        RunningStation(small_scene(), tmp_path / "recordings", signing_key=load_key(str(key_file))) as station,
+        autopilot(scene_file, [f"udpout:127.0.0.1:{agent_port}", station.vehicle_url()], extra=signed),
+    ):
+        done = subprocess.run(
+            agent_command(agent_port, "browse", scene_file, "copter", "--set", "space_size=20", *signed),
+            capture_output=True,
+            text=True,
+            timeout=180,
+        )
         shown = station.http.vehicle(1)
     result = result_of(done)
     assert result["outcome"] == "finished" and result["flight_controller_problems"] == 0, result
@@ -187,8 +266,12 @@ def test_an_agent_with_the_wrong_key_hears_no_autopilot(tmp_path):
     scene_file.write_text(SCENE_TEXT)
     port = free_udp_port()
     with autopilot(scene_file, [f"udpout:127.0.0.1:{port}"], extra=("--signing-key", "the vehicle's passphrase")):
-        done = subprocess.run(agent_command(port, "browse", scene_file, "copter", "--signing-key", "a guess",
-                                            "--connect-timeout", "3"), capture_output=True, text=True, timeout=60)
+        done = subprocess.run(
+            agent_command(port, "browse", scene_file, "copter", "--signing-key", "a guess", "--connect-timeout", "3"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
     assert done.returncode == 1
     assert result_of(done)["reason"] == "no a heartbeat from an autopilot within the time allowed"
 
@@ -196,13 +279,15 @@ def test_an_agent_with_the_wrong_key_hears_no_autopilot(tmp_path):
 # ---- a flight controller that misbehaves ---------------------------------------------------------------------
 class ScriptedAutopilot:
     """A copter's autopilot on a UDP link, answering as told: ``answer`` maps a command to its MAV_RESULT
-    (None: never answers). It sends heartbeats, home and a position until ``stop()``."""
+    (None: never answers); ``late_acks`` are (command, result) it sends unasked, as a late answer comes. It sends
+    heartbeats, home and a position until ``stop()``."""
 
     def __init__(self, port: int, mav_type=mavlink.MAV_TYPE_QUADROTOR):
         self.link = links.connect(f"udpout:127.0.0.1:{port}", 1, 1)
         self.mav_type = mav_type
         self.answer: dict[int, int | None | list[int | None]] = {}
         self.received: list = []
+        self.late_acks: list[tuple[int, int]] = []
         self.attitude = (0.0, 0.0, 0.5)
         self.beating = True
         self._stop = threading.Event()
@@ -224,11 +309,12 @@ class ScriptedAutopilot:
             ms = int((time.monotonic() - started) * 1000)
             mav = self.link.mav
             if self.beating:
-                mav.heartbeat_send(self.mav_type, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 217, 4,
-                                   mavlink.MAV_STATE_ACTIVE)
+                mav.heartbeat_send(self.mav_type, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 217, 4, mavlink.MAV_STATE_ACTIVE)
                 mav.global_position_int_send(ms, int(lat * 1e7), int(lon * 1e7), 584000, 4000, 0, 0, 0, 0)
                 mav.attitude_send(ms, *self.attitude, 0, 0, 0)
                 mav.home_position_send(int(lat * 1e7), int(lon * 1e7), 584000, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0)
+            while self.late_acks:
+                mav.command_ack_send(*self.late_acks.pop(0), 0, 0, 1, 191)
             while (message := self.link.recv_msg()) is not None:
                 self.received.append(message)
                 if message.get_type() == "COMMAND_LONG" or message.get_type() == "COMMAND_INT":
@@ -236,20 +322,22 @@ class ScriptedAutopilot:
                     if isinstance(result, list):  # one answer per try, the last one for every later try
                         result = result.pop(0) if len(result) > 1 else result[0]
                     if result is not None:
-                        mav.command_ack_send(message.command, result, 0, 0, message.get_srcSystem(),
-                                             message.get_srcComponent())
+                        mav.command_ack_send(
+                            message.command, result, 0, 0, message.get_srcSystem(), message.get_srcComponent()
+                        )
 
     def sent(self, command: int) -> list:
-        return [m for m in list(self.received) if m.get_type() in ("COMMAND_LONG", "COMMAND_INT")
-                and m.command == command]
+        return [
+            m for m in list(self.received) if m.get_type() in ("COMMAND_LONG", "COMMAND_INT") and m.command == command
+        ]
 
 
 @contextmanager
-def controller(mav_type=mavlink.MAV_TYPE_QUADROTOR, kind="copter"):
+def controller(mav_type=mavlink.MAV_TYPE_QUADROTOR, kind="copter", retries=3):
     port = free_udp_port()
     link = links.connect(f"udpin:127.0.0.1:{port}", 1, 191)
     with ScriptedAutopilot(port, mav_type) as fake:
-        fc = MavlinkController(link, kind, Datum(), timeout=0.3)
+        fc = MavlinkController(link, kind, Datum(), timeout=0.3, retries=retries)
         try:
             yield fc, fake
         finally:
@@ -269,8 +357,14 @@ def test_a_refused_command_is_reported_and_the_vehicle_told_to_hold():
         assert fc.arm() == mavlink.MAV_RESULT_DENIED
         assert fc.took_over() == "flight controller: component_arm_disarm denied"
         assert fc.problems == 1
-        wait_wall(lambda: any(m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.vx == 0
-                              and m.type_mask == 0x0DC7 for m in list(fake.received)), 5, "a zero-velocity hold")
+        wait_wall(
+            lambda: any(
+                m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.vx == 0 and m.type_mask == 0x0DC7
+                for m in list(fake.received)
+            ),
+            5,
+            "a zero-velocity hold",
+        )
 
 
 def test_a_command_never_answered_is_tried_three_times_then_reported():
@@ -284,12 +378,49 @@ def test_a_command_never_answered_is_tried_three_times_then_reported():
         assert not fc.taking_off  # no take-off is believed under way
 
 
+def test_a_late_refusal_of_a_command_never_answered_is_not_taken_as_the_answer_to_the_next():
+    """An ACK that comes after the agent gave up on a command is forgotten when the command is sent again:
+    the answer to the new try is what counts."""
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = None
+        assert fc.takeoff(4.0) == NO_ANSWER
+        assert fc.took_over() == "flight controller: nav_takeoff no answer"
+        fake.late_acks.append((mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_RESULT_DENIED))
+        wait_wall(lambda: any(m.get_type() == "COMMAND_ACK" for m in fc.pump()), 5, "the late refusal")
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = mavlink.MAV_RESULT_ACCEPTED
+        assert fc.takeoff(4.0) == mavlink.MAV_RESULT_ACCEPTED
+        assert len(fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)) == 4
+        assert fc.took_over() is None and fc.problems == 1
+
+
+def test_a_controller_allowed_no_tries_sends_nothing_and_reports_the_command_never_answered():
+    with controller(retries=0) as (fc, fake):
+        fc.connect(10)
+        assert fc.takeoff(4.0) == NO_ANSWER
+        assert fc.took_over() == "flight controller: nav_takeoff no answer"
+        assert not fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)
+
+
+def test_a_command_refused_or_answered_without_a_name_for_it_is_reported_by_its_number():
+    """The operator reads which command failed and how: by number when the agent has no name for it."""
+    unnamed = 60000  # no MAV_CMD of the dialect
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.answer[unnamed] = mavlink.MAV_RESULT_DENIED
+        assert fc.command(unnamed, 1.0) == mavlink.MAV_RESULT_DENIED
+        assert fc.took_over() == "flight controller: 60000 denied"
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = 99  # no MAV_RESULT
+        assert fc.takeoff(4.0) == 99
+        assert fc.took_over() == "flight controller: nav_takeoff 99"
+        assert fc.problems == 2
+
+
 def test_a_command_in_progress_is_asked_again_until_it_is_answered():
     """IN_PROGRESS is no answer yet: the agent tries again (confirmation + 1) and takes the final result."""
     with controller() as (fc, fake):
         fc.connect(10)
-        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = [mavlink.MAV_RESULT_IN_PROGRESS, None,
-                                                    mavlink.MAV_RESULT_ACCEPTED]
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = [mavlink.MAV_RESULT_IN_PROGRESS, None, mavlink.MAV_RESULT_ACCEPTED]
         assert fc.takeoff(4.0) == mavlink.MAV_RESULT_ACCEPTED
         assert [m.confirmation for m in fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)] == [0, 1, 2]
         assert fc.took_over() is None and fc.problems == 0
@@ -325,8 +456,10 @@ def test_a_flight_controller_that_falls_silent_stops_the_agent_commanding():
 
 
 def test_the_wrong_kind_of_vehicle_is_refused_at_once():
-    with controller(mavlink.MAV_TYPE_GROUND_ROVER, "copter") as (fc, _), \
-            pytest.raises(FlightControllerError, match="is a ground_rover, not a copter"):
+    with (
+        controller(mavlink.MAV_TYPE_GROUND_ROVER, "copter") as (fc, _),
+        pytest.raises(FlightControllerError, match="is a ground_rover, not a copter"),
+    ):
         fc.connect(10)
 
 

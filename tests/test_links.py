@@ -508,3 +508,36 @@ def test_a_stream_whose_peer_goes_away_reports_itself_down(clock):
     finally:
         link.close()
         server.close()
+
+
+@pytest.mark.parametrize("require", [True, False])
+def test_garbage_on_a_signed_stream_reaches_the_caller_as_bad_data_and_is_no_refused_signature(require):
+    """Bytes that are no packet are BAD_DATA, which the caller counts as such: a link that requires signatures
+    does not take them for an unsigned message (dropped and counted as refused, under system 0), nor does a
+    lax one mark them as checked; the signed message behind them still arrives."""
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    link = links.connect(f"tcp:127.0.0.1:{server.getsockname()[1]}", key=KEY, require_signed=require)
+    got = []
+
+    def signed_arrived():
+        while (message := link.recv_msg()) is not None:
+            got.append(message)
+        return any(m.get_type() == "STATUSTEXT" for m in got)
+
+    try:
+        peer, _ = server.accept()
+        with peer:
+            signer = mavlink.MAVLink(None, srcSystem=5, srcComponent=1)
+            signing.sign_outgoing(signer, KEY)
+            peer.sendall(b"\x00garbage" + signer.statustext_encode(6, b"signed").pack(signer))
+            wait_wall(signed_arrived, 5, "the signed message")
+        bad = [m for m in got if m.get_type() == "BAD_DATA"]
+        assert b"".join(m.data for m in bad) == b"\x00garbage"
+        assert not any(hasattr(m, "_verified") for m in bad)
+        assert [(m.text, m._verified) for m in got if m not in bad] == [("signed", True)]
+        assert link.refused == {} and link.up
+    finally:
+        link.close()
+        server.close()

@@ -26,8 +26,9 @@ def scan(memory: MemoryMap, rng: np.random.Generator, n: int = 40) -> None:
     directions = np.column_stack([np.sin(angles), np.cos(angles), np.zeros(n)])
     distances = rng.uniform(1, 12, n)
     distances[rng.random(n) < 0.2] = np.nan
-    memory.add_readings(np.repeat(origin[None], n, axis=0), directions, distances, np.full(n, 40.0),
-                        np.full(n, math.radians(7.5)))
+    memory.add_readings(
+        np.repeat(origin[None], n, axis=0), directions, distances, np.full(n, 40.0), np.full(n, math.radians(7.5))
+    )
 
 
 class Stream:
@@ -540,3 +541,63 @@ def test_a_snapshot_is_cut_into_at_most_65535_chunks():
     assert len(snapshot_chunks(1, bytes(65535 * room))) == 65535
     with pytest.raises(ValueError, match="^map snapshot too large to chunk$"):
         snapshot_chunks(1, bytes(65535 * room + 1))
+
+
+# ---- against the mutants still open after the focus (issue 14) ------------------------------------------------
+def test_a_snapshot_whose_compressed_part_lacks_its_checksum_is_refused():
+    """A zlib stream ends with the Adler-32 of what it holds: a snapshot part without it is cut short, and is
+    refused even though every cell it claims inflates (nothing vouches for them); whole, it is taken."""
+    cells = bytes(range(1, 17))
+    from vehicle.protocol.mapstream import _SNAPSHOT, snapshot_chunks
+
+    head = _SNAPSHOT.pack(1, 4, 1.0, 0.0, 0.0, 0, 0, 0, 4, 4)
+    whole = zlib.compress(cells, 6)
+    cut = _fed(*snapshot_chunks(1, head + whole[:-4]))
+    assert (cut.synced, cut.snapshots, cut.grid) == (False, 0, None)
+    taken = _fed(*snapshot_chunks(2, head + whole))
+    assert taken.synced and taken.grid.tobytes() == cells
+
+
+def test_a_delta_whose_deflate_stream_never_ends_is_dropped():
+    """A delta's raw deflate stream must reach its end: one flushed but never finished (as if cut after the
+    cells) is dropped like any damaged delta, so the receiver waits for the next snapshot, even though its
+    cells and values inflate whole."""
+    from vehicle.protocol.mapstream import _DELTA, _varints
+
+    data = _varints(np.array([1, 1])) + np.int8([3, 4]).tobytes()  # cells 1 and 2 get 3 and 4
+    packer = zlib.compressobj(9, zlib.DEFLATED, -15)
+    unfinished = packer.compress(data) + packer.flush(zlib.Z_SYNC_FLUSH)
+    receiver = _fed(*_snapshot(last=10))
+    receiver.feed(MAP_DELTA, _DELTA.pack(11, 2) + unfinished)
+    assert (receiver.applied, receiver.version) == (10, 1) and receiver.grid[0, 1:3].tolist() == [0, 0]
+    receiver.feed(MAP_DELTA, _DELTA.pack(11, 2) + unfinished + packer.flush())  # the same, finished
+    assert (receiver.applied, receiver.version) == (11, 2) and receiver.grid[0, 1:3].tolist() == [3, 4]
+
+
+@pytest.mark.parametrize("space_size", [4.5, 8.5])
+def test_a_map_whose_side_is_no_multiple_of_8_cells_is_snapshot_cell_for_cell(space_size):
+    """Rows are read 8 cells to a machine word only where they hold whole words: a map 9 or 17 cells a side is
+    read cell by cell, and its snapshot carries the box of its non-zero cells exactly."""
+    memory = MemoryMap((0.0, 0.0), space_size, 1.0)
+    side = memory.size
+    assert side in (9, 17)
+    memory.grid[2, 3] = 7
+    memory.grid[side - 2, side - 1] = -4
+    ident, head, part = MapStreamer(memory, (0.0, 0.0)).snapshot_parts()
+    from vehicle.protocol.mapstream import _SNAPSHOT
+
+    assert _SNAPSHOT.unpack(head)[-4:] == (2, 3, side - 3, side - 3)
+    receiver = MapReceiver()
+    feed(receiver, MapStreamer(memory, (0.0, 0.0)).snapshot())
+    assert_equal_maps(receiver, memory)
+
+
+@pytest.mark.parametrize("space_size", [0.5, 20.0])
+def test_the_snapshot_of_an_empty_map_names_an_empty_part_at_the_first_cell(space_size):
+    """With no non-zero cell the part is no rows and no columns, at row 0 and column 0 (inside even a map of
+    one cell, for a receiver that checks where the part starts), and holds no bytes."""
+    from vehicle.protocol.mapstream import _SNAPSHOT
+
+    memory = MemoryMap((0.0, 0.0), space_size, 1.0)
+    ident, head, part = MapStreamer(memory, (0.0, 0.0)).snapshot_parts()
+    assert _SNAPSHOT.unpack(head)[-4:] == (0, 0, 0, 0) and part == b""

@@ -283,3 +283,176 @@ def test_out_of_grid_is_a_value_error():
             plan(g, start, goal, 1)
         with pytest.raises(ValueError):
             astar(g, start, goal)
+
+
+def test_a_cell_outside_the_grid_is_refused_with_its_name_the_cell_and_the_grid_size():
+    """Rows and columns are checked against their own bounds (the grid need not be square), and the error says
+    which end is outside, where, and how big the grid is."""
+    wide, tall = np.zeros((10, 20), bool), np.zeros((20, 10), bool)
+    for find in (astar, lambda g, s, t: plan(g, s, t, 1)):
+        with pytest.raises(ValueError, match=r"^start \(12, 0\) is outside the 10x20 grid$"):
+            find(wide, (12, 0), (1, 1))
+        with pytest.raises(ValueError, match=r"^goal \(3, 25\) is outside the 10x20 grid$"):
+            find(wide, (1, 1), (3, 25))
+        with pytest.raises(ValueError, match=r"^goal \(2, 12\) is outside the 20x10 grid$"):
+            find(tall, (1, 1), (2, 12))
+        path = find(tall, (15, 2), (1, 8))  # row 15 is inside a grid of 20 rows, though it has only 10 columns
+        assert tuple(path[0]) == (15, 2) and tuple(path[-1]) == (1, 8)
+
+
+def test_an_obstacle_mask_that_is_not_2d_is_refused_with_its_shape():
+    with pytest.raises(ValueError, match=r"^expected a 2D obstacle mask, got shape \(10,\)$"):
+        astar(np.zeros(10, bool), (0, 0), (0, 5))
+    with pytest.raises(ValueError, match=r"^expected a 2D obstacle mask, got shape \(2, 3, 4\)$"):
+        plan(np.zeros((2, 3, 4), bool), (0, 0), (1, 1), 1)
+
+
+def test_an_obstacle_mask_of_numbers_plans_like_the_boolean_one():
+    """Any non-zero cell is an obstacle: a mask given as 0.0 / 1.0 gets the very paths its boolean twin gets."""
+    g = np.zeros((30, 30), bool)
+    g[0:20, 10] = True
+    g[24, 4] = g[25, 5] = True  # a pinch across the diagonal from (29, 0), which A* alone squeezes through
+    numbers = g.astype(float)
+    assert np.array_equal(plan(numbers, (5, 5), (5, 25), 2), plan(g, (5, 5), (5, 25), 2))
+    assert np.array_equal(plan(numbers, (5, 11), (5, 25), 3), plan(g, (5, 11), (5, 25), 3))  # with an escape
+    assert np.array_equal(astar(numbers, (29, 0), (20, 9), doubtful=True), astar(g, (29, 0), (20, 9)))
+
+
+def test_a_blocked_start_is_refused_by_the_search_itself():
+    g = np.zeros((10, 10), bool)
+    g[4, 4] = True
+    with pytest.raises(NoPath) as err:
+        astar(g, (4, 4), (8, 8))
+    assert err.value.reason == START_BLOCKED and str(err.value) == "start is inside an obstacle"
+
+
+def test_corner_cuts_are_only_diagonal_steps_between_two_blocked_cells():
+    """A diagonal step beside one blocked cell, or a straight step between two, is no cut; only the diagonal
+    squeezing between both cells of a checkerboard is, and it is reported by its index in the path."""
+    g = np.zeros((3, 3), bool)
+    step = np.array([(0, 0), (1, 1)])
+    assert not len(corner_cuts(step, g))
+    g[1, 0] = True
+    assert not len(corner_cuts(step, g))
+    g[1, 0], g[0, 1] = False, True
+    assert not len(corner_cuts(step, g))
+    g[1, 0] = True
+    assert corner_cuts(step, g).tolist() == [0]
+    assert corner_cuts(np.array([(2, 0), (2, 1), (1, 2), (0, 1), (1, 1), (0, 0)]), g).tolist() == [4]
+    g[:] = False
+    g[0, 1] = g[2, 1] = True
+    assert not len(corner_cuts(np.array([(1, 0), (1, 1), (1, 2)]), g))  # straight between two blocked cells
+
+
+@pytest.mark.parametrize("path", [[(2, 2)], np.zeros((0, 2), np.int64)])
+def test_a_path_without_a_step_has_no_corner_cut_and_its_cuts_index_it(path):
+    """Too short to have a step: no cuts, as an empty array of indices (usable to index the path)."""
+    g = np.ones((3, 3), bool)
+    cuts = corner_cuts(path, g)
+    assert len(cuts) == 0
+    assert len(np.asarray(path)[cuts]) == 0
+
+
+def test_on_an_open_grid_the_path_is_the_straight_diagonal():
+    """Diagonal steps past no obstacle are no corner cuts: 19 diagonal steps, not a staircase of 38."""
+    path = astar(np.zeros((20, 20), bool), (0, 0), (19, 19))
+    assert path.tolist() == [[i, i] for i in range(20)]
+
+
+@pytest.mark.parametrize(
+    "pinch, start, goal",
+    [([(5, 6), (6, 5)], (0, 0), (19, 19)), ([(9, 9), (10, 10)], (0, 19), (19, 0))],
+    ids=["pinch-across-the-diagonal", "pinch-along-the-diagonal"],
+)
+def test_a_pinch_on_the_straight_way_costs_a_detour_of_two_steps(pinch, start, goal):
+    """The only shortest path squeezes through a pinch (of either orientation): it is closed, and the search
+    goes round it on the 8-connected grid (21 steps) instead of falling back to four-connected steps (38)."""
+    g = np.zeros((20, 20), bool)
+    for cell in pinch:
+        g[cell] = True
+    path = astar(g, start, goal)
+    assert tuple(path[0]) == start and tuple(path[-1]) == goal
+    assert not len(corner_cuts(path, g))
+    assert not g[path[:, 0], path[:, 1]].any()
+    assert (np.abs(np.diff(path, axis=0)).max(axis=1) == 1).all()
+    assert len(path) - 1 == 21
+
+
+@pytest.mark.parametrize("doubtful", [False, True])
+def test_start_and_goal_connected_only_through_corners_are_told_apart_from_unconnected_ones(doubtful):
+    """Joined only diagonally through pinches (8-connected, never 4-connected): the error says so, also when
+    the search was doubtful and checked first whether the goal can be reached at all."""
+    g = np.zeros((12, 12), bool)
+    for i in range(12):
+        g[i, 11 - i] = True  # a wall of cells touching only at their corners
+    with pytest.raises(NoPath) as err:
+        astar(g, (0, 0), (11, 11), doubtful=doubtful)
+    assert err.value.reason == UNREACHABLE
+    assert str(err.value) == "no path (start and goal are only connected through a corner)"
+
+
+def test_a_search_that_runs_out_of_heap_room_is_run_again_with_enough(monkeypatch):
+    """The first heap has room for about one entry a cell; a search that needs more is repeated with room for
+    the most entries any search can hold, and finds the same path."""
+    import vehicle.mapping.planning as planning
+
+    real, rooms = planning._astar_cells, []
+
+    def first_one_too_small(blocked, start, goal, heap, diagonal):
+        rooms.append(len(heap))
+        return real(blocked, start, goal, heap[:4] if len(rooms) == 1 else heap, diagonal)
+
+    g = np.zeros((20, 20), bool)
+    monkeypatch.setattr(planning, "_astar_cells", first_one_too_small)
+    assert np.array_equal(_search(g, (0, 0), (19, 19)), np.column_stack([np.arange(20), np.arange(20)]))
+    assert len(rooms) == 2 and rooms[1] >= 3 * g.size + 1  # a cell's cost drops at most twice after its first push
+
+
+def test_the_escape_never_squeezes_between_two_obstacles_touching_at_a_corner():
+    """A pocket of real free cells whose only way out is diagonally between two blocked cells: the escape does
+    not take it, and says the start is boxed in."""
+    g = np.zeros((20, 20), bool)
+    g[8:12, 8:12] = True
+    g[9:11, 9:11] = False  # the pocket: rows and columns 9 and 10
+    g[11, 11] = False  # touches the pocket's corner (10, 10) between the blocked (10, 11) and (11, 10)
+    for start in [(9, 9), (9, 10), (10, 9), (10, 10)]:
+        with pytest.raises(NoPath) as err:
+            plan(g, start, (2, 2), radius_cells=3)
+        assert err.value.reason == UNREACHABLE
+        assert str(err.value) == "no path (the start is boxed in by obstacles)"
+
+
+def test_the_escape_steps_diagonally_beside_an_obstacle_but_not_through_a_squeeze():
+    """At the grid's bottom edge, between two obstacles touching at a corner (to its upper left) and one two
+    cells to the right: the nearest clear cell is two steps away, the first one diagonally past the corner of
+    the obstacle above, after the squeeze to the upper left has been refused."""
+    g = np.zeros((9, 9), bool)
+    g[7, 3] = g[8, 2] = g[8, 5] = True
+    inflated = inflate(g, 1)
+    for goal in [(0, 0), (2, 6)]:
+        path = plan(g, (8, 3), goal, radius_cells=1)
+        assert path.tolist() == [[8, 3], [7, 4], [6, 4], list(goal)]
+        assert inflated[7, 4] and not inflated[6, 4]
+
+
+@pytest.mark.parametrize("turns", range(4))
+def test_the_escape_runs_along_a_corridor_on_any_edge_of_the_grid(turns):
+    """A start at the dead end of a corridor one cell wide, between a wall and the grid's edge: it escapes
+    along the corridor to its mouth, whichever edge (the same layout turned by quarter turns) it runs along,
+    never stepping off the grid."""
+    base = np.zeros((9, 30), bool)
+    base[1, 6:] = True  # the wall; row 0 beside it is the corridor
+
+    def turned(cell):
+        mark = np.zeros(base.shape, bool)
+        mark[cell] = True
+        return tuple(int(v) for v in np.argwhere(np.rot90(mark, turns))[0])
+
+    g = np.rot90(base, turns).copy()
+    start, mouth, goal = turned((0, 29)), turned((0, 5)), turned((6, 2))
+    inflated = inflate(g, 1)
+    assert inflated[start] and not inflated[mouth]
+    path = plan(g, start, goal, radius_cells=1)
+    assert tuple(path[0]) == start and tuple(path[1]) == mouth and tuple(path[-1]) == goal
+    assert_clear(path[:2], g)
+    assert_clear(path[1:], inflated)

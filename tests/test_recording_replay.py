@@ -37,8 +37,9 @@ from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 from groundstation.replay import Player, Replay, ReplayError, index_tlog
 from groundstation.state import Fleet
 from vehicle.mapping.memory_map import MemoryMap
+from vehicle.protocol import agent_status
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.mapstream import MAP_SNAPSHOT, MapReceiver
+from vehicle.protocol.mapstream import MAP_SNAPSHOT, MapReceiver, MapStreamer
 from vehicle.protocol.mav import mavlink, mavutil
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -985,3 +986,362 @@ def test_the_index_is_exact_on_20000_messages(tmp_path):
     for i in range(0, 20_000, 997):  # each record's bytes are its packet, as pymavlink packed it
         assert bytes(data[index.offsets[i]:index.offsets[i] + index.lengths[i]]) == bytes(messages[i].get_msgbuf())
     assert sum(bool(m.get_msgbuf()[2] & 0x01) for m in messages if m.get_msgbuf()[0] == 0xFD) >= 100  # signed
+
+
+def test_the_index_is_exact_on_map_snapshot_chunk_headers(tmp_path):
+    """The chunk header read from the raw packet (snapshot id, chunk index, chunk count: three unsigned 16-bit
+    numbers) is the one pymavlink decodes, in every snapshot chunk whose header is whole on the wire."""
+    path = tmp_path / "synthetic.tlog"
+    synthetic_log(path, 6000)
+    index = index_tlog(path)
+    replay = Replay.open(path, Fleet(Datum()))
+    messages = decoded(path)
+    chunks = np.flatnonzero(index.tunnel_types == MAP_SNAPSHOT)
+    whole = [int(i) for i in chunks if bytes(messages[i].get_msgbuf())[1] >= 5 + 6]  # MAVLink 2 trims zeros
+    for i in whole:
+        assert replay.chunk_header(i) == struct.unpack_from("<HHH", bytes(messages[i].payload)), i
+    assert len(whole) > 100 and sum(max(replay.chunk_header(i)) >= 32768 for i in whole) >= 10
+
+
+# ---- seeking and playing a log of two mapping vehicles --------------------------------------------------
+TICK = 1 / 64  # s between records of the logs below: exact in binary, so a seek can land exactly on a record
+
+
+class TlogWriter:
+    """A tlog written record by record, each TICK after the one before."""
+
+    def __init__(self):
+        self.records: list[bytes] = []
+
+    @property
+    def next_time(self) -> float:
+        return PLANE_START + len(self.records) * TICK
+
+    def write(self, message, packer) -> float:
+        stamp = self.next_time
+        self.records.append(TLOG_STAMP.pack(round(stamp * 1e6)) + message.pack(packer))
+        return stamp
+
+    def save(self, path: Path) -> Path:
+        path.write_bytes(b"".join(self.records))
+        return path
+
+
+def tunnel_of(kind: int, payload: bytes):
+    return mavlink.MAVLink_tunnel_message(0, 0, kind, len(payload), list(payload.ljust(128, b"\0")))
+
+
+def packers(sysid: int):
+    """The autopilot's and the companion computer's packers of a vehicle."""
+    return (
+        mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1),
+        mavlink.MAVLink(None, srcSystem=sysid, srcComponent=mavlink.MAV_COMP_ID_ONBOARD_COMPUTER),
+    )
+
+
+def copter_beat(custom_mode: int = 3):
+    return mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_QUADROTOR,
+        mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_SAFETY_ARMED,
+        custom_mode,
+        mavlink.MAV_STATE_ACTIVE,
+        3,
+    )
+
+
+def companion_beat():
+    return mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE, 3
+    )
+
+
+def fix(x: float, y: float, ms: int):
+    """A GLOBAL_POSITION_INT at scene x, y, 10 m up, heading north."""
+    lat, lon = Datum(*PLANE_CENTRE, 0.0).to_global(x, y)
+    return mavlink.MAVLink_global_position_int_message(
+        ms, int(round(lat * 1e7)), int(round(lon * 1e7)), 0, 10_000, 50, -20, 0, 0
+    )
+
+
+def survey_log(path: Path, steps: int = 1200) -> Path:
+    """Copters 1 and 2 with companion computers, recorded from the vehicles' first words on: both stream their
+    maps (deltas, a snapshot every 4 s), 1 takes a sonar reading every 4th step, both send their agent's status
+    and a text now and then. The log opens with a text of copter 1 and a heartbeat of copter 2."""
+    log = TlogWriter()
+    (one, one_companion), (two, two_companion) = packers(1), packers(2)
+    onboard = MemoryMap((0.0, 0.0), 10.0, 5.0)
+    streamer = MapStreamer(onboard, (0.0, 0.0), snapshot_period=4.0)
+    streamer_two = MapStreamer(MemoryMap((0.0, 0.0), 10.0, 5.0), (0.0, 0.0), snapshot_period=4.0)  # an empty map
+    rng = random.Random(3)
+    log.write(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, b"recording", 0, 0), one)
+    log.write(copter_beat(), two)
+    for step in range(steps):
+        ms = step * 100
+        t = log.next_time - PLANE_START
+        angle = step / 50
+        x, y = 5 * math.cos(angle), 5 * math.sin(angle)
+        if step % 10 == 0:
+            log.write(copter_beat(3 if step < steps // 2 else 4), one)
+            log.write(companion_beat(), one_companion)
+            log.write(copter_beat(), two)
+            log.write(companion_beat(), two_companion)
+            log.write(
+                mavlink.MAVLink_sys_status_message(
+                    0, 0, 0, 300, 12_600 - step, 1500, 90 - step // 20, 0, 0, 0, 0, 0, 0
+                ),
+                one,
+            )
+            log.write(mavlink.MAVLink_mission_current_message(step // 100, 12, 0, 0), one)
+            phase = ("takeoff", "mission", "homing")[3 * step // steps]
+            for packer, reason in ((one_companion, f"step {step}"), (two_companion, f"idle {step}")):
+                status = agent_status.AgentStatus(phase, False, "", "survey", reason)
+                log.write(tunnel_of(agent_status.AGENT_STATUS, agent_status.encode(status)), packer)
+        log.write(fix(x, y, ms), one)
+        log.write(mavlink.MAVLink_attitude_message(ms, 0.0, 0.0, 0.0, 0, 0, 0), one)  # level, as the fix says
+        log.write(fix(-x, -y, ms), two)
+        log.write(mavlink.MAVLink_attitude_message(ms, 0.0, 0.0, 1.0, 0, 0, 0), two)
+        if step % 4 == 0:
+            distance = rng.uniform(1.5, 4.0)
+            log.write(
+                mavlink.MAVLink_distance_sensor_message(
+                    ms, 20, 1000, int(distance * 100), 1, 0, 0, 0, 0, 0, [1, 0, 0, 0], 0
+                ),
+                one,
+            )
+            onboard.add_reading(
+                np.array([x, y, 2.0]), np.array([math.cos(angle), math.sin(angle), 0.0]), distance, 10.0
+            )
+        for kind, payload in streamer.tick(t):
+            log.write(tunnel_of(kind, payload), one_companion)
+        for kind, payload in streamer_two.tick(t):
+            log.write(tunnel_of(kind, payload), two_companion)
+        if step % 60 == 30:
+            for packer, who in ((one, "one"), (two, "two")):
+                text = f"{who} passed step {step}".encode()
+                log.write(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, text, 0, 0), packer)
+    return log.save(path)
+
+
+def played(path: Path, until: float, datum: Datum) -> Fleet:
+    """A Fleet fed every message of the log up to ``until`` (Unix seconds) in order, as a live link would."""
+    fleet = Fleet(datum, forget_after=None)
+    for message in decoded(path):
+        if message._timestamp > until:
+            break
+        fleet.apply(message, message._timestamp)
+    return fleet
+
+
+def shown(vehicle) -> dict:
+    """What a seek rebuilds of a vehicle: its latest status messages, trail, sonar, hits and agent."""
+    return {
+        "mode": vehicle.mode,
+        "armed": vehicle.armed,
+        "kind": vehicle.kind,
+        "position": (vehicle.lat, vehicle.lon, vehicle.alt, vehicle.x, vehicle.y),
+        "attitude": (vehicle.roll, vehicle.pitch, vehicle.yaw),
+        "motion": (vehicle.speed, vehicle.climb),
+        "battery": (vehicle.voltage, vehicle.remaining),
+        "home": vehicle.home,
+        "heard": (vehicle.last_heartbeat, vehicle.last_message, vehicle.companion_heartbeat),
+        "boot": vehicle.time_boot_s,
+        "mission": (vehicle.mission_current, vehicle.mission_total),
+        "trail": list(vehicle.trail),
+        "sonar": vehicle.sonar,
+        "hits": list(vehicle.hits),
+        "agent": vehicle.agent,
+    }
+
+
+def test_after_a_seek_two_mapping_vehicles_show_what_the_log_played_up_to_there_shows(tmp_path):
+    """A seek applies only some records (the first heartbeats, the map from its last whole snapshot, the latest of
+    each status message per component, the recent texts and readings) and still shows each vehicle as playing the
+    log from its start up to the seek time does; its messages are its last texts in the log, each once."""
+    path = survey_log(tmp_path / "survey.tlog")
+    index = index_tlog(path)
+    datum = Datum(*PLANE_CENTRE, 0.0)
+    replay = Replay.open(path, Fleet(datum))
+    texts = [(m._timestamp, m.get_srcSystem(), m.text) for m in decoded(path) if m.get_type() == "STATUSTEXT"]
+    first_status = np.flatnonzero((index.tunnel_types == agent_status.AGENT_STATUS) & (index.sysids == 1))[0]
+    at = [
+        float(index.times[first_status] - index.start),  # copter 1's agent has sent one status so far
+        replay.duration * 0.45,
+        replay.duration * 0.8,
+        replay.duration,
+    ]
+    maps = sequential_maps(path, [index.start + seconds for seconds in at])
+    for seconds in at:
+        replay.seek(seconds)
+        until = index.start + seconds
+        fleet = played(path, until, datum)
+        assert replay.fleet.ids() == fleet.ids() == [1, 2]
+        for sysid in (1, 2):
+            got, expected = replay.fleet.get(sysid), fleet.get(sysid)
+            assert shown(got) == shown(expected), (seconds, sysid)
+            assert [m["text"] for m in got.messages] == [
+                text for when, who, text in texts if who == sysid and when <= until
+            ][-20:]
+            assert got.status == (got.messages[-1]["text"] if got.messages else "")
+        copter = replay.fleet.get(1)
+        grid, synced, applied = maps[until]
+        assert (copter.map_stream.synced, copter.map_stream.applied) == (synced, applied)
+        assert synced == (seconds > 1)  # the first snapshot comes after the first status
+        assert np.array_equal(copter.map_stream.grid, grid)
+        assert len(copter.hits) == len(fleet.get(1).hits) >= (100 if seconds > 10 else 0)
+    assert copter.mode != replay.fleet.get(2).mode and len(copter.messages) == 20  # the late mode; 21 texts said
+    assert copter.agent.reason != replay.fleet.get(2).agent.reason
+
+
+def mapping_log(path: Path) -> tuple[Path, list[np.ndarray]]:
+    """Copter 1's companion streams a noisy map: snapshot 1 (three chunks or more), deltas, snapshot 2 with a delta
+    sent between its first and second chunk (as a sender that spreads a big snapshot's chunks over several ticks
+    would), and more deltas. Returns the log and the onboard map after snapshot 1 and at the end."""
+    log = TlogWriter()
+    autopilot, companion = packers(1)
+    onboard = MemoryMap((0.0, 0.0), 10.0, 5.0)
+    rng = np.random.default_rng(8)
+    onboard.grid[20:60, 20:60] = rng.integers(-20, 20, (40, 40), dtype=np.int8)
+    streamer = MapStreamer(onboard, (0.0, 0.0))  # (a map that had something in it when streaming began)
+    log.write(copter_beat(), autopilot)
+    log.write(companion_beat(), companion)
+    log.write(fix(0.0, 0.0, 0), autopilot)
+
+    def readings(count: int) -> None:
+        for _ in range(count):
+            angle = rng.uniform(0, 2 * math.pi)
+            onboard.add_reading(
+                np.array([0.0, 0.0, 2.0]),
+                np.array([math.cos(angle), math.sin(angle), 0.0]),
+                rng.uniform(2.0, 8.0),
+                10.0,
+            )
+
+    def send(payloads) -> None:
+        for kind, payload in payloads:
+            log.write(tunnel_of(kind, payload), companion)
+
+    first = streamer.snapshot()
+    assert sum(kind == MAP_SNAPSHOT for kind, _ in first) >= 3
+    send(first)
+    maps = [onboard.grid.copy()]
+    for _ in range(3):
+        readings(2)
+        send(streamer.deltas())
+        log.write(copter_beat(), autopilot)
+    readings(2)
+    second = streamer.snapshot()
+    chunks = [i for i, (kind, _) in enumerate(second) if kind == MAP_SNAPSHOT]
+    send(second[: chunks[0] + 1])
+    readings(2)
+    between = streamer.deltas()
+    assert between
+    send(between)
+    send(second[chunks[0] + 1 :])
+    for _ in range(3):
+        readings(2)
+        send(streamer.deltas())
+        log.write(copter_beat(), autopilot)
+    maps.append(onboard.grid.copy())
+    return log.save(path), maps
+
+
+def test_after_a_seek_the_map_is_the_vehicles_also_when_a_delta_came_between_snapshot_chunks(tmp_path):
+    """The map is rebuilt from the last whole snapshot on, with the deltas after it: a delta newer than that
+    snapshot that came between its chunks is applied once the snapshot is whole, so the map is the vehicle's. A
+    seek into the first snapshot, before its last chunk, shows no map yet."""
+    path, (after_first, final) = mapping_log(tmp_path / "mapping.tlog")
+    index = index_tlog(path)
+    replay = Replay.open(path, Fleet(Datum()))
+    replay.seek(replay.duration)
+    stream = replay.fleet.get(1).map_stream
+    assert stream.synced and np.array_equal(stream.grid, final)
+    chunks = np.flatnonzero(index.tunnel_types == MAP_SNAPSHOT)
+    replay.seek(float(index.times[chunks[0]] - index.start))  # up to and including its first chunk
+    vehicle = replay.fleet.get(1)
+    assert vehicle is not None and vehicle.map_source is None and not vehicle.map_stream.synced
+    whole = next(i for i in chunks if replay.chunk_header(int(i))[1] == replay.chunk_header(int(i))[2] - 1)
+    replay.seek(float(index.times[whole] - index.start))
+    stream = replay.fleet.get(1).map_stream
+    assert stream.synced and np.array_equal(stream.grid, after_first)
+
+
+def long_flight_log(path: Path, poses: int = 5997) -> Path:
+    """A rover driving east 1 m per LOCAL_POSITION_NED (its pose number is its x), a heartbeat every 10 poses and
+    a text every 500."""
+    log = TlogWriter()
+    rover = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    for k in range(poses):
+        if k % 10 == 0:
+            log.write(
+                mavlink.MAVLink_heartbeat_message(
+                    mavlink.MAV_TYPE_GROUND_ROVER,
+                    mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    0,
+                    10,
+                    mavlink.MAV_STATE_ACTIVE,
+                    3,
+                ),
+                rover,
+            )
+        if k % 500 == 250:
+            log.write(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, f"pose {k}".encode(), 0, 0), rover)
+        log.write(mavlink.MAVLink_local_position_ned_message(k * 100, 0.0, float(k), 0.0, 0.0, 1.0, 0.0), rover)
+    return log.save(path)
+
+
+def test_after_a_seek_a_long_flights_trail_is_thinned_evenly_from_the_first_fix_to_the_last(tmp_path):
+    """A seek draws the trail from a sample of the poses: it starts at the first pose and ends at the latest, and
+    the samples are evenly spread (pose numbers between neighbours differ by at most one)."""
+    replay = Replay.open(long_flight_log(tmp_path / "long.tlog"), Fleet(Datum()))
+    for seconds in (60.0, replay.duration):  # some 3500 poses, then all 5997
+        replay.seek(seconds)
+        rover = replay.fleet.get(1)
+        numbers = [round(x) for x, y, z in rover.trail]
+        assert numbers[0] == 0 and numbers[-1] == round(rover.x)
+        gaps = np.diff(numbers)
+        assert 1000 < len(numbers) <= 1500 and gaps.min() >= gaps.max() - 1 >= 1, sorted(Counter(gaps).items())
+    assert rover.x == 5996.0
+
+
+def test_stepping_forward_and_backwards_after_a_seek_moves_a_tenth_of_a_second(tmp_path):
+    """A step forward plays on by 0.1 s of log time, a step back seeks 0.1 s back: each shows what a seek to its
+    time shows."""
+    path = long_flight_log(tmp_path / "long.tlog", 2000)
+    replay = Replay.open(path, Fleet(Datum()))
+    sought = Replay.open(path, Fleet(Datum()))
+    replay.seek(10.0)
+    places = []
+    for direction, seconds in ((1, 10.1), (1, 10.2), (-1, 10.1), (-1, 10.0), (-1, 9.9)):
+        replay.step(direction)
+        assert replay.clock == pytest.approx(seconds)
+        sought.seek(seconds)
+        assert replay.fleet.get(1).x == sought.fleet.get(1).x
+        places.append(replay.fleet.get(1).x)
+    assert places[0] < places[1] and places[2] == places[0] and places[2] > places[3] > places[4]  # some 6 poses a step
+
+
+def test_playing_on_after_a_seek_applies_each_record_once_up_to_its_exact_time_and_stops_at_the_end(tmp_path):
+    """Playing forward applies every record up to and including the new time, once, and at the end of the log
+    stops playing there."""
+    path = long_flight_log(tmp_path / "long.tlog", 2000)
+    index = index_tlog(path)
+    replay = Replay.open(path, Fleet(Datum()))
+    texts = np.flatnonzero(index.msgids == mavlink.MAVLINK_MSG_ID_STATUSTEXT)
+    replay.advance(float(index.times[texts[1]] - index.start))  # exactly to the second text
+    assert replay.fleet.get(1).status == "pose 750"
+    replay.advance(10.0)
+    replay.advance(5.0)
+    sought = Replay.open(path, Fleet(Datum()))
+    sought.seek(replay.clock)
+    got, expected = replay.fleet.get(1), sought.fleet.get(1)
+    assert (
+        [m["text"] for m in got.messages]
+        == [m["text"] for m in expected.messages]
+        == ["pose 250", "pose 750", "pose 1250"]
+    )
+    assert got.x == expected.x and got.status == "pose 1250"
+    replay.playing = True
+    replay.advance(replay.duration)
+    assert replay.clock == replay.duration and replay.playing is False
+    assert replay.fleet.get(1).x == 1999.0 and [m["text"] for m in replay.fleet.get(1).messages][-1] == "pose 1750"

@@ -11,16 +11,22 @@ import math
 import random
 import socket
 import time
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
-from harness import RunningSim, free_udp_port
+from harness import RunningSim, free_udp_port, wait_wall
 from mavlink_gcs import COMPANION, Gcs
 
 from vehicle.agent.settings import Settings
 from vehicle.lab.stepper import simulate
 from vehicle.protocol.mapstream import MAP_DELTA, MapReceiver
 from vehicle.protocol.mav import mavlink, mavutil
+from vehicle.protocol.modes import Kind
+from vehicle.protocol.tlog import TlogWriter
+from vehicle.sim.endpoint import Endpoint
+from vehicle.sim.simulation import Simulation
+from vehicle.sim.telemetry import Telemetry
 from vehicle.world.scene import parse_scene
 
 ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
@@ -49,8 +55,12 @@ def fly(scene):
     def start(kind="copter", mission="browse", autostart=False, speedup=10.0, settings=None, **options):
         port = free_udp_port()
         gcs = Gcs(f"udpin:127.0.0.1:{port}", speedup=speedup)
-        runner = RunningSim(make_vehicle(scene, kind, mission, autostart, settings), [f"udpout:127.0.0.1:{port}"],
-                            speedup=speedup, **options)
+        runner = RunningSim(
+            make_vehicle(scene, kind, mission, autostart, settings),
+            [f"udpout:127.0.0.1:{port}"],
+            speedup=speedup,
+            **options,
+        )
         sim = runner.__enter__()
         running.append((runner, gcs))
         gcs.wait("HEARTBEAT")
@@ -71,8 +81,10 @@ def take_off(gcs, altitude=4.0):
 
 
 # ---- identity and telemetry ---------------------------------------------------------------------
-@pytest.mark.parametrize(("kind", "mav_type", "mode"), [("copter", mavlink.MAV_TYPE_QUADROTOR, 4),
-                                                        ("rover", mavlink.MAV_TYPE_GROUND_ROVER, 4)])
+@pytest.mark.parametrize(
+    ("kind", "mav_type", "mode"),
+    [("copter", mavlink.MAV_TYPE_QUADROTOR, 4), ("rover", mavlink.MAV_TYPE_GROUND_ROVER, 4)],
+)
 def test_heartbeat_looks_like_ardupilot(fly, kind, mav_type, mode):
     gcs, _ = fly(kind)
     beat = gcs.wait("HEARTBEAT")
@@ -162,8 +174,9 @@ def test_unknown_command_is_unsupported_not_silent(fly):
 def test_take_off_then_rtl_lands_at_home_and_disarms(fly):
     gcs, _ = fly()
     take_off(gcs)
-    gcs.conn.mav.set_position_target_local_ned_send(0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b110111111000,
-                                                    4.0, -5.0, -4.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    gcs.conn.mav.set_position_target_local_ned_send(
+        0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b110111111000, 4.0, -5.0, -4.0, 0, 0, 0, 0, 0, 0, 0, 0
+    )
     gcs.wait("LOCAL_POSITION_NED", lambda m: abs(m.x - 4) < 0.3 and abs(m.y + 5) < 0.3, sim_timeout=30)
     assert gcs.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH) == mavlink.MAV_RESULT_ACCEPTED
     gcs.wait_mode(6)
@@ -185,20 +198,35 @@ def test_reposition_in_guided(fly):
     gcs, sim = fly()
     take_off(gcs)
     lat, lon = sim.world.datum.to_global(-6.0, 3.0)
-    gcs.conn.mav.command_int_send(1, 1, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink.MAV_CMD_DO_REPOSITION,
-                                  0, 0, -1, 0, 0, 0, int(lat * 1e7), int(lon * 1e7), 5.0)
+    gcs.conn.mav.command_int_send(
+        1,
+        1,
+        mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        mavlink.MAV_CMD_DO_REPOSITION,
+        0,
+        0,
+        -1,
+        0,
+        0,
+        0,
+        int(lat * 1e7),
+        int(lon * 1e7),
+        5.0,
+    )
     ack = gcs.wait("COMMAND_ACK", lambda m: m.command == mavlink.MAV_CMD_DO_REPOSITION)
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
-    gcs.wait("LOCAL_POSITION_NED", lambda m: abs(m.x - 3) < 0.3 and abs(m.y + 6) < 0.3 and abs(m.z + 5) < 0.3,
-             sim_timeout=30)
+    gcs.wait(
+        "LOCAL_POSITION_NED", lambda m: abs(m.x - 3) < 0.3 and abs(m.y + 6) < 0.3 and abs(m.z + 5) < 0.3, sim_timeout=30
+    )
 
 
 def test_rover_abort_is_hold(fly):
     gcs, _ = fly("rover")
     assert gcs.set_mode(15) == mavlink.MAV_RESULT_ACCEPTED  # GUIDED
     assert gcs.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
-    gcs.conn.mav.set_position_target_local_ned_send(0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b110111111000,
-                                                    -10.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    gcs.conn.mav.set_position_target_local_ned_send(
+        0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b110111111000, -10.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0, 0
+    )
     gcs.wait("VFR_HUD", lambda m: m.groundspeed > 1.0, sim_timeout=20)
     assert gcs.set_mode(4) == mavlink.MAV_RESULT_ACCEPTED  # HOLD
     gcs.wait("VFR_HUD", lambda m: m.groundspeed < 0.05, sim_timeout=10)
@@ -278,8 +306,23 @@ def upload(gcs, items):
         seq = message.seq
         lat, lon, alt = items[seq - 1] if seq else items[0]
         command = mavlink.MAV_CMD_NAV_WAYPOINT
-        gcs.conn.mav.mission_item_int_send(1, 1, seq, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, command, 0, 1,
-                                           0, 0, 0, 0, int(lat * 1e7), int(lon * 1e7), alt, 0)
+        gcs.conn.mav.mission_item_int_send(
+            1,
+            1,
+            seq,
+            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            command,
+            0,
+            1,
+            0,
+            0,
+            0,
+            0,
+            int(lat * 1e7),
+            int(lon * 1e7),
+            alt,
+            0,
+        )
 
 
 def download(gcs):
@@ -322,12 +365,14 @@ def test_mission_clear_all(fly):
 # ---- the map over TUNNEL ----------------------------------------------------------------------------
 def collect_map(gcs, receiver, until, drop=None, rng=None, sim_timeout=120):
     """Feed TUNNEL payloads to the receiver until ``until()``; ``drop`` maps payload type -> loss rate."""
+
     def feed(message):
         if message.get_type() == "TUNNEL":
             lost = drop is not None and rng.random() < drop.get(message.payload_type, 0.0)
             if not lost:
-                receiver.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
+                receiver.feed(message.payload_type, bytes(message.payload[: message.payload_length]))
         return until()
+
     gcs.wait(None, feed, sim_timeout=sim_timeout, component=COMPANION)  # the map is the onboard agent's
 
 
@@ -343,7 +388,7 @@ def test_map_copy_equals_the_onboard_map(fly):
         if message is None:
             break
         if message.get_type() == "TUNNEL":
-            receiver.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
+            receiver.feed(message.payload_type, bytes(message.payload[: message.payload_length]))
     assert receiver.applied == streamer.delta_seq
     assert np.array_equal(receiver.grid.reshape(-1), streamer._sent)
     assert (receiver.grid >= 6).sum() > 10  # it saw the wall
@@ -357,12 +402,18 @@ def test_a_late_and_lossy_ground_station_resynchronises(fly):
     receiver = MapReceiver()
     # lose a fifth of the map deltas, until a gap was noticed and a later
     # snapshot repaired it
-    collect_map(gcs, receiver, lambda: receiver.gaps > 0 and receiver.synced and receiver.snapshots >= 2,
-                drop={MAP_DELTA: 0.2}, rng=random.Random(3), sim_timeout=300)
+    collect_map(
+        gcs,
+        receiver,
+        lambda: receiver.gaps > 0 and receiver.synced and receiver.snapshots >= 2,
+        drop={MAP_DELTA: 0.2},
+        rng=random.Random(3),
+        sim_timeout=300,
+    )
     sim.stop()
     while (message := gcs.recv(timeout=0.5, component=COMPANION)) is not None:
         if message.get_type() == "TUNNEL":
-            receiver.feed(message.payload_type, bytes(message.payload[:message.payload_length]))
+            receiver.feed(message.payload_type, bytes(message.payload[: message.payload_length]))
     assert receiver.synced and receiver.applied == streamer.delta_seq
     assert np.array_equal(receiver.grid.reshape(-1), streamer._sent)
 
@@ -393,8 +444,7 @@ def test_garbage_and_foreign_messages_are_ignored_and_counted(fly):
 
 def test_several_ground_stations_at_once(scene):
     ports = [free_udp_port(), free_udp_port()]
-    first, second = (Gcs(f"udpin:127.0.0.1:{p}", sysid=s, speedup=10) for p, s in zip(ports, (255, 245),
-                                                                                        strict=True))
+    first, second = (Gcs(f"udpin:127.0.0.1:{p}", sysid=s, speedup=10) for p, s in zip(ports, (255, 245), strict=True))
     with RunningSim(make_vehicle(scene), [f"udpout:127.0.0.1:{p}" for p in ports], speedup=10):
         first.wait("HEARTBEAT")
         second.wait("HEARTBEAT")
@@ -418,3 +468,63 @@ def test_vehicle_log_records_both_directions(fly, tmp_path):
         kinds.add((message.get_type(), message.get_srcSystem()))
     assert ("HEARTBEAT", 1) in kinds and ("COMMAND_ACK", 1) in kinds
     assert ("COMMAND_LONG", 255) in kinds  # what the ground station sent
+
+
+@contextmanager
+def endpoint_alone(scene, log: TlogWriter | None = None):
+    """The copter's endpoint on a UDP port without the loop that drives it: the test calls ``poll(now)`` with
+    the wall times it chooses; yields (endpoint, its autopilot, a ground station talking to it)."""
+    port = free_udp_port()
+    world = Simulation(scene, Kind.COPTER)
+    endpoint = Endpoint([f"udpin:127.0.0.1:{port}"], world, Telemetry(world), failsafe_timeout=5.0, log=log)
+    gcs = Gcs(f"udpout:127.0.0.1:{port}")
+    try:
+        yield endpoint, world.autopilot, gcs
+    finally:
+        gcs.close()
+        endpoint.close()
+
+
+def gcs_heard(endpoint, gcs, now: float) -> None:
+    """A ground station's heartbeat, taken in at wall time ``now``."""
+    gcs.heartbeat()
+    wait_wall(lambda: endpoint.poll(now) or endpoint.gcs_seen == now, 5, "the ground station's heartbeat")
+
+
+def next_text(gcs):
+    """The next STATUSTEXT the vehicle sends."""
+    return wait_wall(lambda: (m := gcs.recv(0.1)) is not None and m.get_type() == "STATUSTEXT" and m, 5, "a STATUSTEXT")
+
+
+def test_the_gcs_failsafe_comes_after_exactly_its_timeout_and_again_each_time_the_station_falls_silent(scene, tmp_path):
+    """Silent for the whole timeout (5 s), a ground station it has heard makes an armed copter return home,
+    as the failsafe (the autopilot keeps who changed its mode); a CRITICAL text says why, another that it is
+    cleared when the station is back, and the next silence starts it again. The vehicle log has each text at
+    the time it was sent."""
+    log = TlogWriter(tmp_path / "vehicle.tlog")
+    failsafe = "GCS failsafe: no ground station for 5 s, RTL"
+    with endpoint_alone(scene, log) as (endpoint, autopilot, gcs):
+        assert autopilot.arm() == mavlink.MAV_RESULT_ACCEPTED
+        gcs_heard(endpoint, gcs, 100.0)
+        endpoint.poll(104.999)
+        assert autopilot.mode == "GUIDED"
+        endpoint.poll(105.0)
+        assert (autopilot.mode, autopilot.mode_source) == ("RTL", "failsafe")
+        text = next_text(gcs)
+        assert (text.text, text.severity) == (failsafe, mavlink.MAV_SEVERITY_CRITICAL)
+
+        gcs_heard(endpoint, gcs, 107.0)
+        text = next_text(gcs)
+        assert (text.text, text.severity) == ("GCS failsafe cleared: ground station back", mavlink.MAV_SEVERITY_INFO)
+        assert autopilot.set_mode("LOITER") == mavlink.MAV_RESULT_ACCEPTED  # the operator takes it back
+        endpoint.poll(111.9)
+        assert autopilot.mode == "LOITER"
+        endpoint.poll(112.0)
+        assert (autopilot.mode, autopilot.mode_source) == ("RTL", "failsafe")
+        assert next_text(gcs).text == failsafe
+    log.close()
+    reader = mavutil.mavlink_connection(str(tmp_path / "vehicle.tlog"))
+    texts = []
+    while (message := reader.recv_match(type="STATUSTEXT")) is not None:
+        texts.append((message._timestamp, message.text))
+    assert texts == [(105.0, failsafe), (107.0, "GCS failsafe cleared: ground station back"), (112.0, failsafe)]
