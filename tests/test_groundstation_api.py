@@ -299,12 +299,15 @@ def test_map_errors(api, flyer, plane):
 
 
 # ---- commands: authentication and validation ---------------------------------------------------------
-def test_commands_need_the_operator_token(api, flyer, caplog):
+def test_commands_need_the_operator_token(api, flyer, caplog, monkeypatch):
+    # every refusal reported: else an earlier test's refusal on this station, under LOG_EVERY ago, hides these
+    monkeypatch.setattr("groundstation.security.LOG_EVERY", 0.0)
     caplog.set_level(logging.WARNING, logger="groundstation")
     body = {"action": "rtl"}
     missing = api.post("/api/vehicles/1/commands", json=body)
     assert missing.status_code == 401
     assert missing.headers["www-authenticate"] == "Bearer"
+    assert missing.json()["detail"] == "the operator token is missing or wrong"
     wrong = api.post("/api/vehicles/1/commands", json=body, headers={"Authorization": "Bearer not-the-token"})
     assert wrong.status_code == 401
     assert wrong.headers["www-authenticate"] == "Bearer"
@@ -518,6 +521,13 @@ def test_auth(api):
     assert missing.status_code == 401 and missing.headers["www-authenticate"] == "Bearer"
     assert api.get("/api/auth", headers={"Authorization": "Bearer wrong"}).status_code == 401
     assert api.get("/api/auth", headers={"Authorization": "Bearer"}).status_code == 401
+
+
+def test_the_token_may_follow_the_scheme_after_several_spaces(api):
+    """``Bearer`` and the token may stand any number of spaces apart (RFC 7235 allows one or more)."""
+    spaced = {"Authorization": f"Bearer   {TOKEN}"}
+    assert api.get("/api/auth", headers=spaced).status_code == 200
+    assert api.post("/api/vehicles/99/commands", json={"action": "rtl"}, headers=spaced).status_code == 404
 
 
 @pytest.mark.parametrize("near_miss", [

@@ -10,6 +10,7 @@ through the 3D view, a socket to a foreign server) run in headless Chromium.
 from __future__ import annotations
 
 import json
+import logging
 import re
 import socket
 import time
@@ -120,6 +121,30 @@ def test_a_chunked_body_is_cut_off_at_the_cap(station, vehicle):
     assert answer.startswith(b"HTTP/1.1 413"), answer[:200]
 
 
+def test_a_body_of_exactly_the_cap_is_read_and_one_byte_more_is_refused_saying_the_cap(station, api, vehicle):
+    """``MAX_BODY`` bytes are allowed, declared or chunked; one byte more is a 413 that names the cap."""
+    cap = f"a request body may be at most {MAX_BODY} bytes"
+    over = (
+        f"POST /api/vehicles/99/commands HTTP/1.1\r\nHost: 127.0.0.1:{station.http_port}\r\n"
+        f"Authorization: Bearer {TOKEN}\r\nContent-Length: {MAX_BODY + 1}\r\n\r\n"
+    )
+    answer = raw_request(station, over)
+    assert answer.startswith(b"HTTP/1.1 413"), answer[:200]
+    assert json.loads(answer.split(b"\r\n\r\n", 1)[1]) == {"detail": cap}
+
+    def chunks(size: int):
+        for start in range(0, size, 1 << 20):
+            yield b"x" * min(1 << 20, size - start)
+
+    json_body = {"Content-Type": "application/json", **api.operator}
+    declared = api.post("/api/vehicles/99/commands", content=b"x" * MAX_BODY, headers=json_body)
+    assert declared.status_code == 422, declared.text[:200]  # read, and found no JSON
+    chunked = api.put("/api/vehicles/1/mission", content=chunks(MAX_BODY), headers=api.operator)
+    assert chunked.status_code == 422 and "not a QGC WPL 110 mission" in chunked.json()["detail"]
+    too_long = api.put("/api/vehicles/1/mission", content=chunks(MAX_BODY + 1), headers=api.operator)
+    assert too_long.status_code == 413 and too_long.json() == {"detail": cap}
+
+
 # ---- 7. a viewer's clicks reach that viewer's page only -------------------------------------------------------
 def camera_message() -> bytes:
     return msgspec.msgpack.encode({
@@ -181,6 +206,7 @@ def test_a_foreign_host_name_is_refused(station, api):
     for path in ("/", "/api/vehicles", "/api/recordings"):
         response = api.get(path, headers={"Host": "rebind.attacker.example"})
         assert response.status_code == 421, path
+        assert response.json()["detail"] == "this station does not serve that host name (see --allowed-host)"
     assert api.get("/api/vehicles", headers={"Host": f"localhost:{station.http_port}"}).status_code == 200
     assert api.get("/api/vehicles", headers={"Host": f"[::1]:{station.http_port}"}).status_code == 200
     answer = raw_request(station, "GET /api/vehicles HTTP/1.0\r\n\r\n")  # no Host at all
@@ -193,13 +219,33 @@ def test_a_name_given_with_allowed_host_is_served(scene):
         assert httpx.get(f"{running.base}/api/health", headers={"Host": "other.lan"}).status_code == 421
 
 
-def test_websockets_from_a_foreign_origin_are_refused(station):
+def test_websockets_from_a_foreign_origin_are_refused(station, caplog, monkeypatch):
+    monkeypatch.setattr("groundstation.security.LOG_EVERY", 0.0)  # each refusal logged, whatever came before
+    caplog.set_level(logging.WARNING, logger="groundstation")
     for path in ("/ws", "/viz", f"/viz/v/{VIEWER}"):
         with pytest.raises(websockets.InvalidStatus) as refused:
             ws_connect(ws_url(station, path), origin="http://evil.example", subprotocols=[SUBPROTOCOL])
         assert refused.value.response.status_code == 403, path
+    said = [record.getMessage() for record in caplog.records]
+    assert sum(message.endswith(": websockets only from this station's own pages") for message in said) == 3, said
     with ws_connect(ws_url(station, "/ws"), origin=station.base) as own:  # the station's own page
         assert json.loads(own.recv(timeout=5))["type"] == "vehicles"
+
+
+def test_the_stations_own_origin_by_name_or_over_https_may_open_a_websocket(station):
+    """A page of the station's own, opened by the name ``localhost`` (in any case) or served over TLS, may
+    open the stream: its Origin names the host the browser asked, which is all that is compared."""
+    port = station.http_port
+    for url, origin in (
+        (f"ws://localhost:{port}/ws", f"http://localhost:{port}"),
+        (f"ws://LocalHost:{port}/ws", f"http://localhost:{port}"),
+        (f"ws://127.0.0.1:{port}/ws", f"https://127.0.0.1:{port}"),
+    ):
+        with ws_connect(url, origin=origin) as own:
+            assert json.loads(own.recv(timeout=5))["type"] == "vehicles", (url, origin)
+    with pytest.raises(websockets.InvalidStatus) as refused:  # the same host under another scheme is not a page
+        ws_connect(f"ws://127.0.0.1:{port}/ws", origin=f"ftp://127.0.0.1:{port}")
+    assert refused.value.response.status_code == 403
 
 
 # ---- 9. 4xx, never 500 ------------------------------------------------------------------------------------
@@ -319,6 +365,65 @@ def test_a_session_cookie_lets_a_browser_watch(guarded):
         assert browser.post("/api/vehicles/1/commands", json={"action": "rtl"}).status_code == 401  # still no
     with ws_connect(ws_url(guarded, "/ws"), additional_headers={"Cookie": f"{name}={value}"}) as stream:
         assert json.loads(stream.recv(timeout=5))["type"] == "vehicles"
+
+
+EXPOSED_VIEWER = "a viewer pass phrase 5678"  # spaces and all, as a person may choose one
+
+
+@pytest.fixture(scope="module")
+def exposed():
+    """The policy of a station bound to 192.0.2.7 with a viewer token and ``--allowed-host Station.LAN``
+    (served on loopback for the test: the address only picks the policy)."""
+    access = Access.for_host("192.0.2.7", TOKEN, EXPOSED_VIEWER, ("Station.LAN",))
+    with RunningStation(None, None, access=access) as running:
+        yield running
+
+
+def test_a_station_bound_beyond_loopback_asks_a_token_to_watch_and_serves_its_allowed_names(exposed):
+    """Bound beyond loopback, watching needs the viewer's or the operator's token, and a name given with
+    ``--allowed-host`` is served whatever its case, while other names are refused."""
+    base, port = exposed.base, exposed.http_port
+    viewer, operator = {"Authorization": f"Bearer {EXPOSED_VIEWER}"}, {"Authorization": f"Bearer {TOKEN}"}
+    assert httpx.get(base + "/api/vehicles").status_code == 401
+    assert httpx.get(base + "/api/vehicles", headers=viewer).status_code == 200
+    assert httpx.get(base + "/api/vehicles", headers=operator).status_code == 200
+    assert httpx.post(base + "/api/vehicles/1/commands", json={"action": "rtl"}, headers=viewer).status_code == 401
+    for name in ("station.lan", "STATION.lan"):
+        assert httpx.get(base + "/api/health", headers={**viewer, "Host": f"{name}:{port}"}).status_code == 200, name
+    assert httpx.get(base + "/api/health", headers={**viewer, "Host": f"other.lan:{port}"}).status_code == 421
+
+
+def test_an_empty_viewer_token_lets_no_one_watch_beyond_loopback():
+    """``--viewer-token ''`` is no viewer token: an empty bearer token neither watches nor gets a session."""
+    access = Access.for_host("192.0.2.7", TOKEN, "")
+    assert access.viewer_token is None and access.viewing_needs_token
+    for header in ("Bearer ", "Bearer"):
+        assert not access.may_view(header, None) and not access.grants_session(header), header
+    assert access.may_view(f"Bearer {TOKEN}", None)
+
+
+def test_a_viewer_token_with_spaces_in_it_is_traded_for_a_session(exposed):
+    """The whole viewer token after ``Bearer`` counts, spaces in it too: it gets a session cookie that
+    watches, as the same header watches itself."""
+    granted = httpx.post(exposed.base + "/api/session", headers={"Authorization": f"Bearer {EXPOSED_VIEWER}"})
+    assert granted.status_code == 204, granted.text
+    name, value = granted.headers["set-cookie"].split(";")[0].split("=", 1)
+    with httpx.Client(base_url=exposed.base, cookies={name: value}) as browser:
+        assert browser.get("/api/vehicles").status_code == 200
+    half = httpx.post(exposed.base + "/api/session", headers={"Authorization": "Bearer phrase 5678"})
+    assert half.status_code == 401  # the token's last words alone are not the token
+
+
+def test_a_cookie_other_than_the_session_is_no_token_to_watch(exposed):
+    """A browser's other cookies (or junk in the Cookie header) neither let it watch nor break the
+    station: a clear 401, and the session cookie among other cookies still counts."""
+    for cookie in ("theme=dark", "theme=dark; lang=en", '=;; "junk;=='):
+        refused = httpx.get(exposed.base + "/api/vehicles", headers={"Cookie": cookie})
+        assert refused.status_code == 401, (cookie, refused.status_code)
+        assert refused.json()["detail"] == "watching this station needs a token (the viewer or the operator token)"
+    granted = httpx.post(exposed.base + "/api/session", headers={"Authorization": f"Bearer {TOKEN}"})
+    session = granted.headers["set-cookie"].split(";")[0]
+    assert httpx.get(exposed.base + "/api/vehicles", headers={"Cookie": f"theme=dark; {session}"}).status_code == 200
 
 
 # ---- in the browser -------------------------------------------------------------------------------------------
