@@ -39,7 +39,7 @@ from groundstation.link import LinkError
 from groundstation.mapview import legend, trails
 from groundstation.proxy import VIEWER_ID
 from groundstation.replay import ReplayError
-from groundstation.security import SESSION_COOKIE, BodyTooLarge, Gate
+from groundstation.security import SESSION_COOKIE, Gate
 from vehicle import __version__
 from vehicle.mapping.memory_map import FREE_AT, OCCUPIED_AT
 from vehicle.protocol.waypoints import WaypointError, mission_text, parse_mission
@@ -283,7 +283,7 @@ def create_app(station: GroundStation) -> FastAPI:
         """Upload an AUTO mission (QGC WPL 110 text; item 0 is home)."""
         live_only()
         vehicle_or_404(sysid)
-        text = (await request.body()).decode("utf-8", "replace")  # at most security.MAX_BODY bytes
+        text = (await request.body()).decode("utf-8", "replace")  # at most security.MAX_BODY bytes: the Gate read it
         try:
             items = parse_mission(text)
         except WaypointError as error:
@@ -434,10 +434,6 @@ def create_app(station: GroundStation) -> FastAPI:
     @app.exception_handler(LinkError)
     async def link_error(request: Request, error: LinkError):
         return JSONResponse({"detail": str(error)}, status_code=504)
-
-    @app.exception_handler(BodyTooLarge)
-    async def body_too_large(request: Request, error: BodyTooLarge):
-        return JSONResponse({"detail": str(error)}, status_code=413)
 
     @app.exception_handler(RequestValidationError)
     async def invalid(request: Request, error: RequestValidationError):

@@ -2,11 +2,14 @@
 
 Every request must name a Host the station serves under (an IP address,
 ``localhost`` or one given with ``--allowed-host``), so a page on a foreign
-domain cannot reach it through DNS rebinding. A browser's websocket must come
-from the station's own pages (its Origin names the same host), so another site
-cannot read live telemetry. Anything that changes state (POST, PUT, DELETE
+domain cannot reach it through DNS rebinding; a request that names no host at
+all is refused too. A browser's websocket must come from the station's own
+pages (its Origin names the same host), so another site cannot read live
+telemetry. Anything that changes state (POST, PUT, DELETE
 under ``/api/``) needs the operator token in ``Authorization`` before its body
-is read, and no body may exceed ``MAX_BODY``. When the station serves beyond
+is read, and no body may exceed ``MAX_BODY``: the Gate reads a body whole before
+any route runs, so one over the cap gets the same 413 on every route whether it
+was declared (``Content-Length``) or chunked. When the station serves beyond
 loopback, watching needs a token too: the operator's or the read-only viewer
 token, as a bearer header or as the cookie ``POST /api/session`` sets (a
 browser cannot put headers on a frame or a websocket). Every response says
@@ -30,6 +33,7 @@ from http.cookies import SimpleCookie
 from urllib.parse import urlsplit
 
 MAX_BODY = 8 << 20  # bytes: a mission of 65,535 waypoints is about 6 MB of WPL text
+NO_HOST = "the request names no host (a Host header is required)"
 SESSION_COOKIE = "scanstation_view"
 WRITES = {"POST", "PUT", "DELETE", "PATCH"}
 PUBLIC = ("/static/",)  # the page and its files: the sign-in form must load without a token
@@ -99,7 +103,7 @@ class Access:
 
     def host_allowed(self, host_header: str) -> bool:
         """An IP address (no rebinding through a literal), localhost, or a name the operator allowed."""
-        host = urlsplit(f"//{host_header}").hostname if host_header else None
+        host = urlsplit(f"//{host_header}").hostname  # None for an empty header
         if host is None:
             return False
         if host == "localhost" or host in self.allowed_hosts:
@@ -154,14 +158,23 @@ class Gate:
         if scope["type"] == "websocket":
             await self.app(scope, receive, send)
             return
+        too_large = f"a request body may be at most {self.max_body} bytes"
         length = headers.get("content-length")
         if length is not None and (not length.isdigit() or int(length) > self.max_body):
-            await _answer(send, 413, f"a request body may be at most {self.max_body} bytes")
+            await _answer(send, 413, too_large)  # declared too long: not a byte of it read
             return
-        await self.app(scope, self._capped(receive, send), _with_headers(send))
+        body = await self._body(receive)
+        if body is None:  # the client left before its body ended: no one to answer
+            return
+        if len(body) > self.max_body:
+            await _answer(send, 413, too_large)
+            return
+        await self.app(scope, _replay(body, receive), _with_headers(send))
 
     def _refusal(self, scope, headers: dict[str, str]) -> tuple[int, str] | None:
-        host = headers.get("host", "")
+        host = headers.get("host")
+        if not host:  # HTTP/1.0 needs none, and an empty one names nothing
+            return 400, NO_HOST
         if not self.access.host_allowed(host):
             return 421, "this station does not serve that host name (see --allowed-host)"
         origin = headers.get("origin")
@@ -190,27 +203,31 @@ class Gate:
                     reason, f" ({since} more since the last report)" if since else "")
         self._logged[reason] = (now, 0)
 
-    def _capped(self, receive, send):
-        """``receive`` that stops a body (chunked ones too) once it passes ``max_body``."""
-        seen = 0
-
-        async def capped():
-            nonlocal seen
+    async def _body(self, receive) -> bytes | None:
+        """The request's body, read whole before any route runs (a route's own parsing never meets a body over
+        the cap, declared or chunked), but not past the first message that passes ``max_body``: the rest is
+        never read. None if the client left first."""
+        parts, size, more = [], 0, True
+        while more and size <= self.max_body:
             message = await receive()
-            if message["type"] == "http.request":
-                seen += len(message.get("body", b""))
-                if seen > self.max_body:
-                    raise BodyTooLarge(self.max_body)
-            return message
+            if message["type"] != "http.request":
+                return None
+            part = message.get("body", b"")
+            parts.append(part)
+            size += len(part)
+            more = message.get("more_body", False)
+        return b"".join(parts)
 
-        return capped
 
+def _replay(body: bytes, receive):
+    """``receive`` for the app: the body the Gate read, as one message, then what the server says next (that
+    the client left, or the response ended)."""
+    pending = [{"type": "http.request", "body": body, "more_body": False}]
 
-class BodyTooLarge(Exception):
-    """A streamed body passed the cap (the app answers 413)."""
+    async def replaying():
+        return pending.pop() if pending else await receive()
 
-    def __init__(self, limit: int):
-        super().__init__(f"a request body may be at most {limit} bytes")
+    return replaying
 
 
 def _with_headers(send):

@@ -9,6 +9,7 @@ through the 3D view, a socket to a foreign server) run in headless Chromium.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 import re
@@ -24,7 +25,7 @@ import websockets
 from harness import CHROMIUM, TOKEN, RunningStation, small_scene, start_sim, wait_wall
 from websockets.sync.client import connect as ws_connect
 
-from groundstation.security import MAX_BODY, Access
+from groundstation.security import MAX_BODY, NO_HOST, Access, Gate
 
 VIEWER = "operator-viewer-0123456789abcdef"
 SUBPROTOCOL = f"viser-v{viser.__version__}"
@@ -132,10 +133,6 @@ def test_a_body_of_exactly_the_cap_is_read_and_one_byte_more_is_refused_saying_t
     assert answer.startswith(b"HTTP/1.1 413"), answer[:200]
     assert json.loads(answer.split(b"\r\n\r\n", 1)[1]) == {"detail": cap}
 
-    def chunks(size: int):
-        for start in range(0, size, 1 << 20):
-            yield b"x" * min(1 << 20, size - start)
-
     json_body = {"Content-Type": "application/json", **api.operator}
     declared = api.post("/api/vehicles/99/commands", content=b"x" * MAX_BODY, headers=json_body)
     assert declared.status_code == 422, declared.text[:200]  # read, and found no JSON
@@ -143,6 +140,136 @@ def test_a_body_of_exactly_the_cap_is_read_and_one_byte_more_is_refused_saying_t
     assert chunked.status_code == 422 and "not a QGC WPL 110 mission" in chunked.json()["detail"]
     too_long = api.put("/api/vehicles/1/mission", content=chunks(MAX_BODY + 1), headers=api.operator)
     assert too_long.status_code == 413 and too_long.json() == {"detail": cap}
+
+
+def chunks(size: int, step: int = 1 << 20):
+    """``size`` bytes in pieces (httpx sends a generator chunked, without Content-Length)."""
+    for start in range(0, size, step):
+        yield b"x" * min(step, size - start)
+
+
+@pytest.mark.parametrize(("method", "path", "content_type"), [
+    ("POST", "/api/vehicles/1/commands", "application/json"),
+    ("PUT", "/api/vehicles/1/mission", "text/plain"),
+])
+def test_a_body_over_the_cap_is_413_naming_the_cap_on_every_route_declared_or_chunked(
+        station, api, method, path, content_type):
+    """A JSON route parses its body itself (FastAPI), the mission upload reads it raw: both answer a body one
+    byte over the cap with the same 413 and message, whether it was declared up front or came chunked."""
+    cap = {"detail": f"a request body may be at most {MAX_BODY} bytes"}
+    declared = (f"{method} {path} HTTP/1.1\r\nHost: 127.0.0.1:{station.http_port}\r\n"
+                f"Authorization: Bearer {TOKEN}\r\nContent-Type: {content_type}\r\n"
+                f"Content-Length: {MAX_BODY + 1}\r\n\r\n")
+    answer = raw_request(station, declared)  # no byte of it sent: the header alone is refused
+    assert answer.startswith(b"HTTP/1.1 413"), answer[:200]
+    assert json.loads(answer.split(b"\r\n\r\n", 1)[1]) == cap
+    chunked = api.request(method, path, content=chunks(MAX_BODY + 1),
+                          headers={"Content-Type": content_type, **api.operator})
+    assert "content-length" not in chunked.request.headers  # it went chunked
+    assert chunked.status_code == 413, chunked.text[:200]
+    assert chunked.json() == cap
+
+
+def test_a_chunked_json_body_under_the_cap_reaches_its_route_whole(station, api):
+    """Read by the gate first, a chunked body still reaches the route whole: parsed, it names the action,
+    and the route answers for the vehicle (there is none 99)."""
+    command = json.dumps({"action": "rtl"}).encode()
+    parts = (command[i:i + 3] for i in range(0, len(command), 3))
+    response = api.post("/api/vehicles/99/commands", content=parts,
+                        headers={"Content-Type": "application/json", **api.operator})
+    assert response.request.headers.get("transfer-encoding") == "chunked"
+    assert response.status_code == 404, response.text[:200]
+
+
+# ---- the gate itself, message by message (ASGI, as uvicorn speaks to it) -------------------------------------
+class Through:
+    """One request through a ``Gate`` (cap ``max_body``) around an app that reads its body to the end and
+    answers 200: what the client's side was asked for (``reads``), what the app got and what was sent back."""
+
+    def __init__(self, messages: list[dict], headers: list[tuple[bytes, bytes]] | None = None,
+                 kind: str = "http", max_body: int = 5):
+        self.messages, self.reads, self.sent, self.got = list(messages), 0, [], None
+        headers = [(b"host", b"127.0.0.1:8000")] if headers is None else headers
+        scope = {"type": kind, "method": "POST", "path": "/api/vehicles/1/commands", "headers":
+                 [(b"authorization", f"Bearer {TOKEN}".encode()), *headers], "client": ("127.0.0.1", 5000)}
+        asyncio.run(Gate(self.app, Access(TOKEN), max_body=max_body)(scope, self.receive, self.send))
+
+    async def receive(self) -> dict:
+        self.reads += 1
+        return self.messages.pop(0) if self.messages else {"type": "http.disconnect"}
+
+    async def send(self, message: dict) -> None:
+        self.sent.append(message)
+
+    async def app(self, scope, receive, send) -> None:
+        self.got = []
+        while not self.got or self.got[-1].get("more_body"):
+            self.got.append(await receive())
+        self.got.append(await receive())  # after the body: what the server says next
+        await send({"type": "http.response.start", "status": 200, "headers": []})
+        await send({"type": "http.response.body", "body": b"ok"})
+
+    @property
+    def status(self) -> int | None:
+        return next((m["status"] for m in self.sent if m["type"] == "http.response.start"), None)
+
+    @property
+    def detail(self) -> str:
+        return json.loads(b"".join(m.get("body", b"") for m in self.sent if m["type"] == "http.response.body"))[
+            "detail"]
+
+
+def part(body: bytes, more: bool) -> dict:
+    return {"type": "http.request", "body": body, "more_body": more}
+
+
+def test_a_body_in_pieces_up_to_the_cap_reaches_the_app_whole_then_what_follows():
+    request = Through([part(b"ab", True), part(b"", True), part(b"cde", False)])
+    assert request.got == [part(b"abcde", False), {"type": "http.disconnect"}]  # one message, then the server's
+    assert request.reads == 4 and request.status == 200  # three for the body, one when the app asked again
+
+
+def test_a_body_one_byte_over_the_cap_in_its_last_piece_is_413_and_never_reaches_the_app():
+    for pieces in ([part(b"abcde", True), part(b"f", False)], [part(b"abc", True), part(b"def", True)]):
+        request = Through(pieces)
+        assert request.got is None and request.reads == 2, pieces
+        assert request.status == 413 and request.detail == "a request body may be at most 5 bytes", pieces
+
+
+def test_a_body_over_the_cap_is_not_read_past_the_piece_that_passed_it():
+    request = Through([part(b"abcdef", True), part(b"g" * 100, True), part(b"", False)])
+    assert request.got is None and request.reads == 1
+    assert request.status == 413 and request.detail == "a request body may be at most 5 bytes"
+
+
+def test_a_body_declared_over_the_cap_is_413_unread():
+    for length in (b"6", b"-1", b"5 ", b"0x5"):
+        request = Through([part(b"abc", False)], headers=[(b"host", b"127.0.0.1"), (b"content-length", length)])
+        assert request.got is None and request.reads == 0, length
+        assert request.status == 413 and request.detail == "a request body may be at most 5 bytes", length
+    declared = Through([part(b"abcde", False)], headers=[(b"host", b"127.0.0.1"), (b"content-length", b"5")])
+    assert declared.got == [part(b"abcde", False), {"type": "http.disconnect"}] and declared.status == 200
+
+
+def test_a_request_message_without_body_or_more_body_is_an_empty_body_that_ends():
+    """ASGI's defaults: no ``body`` is empty, no ``more_body`` means the body ended."""
+    request = Through([{"type": "http.request"}, part(b"never read", False)])
+    assert request.got == [part(b"", False), part(b"never read", False)]
+    assert request.reads == 2 and request.status == 200
+
+
+def test_a_client_gone_before_its_body_ended_gets_no_answer_and_reaches_no_app():
+    request = Through([part(b"ab", True), {"type": "http.disconnect"}])
+    assert request.got is None and request.sent == [] and request.reads == 2
+
+
+def test_a_request_with_no_or_an_empty_host_header_is_refused_unread_at_the_gate():
+    for headers in ([], [(b"host", b"")]):
+        request = Through([part(b"{}", False)], headers=headers)
+        assert request.got is None and request.reads == 0, headers
+        assert request.status == 400 and request.detail == NO_HOST, headers
+    socket_ = Through([], headers=[], kind="websocket")
+    assert socket_.sent == [{"type": "websocket.close", "code": 1008, "reason": NO_HOST}]
 
 
 # ---- 7. a viewer's clicks reach that viewer's page only -------------------------------------------------------
@@ -209,8 +336,25 @@ def test_a_foreign_host_name_is_refused(station, api):
         assert response.json()["detail"] == "this station does not serve that host name (see --allowed-host)"
     assert api.get("/api/vehicles", headers={"Host": f"localhost:{station.http_port}"}).status_code == 200
     assert api.get("/api/vehicles", headers={"Host": f"[::1]:{station.http_port}"}).status_code == 200
-    answer = raw_request(station, "GET /api/vehicles HTTP/1.0\r\n\r\n")  # no Host at all
-    assert answer.startswith(b"HTTP/1.1 421"), answer[:100]
+
+
+def test_a_request_naming_no_host_name_is_refused_as_such(station, caplog, monkeypatch):
+    """HTTP/1.0 needs no Host header, and an empty one names nothing: either is a 400 saying so, logged,
+    whatever the path (the page, the API, a write with the token), never served as if it named a host."""
+    monkeypatch.setattr("groundstation.security.LOG_EVERY", 0.0)  # each refusal logged, whatever came before
+    caplog.set_level(logging.WARNING, logger="groundstation")
+    heads = [
+        "GET /api/vehicles HTTP/1.0\r\n\r\n",
+        "GET / HTTP/1.0\r\n\r\n",
+        f"POST /api/vehicles/1/commands HTTP/1.0\r\nAuthorization: Bearer {TOKEN}\r\nContent-Length: 2\r\n\r\n{{}}",
+        "GET /api/health HTTP/1.1\r\nHost: \r\nConnection: close\r\n\r\n",
+    ]
+    for head in heads:
+        answer = raw_request(station, head)
+        assert answer.startswith(b"HTTP/1.1 400"), (head, answer[:100])
+        assert json.loads(answer.split(b"\r\n\r\n", 1)[1]) == {"detail": NO_HOST}, head
+    said = [record.getMessage() for record in caplog.records]
+    assert sum(message.endswith(f": {NO_HOST}") for message in said) == len(heads), said
 
 
 def test_a_name_given_with_allowed_host_is_served(scene):
