@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 from groundstation.state import FORGET_AFTER, LINK_LOST_AFTER, Fleet
 from vehicle.protocol import links, mission, signing
-from vehicle.protocol.mav import mavlink, pack
+from vehicle.protocol.mav import RESULT_WORDS, mavlink, pack
 from vehicle.protocol.mission import MissionItem
 
 log = logging.getLogger("groundstation.link")
@@ -41,11 +41,7 @@ log = logging.getLogger("groundstation.link")
 GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
-RESULTS = {
-    mavlink.MAV_RESULT_ACCEPTED: "accepted", mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily rejected",
-    mavlink.MAV_RESULT_DENIED: "denied", mavlink.MAV_RESULT_UNSUPPORTED: "unsupported",
-    mavlink.MAV_RESULT_FAILED: "failed", mavlink.MAV_RESULT_IN_PROGRESS: "in progress",
-}
+RESULTS = RESULT_WORDS  # a COMMAND_ACK's result as a word
 TELEMETRY = {  # message -> Hz asked of every vehicle
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 20, mavlink.MAVLINK_MSG_ID_ATTITUDE: 20,
     mavlink.MAVLINK_MSG_ID_VFR_HUD: 4, mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1, mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 1,

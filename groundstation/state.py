@@ -43,7 +43,7 @@ from vehicle.protocol import agent_status
 from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mapstream import MapReceiver
-from vehicle.protocol.mav import mavlink, mavutil
+from vehicle.protocol.mav import RESULT_WORDS, mavlink, mavutil
 from vehicle.protocol.modes import FORCE_DISARM
 from vehicle.protocol.rangefinder import reading_from
 from vehicle.protocol.statustext import Reassembler
@@ -319,17 +319,15 @@ class Fleet:
             self.stations.popitem(last=False)
 
     def _command_ack(self, vehicle, m, now) -> None:
+        result = RESULTS.get(m.result, f"result {m.result}")
         if m.command not in QUIET_COMMANDS:
-            result = RESULTS.get(m.result, f"result {m.result}")
             self.history.event(vehicle.sysid, now, "ack", f"{_command_name(m.command)}: {result}")
         target = getattr(m, "target_system", 0)
         if target == vehicle.sysid:  # the companion's order
             vehicle.ordered = (now, None)
         elif target not in (0, self.own_sysid):
             name = mavlink.enums["MAV_CMD"][m.command].name if m.command in mavlink.enums["MAV_CMD"] else m.command
-            result = mavlink.enums["MAV_RESULT"][m.result].name.removeprefix("MAV_RESULT_").lower() \
-                if m.result in mavlink.enums["MAV_RESULT"] else f"result {m.result}"
-            vehicle.other_gcs = (target, f"COMMAND_ACK {name} {result.replace('_', ' ')}", now)
+            vehicle.other_gcs = (target, f"COMMAND_ACK {name} {result}", now)
 
     def _mission_ack(self, vehicle, m, now) -> None:
         if m.target_system not in (0, self.own_sysid, vehicle.sysid):
@@ -562,11 +560,7 @@ def _round(value: float | None, digits: int = 2) -> float | None:
 
 
 MAX_WAYPOINTS_SHOWN = 500
-RESULTS = {
-    mavlink.MAV_RESULT_ACCEPTED: "accepted", mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily rejected",
-    mavlink.MAV_RESULT_DENIED: "denied", mavlink.MAV_RESULT_UNSUPPORTED: "unsupported",
-    mavlink.MAV_RESULT_FAILED: "failed", mavlink.MAV_RESULT_IN_PROGRESS: "in progress",
-}
+RESULTS = RESULT_WORDS  # a COMMAND_ACK's result as a word
 
 
 def _command_name(command: int) -> str:

@@ -13,7 +13,7 @@ from harness import free_udp_port, wait_wall
 
 from groundstation.link import Link, LinkError
 from groundstation.state import Fleet
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import RESULT_WORDS, mavlink
 
 TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
 TIMEOUT = 0.25  # s per try: short, as the scripted vehicle answers at once or never
@@ -138,6 +138,10 @@ def test_only_the_ack_of_this_command_from_this_vehicle_answers_it():
         (mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "temporarily rejected"),
         (mavlink.MAV_RESULT_UNSUPPORTED, "unsupported"),
         (mavlink.MAV_RESULT_IN_PROGRESS, "in progress"),
+        (6, "cancelled"),  # MAV_RESULT_CANCELLED, which pymavlink 2.4.50's dialect lacks
+        (mavlink.MAV_RESULT_COMMAND_LONG_ONLY, "COMMAND_LONG only"),
+        (mavlink.MAV_RESULT_COMMAND_INT_ONLY, "COMMAND_INT only"),
+        (9, "unsupported frame"),  # MAV_RESULT_COMMAND_UNSUPPORTED_MAV_FRAME, which it lacks too
         (99, "result 99"),
     ],
 )
@@ -145,6 +149,36 @@ def test_result_words(result, word):
     with station_and_vehicle() as (link, vehicle):
         vehicle.answers[TAKEOFF] = [result]
         assert link.command(1, TAKEOFF, timeout=TIMEOUT) == word
+
+
+def test_every_mav_result_the_dialect_defines_has_a_word():
+    """No result a vehicle may send (as pymavlink's ardupilotmega dialect knows them, and MAVLink's 6 and 9
+    besides) reaches the operator as a bare number."""
+    defined = {value for value, entry in mavlink.enums["MAV_RESULT"].items() if not entry.name.endswith("ENUM_END")}
+    assert defined | {6, 9} == set(RESULT_WORDS) == set(range(10))
+    assert len(set(RESULT_WORDS.values())) == len(RESULT_WORDS)  # no two results read alike
+
+
+def test_a_cancelled_command_reads_cancelled_in_the_answer_the_history_and_another_stations_ack():
+    """A vehicle that answers CANCELLED (a long command stopped by COMMAND_CANCEL): the command's answer says
+    "cancelled", as do the vehicle's history and, for an ACK addressed to another ground station, the note
+    that another station commands it."""
+    cancelled = 6
+
+    def cancelled_for_another_station(vehicle, message):
+        vehicle.send(vehicle.mav.command_ack_encode(mavlink.MAV_CMD_NAV_LAND, cancelled, 0, 0, 254, 0))
+        vehicle.ack(message.command, mavlink.MAV_RESULT_ACCEPTED)
+
+    with station_and_vehicle() as (link, vehicle):
+        vehicle.answers[TAKEOFF] = [cancelled]
+        assert link.command(1, TAKEOFF, timeout=TIMEOUT) == "cancelled"
+        history = link.fleet.history.of(1)
+        wait_wall(lambda: ("ack", "NAV_TAKEOFF: cancelled") in [(e["kind"], e["text"]) for e in
+                                                                history.as_json()["events"]], 5, "the ACK noted")
+        vehicle.answers[mavlink.MAV_CMD_DO_SET_MODE] = [cancelled_for_another_station]
+        assert link.command(1, mavlink.MAV_CMD_DO_SET_MODE, timeout=TIMEOUT) == "accepted"
+        wait_wall(lambda: link.fleet.get(1).other_gcs is not None, 5, "the other station noted")
+        assert link.fleet.get(1).other_gcs[:2] == (254, "COMMAND_ACK MAV_CMD_NAV_LAND cancelled")
 
 
 def test_command_int_repeats_the_same_message_and_names_the_result():

@@ -27,7 +27,7 @@ from collections.abc import Callable
 from vehicle.protocol import mission as mission_protocol
 from vehicle.protocol.frames import Navigation, Pose
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
-from vehicle.protocol.mav import mavlink, mavutil
+from vehicle.protocol.mav import RESULT_WORDS, mavlink, mavutil
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import Kind
 from vehicle.protocol.rangefinder import Reading, Servo, reading_from, readings_from_obstacles
@@ -56,9 +56,7 @@ IGNORE_ALL_BUT_VELOCITY = 0x0DC7  # type masks ArduPilot documents for GUIDED ta
 IGNORE_ALL_BUT_YAW = 0x09FF
 NAMES = {v: k.removeprefix("MAV_CMD_").lower() for k, v in vars(mavlink).items() if k.startswith("MAV_CMD_")
          and isinstance(v, int)}
-RESULTS = {mavlink.MAV_RESULT_ACCEPTED: "accepted", mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily rejected",
-           mavlink.MAV_RESULT_DENIED: "denied", mavlink.MAV_RESULT_UNSUPPORTED: "unsupported",
-           mavlink.MAV_RESULT_FAILED: "failed", mavlink.MAV_RESULT_IN_PROGRESS: "in progress", NO_ANSWER: "no answer"}
+RESULTS = {**RESULT_WORDS, NO_ANSWER: "no answer"}
 
 
 class FlightControllerError(Exception):

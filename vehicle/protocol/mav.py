@@ -16,6 +16,19 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402 - must follow the environment setting
 
+# MAV_RESULT values MAVLink defines (common.xml) that pymavlink 2.4.50's generated dialects lack (no 6, and 9 is
+# their ENUM_END): CANCELLED answers a long command stopped by COMMAND_CANCEL.
+MAV_RESULT_CANCELLED = getattr(mavlink, "MAV_RESULT_CANCELLED", 6)
+MAV_RESULT_COMMAND_UNSUPPORTED_MAV_FRAME = getattr(mavlink, "MAV_RESULT_COMMAND_UNSUPPORTED_MAV_FRAME", 9)
+RESULT_WORDS = {  # a COMMAND_ACK's result as the operator reads it (every MAV_RESULT MAVLink defines)
+    mavlink.MAV_RESULT_ACCEPTED: "accepted", mavlink.MAV_RESULT_TEMPORARILY_REJECTED: "temporarily rejected",
+    mavlink.MAV_RESULT_DENIED: "denied", mavlink.MAV_RESULT_UNSUPPORTED: "unsupported",
+    mavlink.MAV_RESULT_FAILED: "failed", mavlink.MAV_RESULT_IN_PROGRESS: "in progress",
+    MAV_RESULT_CANCELLED: "cancelled",
+    mavlink.MAV_RESULT_COMMAND_LONG_ONLY: "COMMAND_LONG only", mavlink.MAV_RESULT_COMMAND_INT_ONLY: "COMMAND_INT only",
+    MAV_RESULT_COMMAND_UNSUPPORTED_MAV_FRAME: "unsupported frame",
+}
+
 
 def __getattr__(name: str):
     if name == "mavutil":
@@ -39,4 +52,4 @@ def pack(message, packer) -> bytes:
     return packet
 
 
-__all__ = ["mavlink", "pack"]  # and mavutil, on first use
+__all__ = ["RESULT_WORDS", "mavlink", "pack"]  # and mavutil, on first use
