@@ -114,6 +114,7 @@ class Page:
         self.errors: list[str] = []
         self.scene_nodes: set[tuple[str, str]] = set()  # (message type, node name) the 3D view was sent
         self.commands: list[str] = []  # command POSTs the page sent
+        self.requests: list[str] = []  # every request the page sent, in order
         self.page.on("pageerror", self._error)
         self.page.on("websocket", self._socket)
         self.page.on("request", self._request)
@@ -143,8 +144,17 @@ class Page:
         return wait_wall(condition, timeout, what, sleep=lambda: self.page.wait_for_timeout(200))
 
     def _request(self, request) -> None:
+        self.requests.append(request.url)
         if request.method == "POST" and "/commands" in request.url:
             self.commands.append(request.url)
+
+    def settle(self) -> None:
+        """Wait until every request the page has sent so far was seen: the page fetches a marker of its own,
+        and Playwright reports requests in the order they were sent, so once the marker is seen nothing the
+        page sent before it is still to come."""
+        marker = f"{self.station.base}/api/health?settle={len(self.requests)}"
+        self.page.evaluate("(url) => { fetch(url); }", marker)
+        self.poll(lambda: marker in self.requests, 30, "the page's marker request seen")
 
     def open(self, fragment: str = "", view: bool = False):
         """Load the operator page; without ``view`` its 3D view's frame gets an empty page instead of
@@ -340,7 +350,7 @@ def test_kill_needs_a_second_click(browser_page, station, copters):
     sysid = 3
     copters(sysid)
     assert station.http.result(sysid, action="arm") == "accepted"
-    page = browser_page.open(f"#token={TOKEN}")
+    browser_page.open(f"#token={TOKEN}")
     card = browser_page.card(sysid)
     expect(card.locator(".armed")).to_have_text("ARMED")
     kill = card.locator('button[data-action="kill"]')
@@ -349,7 +359,7 @@ def test_kill_needs_a_second_click(browser_page, station, copters):
     press(kill)
     expect(kill).to_have_text("Confirm kill?")
     expect(kill).to_have_class(re.compile(r"\bconfirming\b"))
-    page.wait_for_timeout(1500)  # a command would be acked in well under a second
+    browser_page.settle()  # the first click's handler has run (it asked to confirm): nothing was sent
     assert browser_page.commands == []
     assert station.http.vehicle(sysid)["armed"] is True
     expect(card.locator(".armed")).to_have_text("ARMED")

@@ -135,7 +135,10 @@ def test_vehicles_are_listed_in_their_colours_and_one_is_selected(page, station)
     assert page.evaluate("window.heard") == [IDLE]
     expect(page.locator("#target-vehicle")).to_have_value(str(IDLE))  # "Go here" follows the selection
     expect(page.locator("#instruments-vehicle")).to_have_text(f"{IDLE} copter")
-    page.wait_for_timeout(1500)  # the selection stays across status frames
+    # the selection stays across status frames (the stream sends four a second)
+    page.evaluate("""window.statusFrames = 0; window.addEventListener("station-status", () => window.statusFrames++)""")
+    wait_wall(lambda: page.evaluate("window.statusFrames") >= 3, 20, "three more status frames",
+              sleep=lambda: page.wait_for_timeout(100))
     assert page.evaluate("window.selectedVehicle") == IDLE
 
 
@@ -258,7 +261,9 @@ def test_plots_live_and_in_replay_with_events_that_seek(page, station):
     assert [e["text"] for e in events if e["kind"] == "command"][-1:] == ["sent DO_SET_MODE GUIDED"], events
     assert [e["text"] for e in events if e["kind"] == "ack"][-1:] == ["DO_SET_MODE: accepted"], events
     assert len([e for e in events if e["kind"] == "command"]) == 1, events
-    page.wait_for_timeout(3000)  # the recording is flushed every second
+    # the recording is flushed every second: once it has grown after the ACK, the ACK is on disk
+    on_disk = station.station.recorder.path.stat().st_size
+    wait_wall(lambda: station.station.recorder.path.stat().st_size > on_disk, 10, "the recording flushed")
 
     recording = next(r for r in station.http.get("/api/recordings").json() if r["recording"])
     started = station.http.post("/api/replay", json={"name": recording["name"]}, headers=station.http.operator)

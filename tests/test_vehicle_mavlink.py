@@ -269,6 +269,15 @@ def test_gcs_failsafe_returns_a_copter_home_and_obeys_again(fly):
     assert gcs.set_mode(5) == mavlink.MAV_RESULT_ACCEPTED
 
 
+def test_the_agent_says_a_failsafe_not_an_operator_took_over(fly):
+    gcs, _ = fly(mission="search", autostart=True, failsafe_timeout=2.0)  # minutes of searching
+    gcs.wait_text("search: start", sim_timeout=20)
+    mark = len(gcs.texts)
+    gcs.wait_text("GCS failsafe", since=mark, heartbeats=False, sim_timeout=60)  # the station falls silent
+    paused = gcs.wait_text("Agent: paused", since=mark, heartbeats=False)
+    assert paused == "Agent: paused, failsafe switched to RTL"
+
+
 def test_gcs_failsafe_holds_a_rover(fly):
     gcs, _ = fly("rover", failsafe_timeout=2.0)
     assert gcs.set_mode(15) == mavlink.MAV_RESULT_ACCEPTED

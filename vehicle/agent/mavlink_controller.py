@@ -38,6 +38,7 @@ ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
 NO_ANSWER = -1  # what a command returns when the autopilot never acknowledged it
 HEARTBEAT_LOST = 2.0  # wall s without the autopilot's heartbeat before the agent stops commanding
+FAILSAFE_NEWS = 3.0  # wall s: a mode change this soon after the autopilot said "failsafe" is the failsafe's
 STREAMS = {  # message -> rate (Hz of the autopilot's clock) the agent asks for
     "HEARTBEAT": 4, "GLOBAL_POSITION_INT": 20, "ATTITUDE": 20, "SYS_STATUS": 1, "HOME_POSITION": 0.5,
     "MISSION_CURRENT": 2, "EXTENDED_SYS_STATE": 4, "DISTANCE_SENSOR": 10,
@@ -101,6 +102,7 @@ class MavlinkController:
         self._have_position = False
         self._readings: list[Reading] = []
         self._events: deque[str] = deque(maxlen=32)
+        self._failsafe_said = -math.inf  # when the autopilot last announced a failsafe (wall clock)
         self._acks: dict[int, int] = {}
         self._replies: list = []
         self._wanted_mode: str | None = None
@@ -224,7 +226,15 @@ class MavlinkController:
         self._target = self._yaw_target = self._takeoff_to = None  # a mode change drops every target
         own_ending = was == "AUTO" and time.monotonic() - self._mission_done_at < 5.0  # Rover holds after AUTO
         if self._wanted_mode is not None and mode != self._wanted_mode and not own_ending:
-            self._events.append(f"operator switched to {mode}")
+            failsafe = time.monotonic() - self._failsafe_said < FAILSAFE_NEWS
+            self._events.append(f"{'failsafe' if failsafe else 'operator'} switched to {mode}")
+
+    def _on_statustext(self, m) -> None:
+        """An autopilot announces a failsafe (ArduPilot: "GCS Failsafe", "Battery Failsafe", ...) as it changes
+        mode: the mode change that follows is the failsafe's, not an operator's."""
+        text = m.text if isinstance(m.text, str) else bytes(m.text).decode("utf-8", "replace")
+        if "failsafe" in text.lower() and "clear" not in text.lower():
+            self._failsafe_said = time.monotonic()
 
     def _on_global_position_int(self, m) -> None:
         self._clock(m)

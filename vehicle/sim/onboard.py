@@ -101,7 +101,9 @@ class SimController:
         what = None
         if pilot.mode_changes != self._mode_changes:
             self._mode_changes = pilot.mode_changes
-            if pilot.mode_source != SOURCE:
+            if pilot.mode_source == "failsafe":
+                what = f"failsafe switched to {pilot.mode}"
+            elif pilot.mode_source != SOURCE:
                 what = f"operator switched to {pilot.mode}"
         if pilot.overrides != self._overrides:
             self._overrides = pilot.overrides
