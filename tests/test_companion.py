@@ -434,6 +434,16 @@ def test_a_command_refused_or_answered_without_a_name_for_it_is_reported_by_its_
         assert fc.problems == 2
 
 
+def test_a_command_refused_with_a_result_pymavlink_lacks_is_reported_by_its_word():
+    """MAV_RESULT_CANCELLED (6), which pymavlink 2.4.50's dialect does not define, reads "cancelled"."""
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = 6
+        assert fc.takeoff(4.0) == 6
+        assert fc.took_over() == "flight controller: nav_takeoff cancelled"
+        assert fc.problems == 1
+
+
 def test_a_command_in_progress_is_asked_again_until_it_is_answered():
     """IN_PROGRESS is no answer yet: the agent tries again (confirmation + 1) and takes the final result."""
     with controller() as (fc, fake):
