@@ -159,10 +159,17 @@ def test_instruments_show_the_selected_vehicle(page, station):
     assert altitude > 0.5, altitude  # the copter is flying (the page shows the live value, not a stale one)
     assert len(page.locator("#readout-sonar").inner_text().split(" · ")) == len(flying["sonar"])
 
-    # the artificial horizon: sky above, ground below, near level while the copter cruises
-    sky, ground = pixel(page, "#attitude", 0.5, 0.15), pixel(page, "#attitude", 0.5, 0.8)
-    assert sky[2] > 150 and sky[2] > sky[0] + 60, sky
-    assert ground[0] > ground[2] + 40, ground
+    # the artificial horizon: sky above, ground below, once the copter flies near level (it leans to turn)
+    seen = []
+
+    def horizon() -> bool:
+        sky, ground = pixel(page, "#attitude", 0.5, 0.15), pixel(page, "#attitude", 0.5, 0.8)
+        seen.append((sky, ground))
+        return sky[2] > 150 and sky[2] > sky[0] + 60 and ground[0] > ground[2] + 40
+    try:
+        wait_wall(horizon, 30, "sky above and ground below", sleep=lambda: page.wait_for_timeout(200))
+    except AssertionError as error:
+        raise AssertionError(f"{error}; (sky, ground) pixels seen: {seen[-4:]}") from None
     # the compass: the vehicle's colour in the middle
     colour = int(flying["colour"][1:], 16)
     middle = pixel(page, "#compass", 0.5, 0.5)
