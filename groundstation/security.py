@@ -103,7 +103,10 @@ class Access:
 
     def host_allowed(self, host_header: str) -> bool:
         """An IP address (no rebinding through a literal), localhost, or a name the operator allowed."""
-        host = urlsplit(f"//{host_header}").hostname  # None for an empty header
+        try:
+            host = urlsplit(f"//{host_header}").hostname  # None for an empty header or one without a name
+        except ValueError:  # a broken [IPv6] literal ("[", "[]", "[zz")
+            return False
         if host is None:
             return False
         if host == "localhost" or host in self.allowed_hosts:
@@ -117,7 +120,10 @@ class Access:
 
 def same_origin(origin: str, host_header: str) -> bool:
     """A browser's Origin names the host (and port) it asked: the page is one of ours."""
-    parts = urlsplit(origin)
+    try:
+        parts = urlsplit(origin)
+    except ValueError:  # a broken [IPv6] literal
+        return False
     return parts.scheme in ("http", "https") and parts.netloc.lower() == host_header.lower()
 
 

@@ -218,7 +218,8 @@ MODULES = [
                 "_cookie",
                 "Gate.__call__",
                 "Gate._refusal",
-                "Gate._capped",
+                "Gate._body",
+                "_replay",
             ]
         },
         jobs=4,

@@ -263,7 +263,7 @@ def test_a_client_gone_before_its_body_ended_gets_no_answer_and_reaches_no_app()
     assert request.got is None and request.sent == [] and request.reads == 2
 
 
-def test_a_request_with_no_or_an_empty_host_header_is_refused_unread_at_the_gate():
+def test_a_request_with_no_host_name_or_an_empty_one_is_refused_unread_at_the_gate():
     for headers in ([], [(b"host", b"")]):
         request = Through([part(b"{}", False)], headers=headers)
         assert request.got is None and request.reads == 0, headers
@@ -336,6 +336,29 @@ def test_a_foreign_host_name_is_refused(station, api):
         assert response.json()["detail"] == "this station does not serve that host name (see --allowed-host)"
     assert api.get("/api/vehicles", headers={"Host": f"localhost:{station.http_port}"}).status_code == 200
     assert api.get("/api/vehicles", headers={"Host": f"[::1]:{station.http_port}"}).status_code == 200
+
+
+def test_a_host_name_that_names_nothing_or_breaks_the_parser_is_refused_as_foreign(station):
+    """A Host with a port but no name, a bare ``@``, or a broken IPv6 literal is a 421 like any foreign
+    name: never served, never a 500."""
+    for host in (f":{station.http_port}", "@", "[]", "[zz", "[::1"):
+        answer = raw_request(station, f"GET /api/health HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n")
+        assert answer.startswith(b"HTTP/1.1 421"), (host, answer[:100])
+        detail = json.loads(answer.split(b"\r\n\r\n", 1)[1])["detail"]
+        assert detail == "this station does not serve that host name (see --allowed-host)", host
+    assert not Access(TOKEN, allowed_hosts=frozenset({""})).host_allowed(":8000")  # no name is no allowed name
+
+
+def test_a_websocket_whose_origin_breaks_the_parser_is_refused(station, monkeypatch):
+    """An Origin with a broken IPv6 literal names no page of ours: the socket is refused (403), not a 500."""
+    monkeypatch.setattr("groundstation.security.LOG_EVERY", 0.0)  # no refusal held back to be counted later
+    head = (f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{station.http_port}\r\nUpgrade: websocket\r\n"
+            "Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n")
+    for origin in ("http://[zz", "http://[127.0.0.1"):
+        answer = raw_request(station, f"{head}Origin: {origin}\r\n\r\n")
+        assert answer.startswith(b"HTTP/1.1 403"), (origin, answer[:100])
+    assert raw_request(station, f"{head}Origin: http://127.0.0.1:{station.http_port}\r\n\r\n").startswith(
+        b"HTTP/1.1 101")  # the same handshake from our own page is taken
 
 
 def test_a_request_naming_no_host_name_is_refused_as_such(station, caplog, monkeypatch):
