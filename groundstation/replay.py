@@ -6,9 +6,11 @@ only the framing instead: the timestamp, system and component ids, message
 id and offset of every record (and, for TUNNEL, the payload type in its first
 two bytes).
 Seeking to a time then decodes only what rebuilds the state there: the
-latest of each status message, a thinned-out trail, the recent messages and
-sonar hits, and the map from its last complete snapshot on (found from the
-chunk headers in the raw TUNNEL payloads). Playing forward
+latest of each status message (of the onboard agent's, the last few: a damaged
+one leaves the one before), a thinned-out trail, the recent messages and sonar
+hits (each reading after the attitude the vehicle had then), the map from its
+last complete snapshot on and the planned path from its last complete sending
+on (both found from the chunk headers in the raw TUNNEL payloads). Playing forward
 feeds the Fleet message by message, as a live link does: a log is just another
 MAVLink source, and the views cannot tell the difference.
 """
@@ -26,7 +28,7 @@ import numpy as np
 
 from groundstation.state import Fleet
 from vehicle.protocol.agent_status import AGENT_STATUS
-from vehicle.protocol.mapstream import MAP_SNAPSHOT
+from vehicle.protocol.mapstream import MAP_SNAPSHOT, PATH
 from vehicle.protocol.mav import mavlink
 
 V1, V2 = 0xFE, 0xFD
@@ -39,9 +41,13 @@ LATEST_ONLY = (mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_ATTITUDE
                mavlink.MAVLINK_MSG_ID_MISSION_CURRENT, mavlink.MAVLINK_MSG_ID_MISSION_ITEM_REACHED, *POSES)
 STATUSTEXT = mavlink.MAVLINK_MSG_ID_STATUSTEXT
 DISTANCE_SENSOR = mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR
+ATTITUDE = mavlink.MAVLINK_MSG_ID_ATTITUDE
 TRAIL_SAMPLES = 1500
 RECENT_TEXTS = 20
 RECENT_READINGS = 600
+RECENT_STATUSES = 10  # the onboard agent's, per component: the latest that decodes among them is shown
+SNAPSHOT_CHUNK = struct.Struct("<HHH")  # chunk headers (vehicle/protocol/mapstream.py): snapshot id, index, count
+PATH_CHUNK = struct.Struct("<HBB")  # path id, chunk index, chunk count
 
 
 class ReplayError(ValueError):
@@ -244,9 +250,13 @@ class Replay:
 
         The first heartbeat of each component comes first (the autopilot's creates
         the vehicle), then its map from the last whole snapshot on (so the
-        readings that follow draw hits, not a map of the ground station's own),
-        then the rest in time order. Status messages count per component: a
-        vehicle's autopilot and its companion computer each have a latest one.
+        readings that follow draw hits, not a map of the ground station's own)
+        and its planned path from the last whole one on, then the rest in time
+        order: each sonar reading after the latest attitude before it, so that
+        its hit lands where it did. Status messages count per component: a
+        vehicle's autopilot and its companion computer each have a latest one;
+        of the agent's statuses the last few are applied, so that a damaged
+        latest one leaves the one before it, as when playing.
         """
         index = self.index
         msgids, sysids, compids = index.msgids[:end], index.sysids[:end], index.compids[:end]
@@ -263,35 +273,41 @@ class Replay:
                 for msgid in LATEST_ONLY:
                     rest.append(np.flatnonzero(theirs & (msgids == msgid))[-1:])
                 statuses = np.flatnonzero(theirs & (msgids == TUNNEL))
-                rest.append(statuses[index.tunnel_types[statuses] == AGENT_STATUS][-1:])
+                rest.append(statuses[index.tunnel_types[statuses] == AGENT_STATUS][-RECENT_STATUSES:])
             poses = np.flatnonzero(mine & np.isin(msgids, POSES))
             if len(poses):
                 rest.append(poses[np.linspace(0, len(poses) - 1, min(len(poses), TRAIL_SAMPLES)).astype(int)])
             rest.append(np.flatnonzero(mine & (msgids == STATUSTEXT))[-RECENT_TEXTS:])
             tunnels = np.flatnonzero(mine & (msgids == TUNNEL) & (index.tunnel_types[:end] != AGENT_STATUS))
             snapshot_chunks = tunnels[index.tunnel_types[tunnels] == MAP_SNAPSHOT]
+            path_chunks = tunnels[index.tunnel_types[tunnels] == PATH]
             readings = np.flatnonzero(mine & (msgids == DISTANCE_SENSOR))
+            if len(path_chunks):
+                maps.append(path_chunks[path_chunks >= self._whole_start(path_chunks, PATH_CHUNK)])
             if len(snapshot_chunks):
-                maps.append(tunnels[tunnels >= self._snapshot_start(snapshot_chunks)])
-                rest.append(readings[-RECENT_READINGS:])
-            else:  # no map from the vehicle: the ground station builds one from every reading
-                rest.append(readings)
+                maps.append(tunnels[tunnels >= self._whole_start(snapshot_chunks, SNAPSHOT_CHUNK)])
+                readings = readings[-RECENT_READINGS:]  # (with none, the station maps every reading)
+            attitudes = np.flatnonzero(mine & (msgids == ATTITUDE))
+            before = np.searchsorted(attitudes, readings) - 1  # the latest attitude before each reading
+            rest.append(attitudes[before[before >= 0]])
+            rest.append(readings)
         if not firsts:
             return np.zeros(0, dtype=np.int64), latest
         first = np.unique(np.concatenate(firsts))
         return np.concatenate([first, np.unique(np.concatenate(maps + [np.zeros(0, dtype=np.int64)])),
                                np.setdiff1d(np.concatenate(rest), first)]), latest
 
-    def _snapshot_start(self, chunks: np.ndarray) -> int:
-        """Record index where the last complete snapshot among ``chunks`` began (its first chunk).
+    def _whole_start(self, chunks: np.ndarray, header: struct.Struct) -> int:
+        """Record index where the last complete one among ``chunks`` (of map snapshots, or of paths, as
+        ``header`` says) began (its first chunk); the first chunk's if none is complete.
 
         A snapshot cut off by the seek time, or one that lost a chunk on the way,
         cannot be applied; the deltas after an earlier whole one bring the map up
-        to date just the same.
+        to date just the same. A path that lost a chunk leaves the one before.
         """
         seen: dict[int, set[int]] = {}
-        for i in chunks[::-1]:  # from the latest back: the first whole snapshot found is the one
-            ident, number, count = self._chunk_header(int(i))
+        for i in chunks[::-1]:  # from the latest back: the first whole one found is the one
+            ident, number, count = self._chunk_header(int(i), header)
             numbers = seen.setdefault(ident, set())
             numbers.add(number)
             if number == 0:
@@ -300,14 +316,16 @@ class Replay:
                 del seen[ident]  # an incomplete one: its id may come round again earlier
         return int(chunks[0])
 
-    def _chunk_header(self, i: int) -> tuple[int, int, int]:
-        """Snapshot id, chunk index and chunk count inside a MAP_SNAPSHOT TUNNEL record, from the raw packet."""
+    def _chunk_header(self, i: int, header: struct.Struct = SNAPSHOT_CHUNK) -> tuple[int, int, int]:
+        """Id, chunk index and chunk count inside a MAP_SNAPSHOT (or, by ``header``, PATH) TUNNEL record, from
+        the raw packet."""
         start = int(self.index.offsets[i])
         body = start + (10 if self._data[start] == V2 else 6)
-        # TUNNEL on the wire: payload_type u16, target system, target component, payload length, payload;
-        # our chunk header in the payload: snapshot id u16, chunk index u16, chunk count u16
-        raw = self._data[body + 5:body + 11].ljust(6, b"\0")
-        return struct.unpack("<HHH", raw)
+        # TUNNEL on the wire: payload_type u16, target system, target component, payload length, payload; the
+        # chunk header opens the payload. MAVLink 2 drops trailing zero bytes (the packet's length byte says how
+        # many are left): a header cut short ends in zeros.
+        fields = self._data[body:body + self._data[start + 1]]
+        return header.unpack(fields[5:5 + header.size].ljust(header.size, b"\0"))
 
     # ---- playing ----------------------------------------------------------------------------------
     def advance(self, seconds: float) -> None:

@@ -237,7 +237,7 @@ MODULES = [
             "groundstation/replay.py": [
                 "Replay.seek",
                 "Replay._needed",
-                "Replay._snapshot_start",
+                "Replay._whole_start",
                 "Replay._chunk_header",
                 "Replay._apply",
                 "Replay.advance",

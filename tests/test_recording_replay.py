@@ -39,7 +39,7 @@ from groundstation.state import Fleet
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol import agent_status
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.mapstream import MAP_SNAPSHOT, MapReceiver, MapStreamer
+from vehicle.protocol.mapstream import MAP_SNAPSHOT, PATH, MapReceiver, MapStreamer
 from vehicle.protocol.mav import mavlink, mavutil
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -990,17 +990,19 @@ def test_the_index_is_exact_on_20000_messages(tmp_path):
 
 def test_the_index_is_exact_on_map_snapshot_chunk_headers(tmp_path):
     """The chunk header read from the raw packet (snapshot id, chunk index, chunk count: three unsigned 16-bit
-    numbers) is the one pymavlink decodes, in every snapshot chunk whose header is whole on the wire."""
+    numbers) is the one pymavlink decodes, in every snapshot chunk: also where MAVLink 2 dropped trailing zero
+    bytes of the payload into the header (its missing bytes are zeros, not the checksum after the payload)."""
     path = tmp_path / "synthetic.tlog"
     synthetic_log(path, 6000)
     index = index_tlog(path)
     replay = Replay.open(path, Fleet(Datum()))
     messages = decoded(path)
-    chunks = np.flatnonzero(index.tunnel_types == MAP_SNAPSHOT)
-    whole = [int(i) for i in chunks if bytes(messages[i].get_msgbuf())[1] >= 5 + 6]  # MAVLink 2 trims zeros
-    for i in whole:
+    chunks = [int(i) for i in np.flatnonzero(index.tunnel_types == MAP_SNAPSHOT)]
+    for i in chunks:
         assert replay.chunk_header(i) == struct.unpack_from("<HHH", bytes(messages[i].payload)), i
-    assert len(whole) > 100 and sum(max(replay.chunk_header(i)) >= 32768 for i in whole) >= 10
+    cut = [i for i in chunks if bytes(messages[i].get_msgbuf())[1] < 5 + 6]  # the header cut short on the wire
+    assert len(chunks) > 100 and sum(max(replay.chunk_header(i)) >= 32768 for i in chunks) >= 10
+    assert len(cut) >= 5 and sum(replay.chunk_header(i) == (0, 0, 0) for i in cut) >= 1
 
 
 # ---- seeking and playing a log of two mapping vehicles --------------------------------------------------
@@ -1064,10 +1066,29 @@ def fix(x: float, y: float, ms: int):
     )
 
 
+SURVEY_PATHS = {3: 40, 500: 35, 800: 7}  # copter 1's planned paths: step sent, points (15 to a chunk)
+SURVEY_LOST = 500  # the path whose middle chunk was lost on the way
+
+
+def survey_path(step: int, points: int) -> list[tuple[float, float]]:
+    return [(round(step / 100 + k * 0.5, 2), round(-k * 0.25, 2)) for k in range(points)]
+
+
+def corrupt_last(log: TlogWriter, into: int) -> None:
+    """Flip a byte ``into`` the packet of the last record written: its checksum no longer matches."""
+    record = bytearray(log.records[-1])
+    record[TLOG_STAMP.size + into] ^= 0x55
+    log.records[-1] = bytes(record)
+
+
 def survey_log(path: Path, steps: int = 1200) -> Path:
     """Copters 1 and 2 with companion computers, recorded from the vehicles' first words on: both stream their
-    maps (deltas, a snapshot every 4 s), 1 takes a sonar reading every 4th step, both send their agent's status
-    and a text now and then. The log opens with a text of copter 1 and a heartbeat of copter 2."""
+    maps (deltas, a snapshot every 4 s), 1 takes a sonar reading every 4th step while it pitches and turns, both
+    send a text now and then. Copter 1's agent sends its status every 10 steps, copter 2's once, at the start
+    (it idles throughout). Their agents send planned paths: copter 2's one, early;
+    copter 1's at the steps of SURVEY_PATHS, all but one whole. Copter 1's last two agent statuses are damaged:
+    one that does not decode as a status, one whose packet fails its checksum. The log opens with a text of
+    copter 1 and a heartbeat of copter 2."""
     log = TlogWriter()
     (one, one_companion), (two, two_companion) = packers(1), packers(2)
     onboard = MemoryMap((0.0, 0.0), 10.0, 5.0)
@@ -1094,11 +1115,26 @@ def survey_log(path: Path, steps: int = 1200) -> Path:
             )
             log.write(mavlink.MAVLink_mission_current_message(step // 100, 12, 0, 0), one)
             phase = ("takeoff", "mission", "homing")[3 * step // steps]
-            for packer, reason in ((one_companion, f"step {step}"), (two_companion, f"idle {step}")):
-                status = agent_status.AgentStatus(phase, False, "", "survey", reason)
-                log.write(tunnel_of(agent_status.AGENT_STATUS, agent_status.encode(status)), packer)
+            status = agent_status.encode(agent_status.AgentStatus(phase, False, "", "survey", f"step {step}"))
+            if step == steps - 20:
+                status = bytes([len(agent_status.PHASES)]) + status[1:]  # a phase no agent has
+            log.write(tunnel_of(agent_status.AGENT_STATUS, status), one_companion)
+            if step == steps - 10:
+                corrupt_last(log, 10 + 5 + 6)  # a byte of the mission's name
+            if step == 0:  # copter 2's agent says its state only when it changes, and it idles throughout
+                idle = agent_status.AgentStatus("waiting", False, "", "survey", "idle")
+                log.write(tunnel_of(agent_status.AGENT_STATUS, agent_status.encode(idle)), two_companion)
+        if step in SURVEY_PATHS:
+            chunks = streamer.path(survey_path(step, SURVEY_PATHS[step]))
+            for number, (kind, payload) in enumerate(chunks):
+                if step != SURVEY_LOST or number != 1:
+                    log.write(tunnel_of(kind, payload), one_companion)
+        if step == 2:
+            for kind, payload in streamer_two.path([(-1.0, 2.0), (-3.5, 4.25)]):
+                log.write(tunnel_of(kind, payload), two_companion)
         log.write(fix(x, y, ms), one)
-        log.write(mavlink.MAVLink_attitude_message(ms, 0.0, 0.0, 0.0, 0, 0, 0), one)  # level, as the fix says
+        pitch, yaw = 0.2 + 0.15 * math.sin(step / 7), (angle + math.pi / 2 + 0.3 * math.sin(step / 5)) % (2 * math.pi)
+        log.write(mavlink.MAVLink_attitude_message(ms, 0.05, pitch, yaw, 0, 0, 0), one)  # (the fix says north)
         log.write(fix(-x, -y, ms), two)
         log.write(mavlink.MAVLink_attitude_message(ms, 0.0, 0.0, 1.0, 0, 0, 0), two)
         if step % 4 == 0:
@@ -1151,17 +1187,26 @@ def shown(vehicle) -> dict:
         "sonar": vehicle.sonar,
         "hits": list(vehicle.hits),
         "agent": vehicle.agent,
+        "path": vehicle.planned_path(),
     }
 
 
-def test_after_a_seek_two_mapping_vehicles_show_what_the_log_played_up_to_there_shows(tmp_path):
-    """A seek applies only some records (the first heartbeats, the map from its last whole snapshot, the latest of
-    each status message per component, the recent texts and readings) and still shows each vehicle as playing the
-    log from its start up to the seek time does; its messages are its last texts in the log, each once."""
+def test_after_a_seek_two_mapping_vehicles_show_what_the_log_played_up_to_there_shows(tmp_path, monkeypatch):
+    """A seek applies only some records (the first heartbeats, the map from its last whole snapshot, the path from
+    its last whole sending, the latest of each status message per component, the recent texts and readings) and
+    still shows each vehicle as playing the log from its start up to the seek time does: the planned path sent
+    before the last snapshot, each sonar hit where the vehicle's attitude then put it, the agent's last status that
+    decodes; its messages are its last texts in the log, each once. It decodes each record it applies once, and of
+    the planned path's records only those from the last whole path on."""
     path = survey_log(tmp_path / "survey.tlog")
     index = index_tlog(path)
     datum = Datum(*PLANE_CENTRE, 0.0)
     replay = Replay.open(path, Fleet(datum))
+    decoding: list[int] = []  # the records the replay decodes, in order
+    decode = replay.decode
+    monkeypatch.setattr(replay, "decode", lambda i, decoder=None: decoding.append(i) or decode(i, decoder))
+    path_ids = {i: struct.unpack_from("<H", packet, 10 + 5)[0] for i, (_, packet) in enumerate(records(path))
+                if index.tunnel_types[i] == PATH and index.sysids[i] == 1}  # copter 1's path records: their path id
     texts = [(m._timestamp, m.get_srcSystem(), m.text) for m in decoded(path) if m.get_type() == "STATUSTEXT"]
     first_status = np.flatnonzero((index.tunnel_types == agent_status.AGENT_STATUS) & (index.sysids == 1))[0]
     at = [
@@ -1171,8 +1216,11 @@ def test_after_a_seek_two_mapping_vehicles_show_what_the_log_played_up_to_there_
         replay.duration,
     ]
     maps = sequential_maps(path, [index.start + seconds for seconds in at])
+    paths = []  # the step of copter 1's path shown at each seek
     for seconds in at:
+        decoding.clear()
         replay.seek(seconds)
+        assert len(decoding) == len(set(decoding)) > 0
         until = index.start + seconds
         fleet = played(path, until, datum)
         assert replay.fleet.ids() == fleet.ids() == [1, 2]
@@ -1189,8 +1237,21 @@ def test_after_a_seek_two_mapping_vehicles_show_what_the_log_played_up_to_there_
         assert synced == (seconds > 1)  # the first snapshot comes after the first status
         assert np.array_equal(copter.map_stream.grid, grid)
         assert len(copter.hits) == len(fleet.get(1).hits) >= (100 if seconds > 10 else 0)
+        # the step of copter 1's latest fix (none yet: -1); the paths of its step came before it
+        step = -1 if copter.time_boot_s is None else round(copter.time_boot_s * 10)
+        sent = [s for s in SURVEY_PATHS if s <= step and s != SURVEY_LOST]
+        paths.append(sent[-1] if sent else None)
+        assert copter.map_stream.path == [tuple(float(np.float32(v)) for v in point)
+                                          for point in (survey_path(sent[-1], SURVEY_PATHS[sent[-1]]) if sent else [])]
+        assert replay.fleet.get(2).map_stream.path == ([(-1.0, 2.0), (-3.5, 4.25)] if step >= 2 else [])
+        shown_id = list(SURVEY_PATHS).index(sent[-1]) + 1 if sent else 0  # the paths' ids count from 1
+        assert [path_ids[i] for i in decoding if i in path_ids] == [
+            ident for i, ident in path_ids.items() if i < replay.position and ident >= shown_id
+        ]
+    assert paths == [None, 3, 800, 800]  # the second seek comes after the path that lost a chunk
     assert copter.mode != replay.fleet.get(2).mode and len(copter.messages) == 20  # the late mode; 21 texts said
-    assert copter.agent.reason != replay.fleet.get(2).agent.reason
+    assert copter.agent.reason == "step 1170"  # the last two do not decode
+    assert replay.fleet.get(2).agent.reason == "idle"
 
 
 def mapping_log(path: Path) -> tuple[Path, list[np.ndarray]]:
