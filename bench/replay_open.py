@@ -90,9 +90,9 @@ def main() -> None:
             started = time.perf_counter()
             replay.seek(float(target))
             seeks.append(time.perf_counter() - started)
-        vehicle = replay.fleet.get(1)
+        occupied = replay.fleet.occupied(replay.fleet.get(1))
         print(f"recording: {count:,} messages, {path.stat().st_size / 1e6:.1f} MB, {replay.duration:.0f} s "
-              f"(made in {made:.0f} s); after the last seek the map has {Fleet.occupied(vehicle)} occupied cells")
+              f"(made in {made:.0f} s); after the last seek the map has {occupied} occupied cells")
         print(table(["what", "figure", "target"], [
             ["open (index + first seek)", f"{opened:.2f} s", "< 5 s"],
             ["seek, median of 20", f"{np.median(seeks) * 1000:.0f} ms", "< 300 ms"],
