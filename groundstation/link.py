@@ -41,7 +41,6 @@ log = logging.getLogger("groundstation.link")
 GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
-RESULTS = RESULT_WORDS  # a COMMAND_ACK's result as a word
 TELEMETRY = {  # message -> Hz asked of every vehicle
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 20, mavlink.MAVLINK_MSG_ID_ATTITUDE: 20,
     mavlink.MAVLINK_MSG_ID_VFR_HUD: 4, mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1, mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 1,
@@ -270,7 +269,7 @@ class Link:
 
         ack = self.request(sysid, build(0), lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
                            timeout, retries, build)
-        return RESULTS.get(ack.result, f"result {ack.result}")
+        return RESULT_WORDS.get(ack.result, f"result {ack.result}")
 
     def command_int(self, sysid: int, command: int, frame: int, params: list[float], x: int, y: int, z: float,
                     timeout: float = 1.0, retries: int = 3, component: int = AUTOPILOT) -> str:
@@ -280,7 +279,7 @@ class Link:
 
         ack = self.request(sysid, build(0), lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
                            timeout, retries, build)
-        return RESULTS.get(ack.result, f"result {ack.result}")
+        return RESULT_WORDS.get(ack.result, f"result {ack.result}")
 
     # ---- the mission protocol, ground station side ----------------------------------------------------
     def download_mission(self, sysid: int, timeout: float = 1.0) -> list[MissionItem]:

@@ -28,7 +28,7 @@ import numpy as np
 
 from groundstation.state import Fleet
 from vehicle.protocol.agent_status import AGENT_STATUS
-from vehicle.protocol.mapstream import MAP_SNAPSHOT, PATH
+from vehicle.protocol.mapstream import MAP_SNAPSHOT, PATH, PATH_CHUNK, SNAPSHOT_CHUNK
 from vehicle.protocol.mav import mavlink
 
 V1, V2 = 0xFE, 0xFD
@@ -46,8 +46,6 @@ TRAIL_SAMPLES = 1500
 RECENT_TEXTS = 20
 RECENT_READINGS = 600
 RECENT_STATUSES = 10  # the onboard agent's, per component: the latest that decodes among them is shown
-SNAPSHOT_CHUNK = struct.Struct("<HHH")  # chunk headers (vehicle/protocol/mapstream.py): snapshot id, index, count
-PATH_CHUNK = struct.Struct("<HBB")  # path id, chunk index, chunk count
 
 
 class ReplayError(ValueError):

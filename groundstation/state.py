@@ -319,7 +319,7 @@ class Fleet:
             self.stations.popitem(last=False)
 
     def _command_ack(self, vehicle, m, now) -> None:
-        result = RESULTS.get(m.result, f"result {m.result}")
+        result = RESULT_WORDS.get(m.result, f"result {m.result}")
         if m.command not in QUIET_COMMANDS:
             self.history.event(vehicle.sysid, now, "ack", f"{_command_name(m.command)}: {result}")
         target = getattr(m, "target_system", 0)
@@ -560,7 +560,6 @@ def _round(value: float | None, digits: int = 2) -> float | None:
 
 
 MAX_WAYPOINTS_SHOWN = 500
-RESULTS = RESULT_WORDS  # a COMMAND_ACK's result as a word
 
 
 def _command_name(command: int) -> str:

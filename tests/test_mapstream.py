@@ -498,10 +498,10 @@ def test_a_delta_may_change_every_cell_but_not_one_more_nor_go_back():
 
 
 def test_a_path_point_with_either_coordinate_not_finite_is_dropped():
-    from vehicle.protocol.mapstream import _PATH, _POINT
+    from vehicle.protocol.mapstream import _POINT, PATH_CHUNK
 
     points = [(1.0, 2.0), (float("nan"), 3.0), (4.0, float("inf")), (5.0, 6.0)]
-    receiver = _fed((PATH, _PATH.pack(1, 0, 1) + b"".join(_POINT.pack(*p) for p in points)))
+    receiver = _fed((PATH, PATH_CHUNK.pack(1, 0, 1) + b"".join(_POINT.pack(*p) for p in points)))
     assert receiver.path == [(1.0, 2.0), (5.0, 6.0)]
 
 
@@ -535,9 +535,9 @@ def test_delta_payloads_are_filled_before_another_is_started():
 
 
 def test_a_snapshot_is_cut_into_at_most_65535_chunks():
-    from vehicle.protocol.mapstream import _CHUNK, snapshot_chunks
+    from vehicle.protocol.mapstream import SNAPSHOT_CHUNK, snapshot_chunks
 
-    room = PAYLOAD - _CHUNK.size
+    room = PAYLOAD - SNAPSHOT_CHUNK.size
     assert len(snapshot_chunks(1, bytes(65535 * room))) == 65535
     with pytest.raises(ValueError, match="^map snapshot too large to chunk$"):
         snapshot_chunks(1, bytes(65535 * room + 1))

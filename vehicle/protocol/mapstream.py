@@ -49,13 +49,13 @@ MAP_DELTA = 32801
 PATH = 32802
 PAYLOAD = 128
 
-_CHUNK = struct.Struct("<HHH")
+SNAPSHOT_CHUNK = struct.Struct("<HHH")
 _SNAPSHOT = struct.Struct("<BHfffIHHHH")
 _DELTA = struct.Struct("<IH")
-_PATH = struct.Struct("<HBB")
+PATH_CHUNK = struct.Struct("<HBB")
 _POINT = struct.Struct("<ff")
 DELTA_ROOM = PAYLOAD - _DELTA.size
-POINTS_PER_CHUNK = (PAYLOAD - _PATH.size) // _POINT.size
+POINTS_PER_CHUNK = (PAYLOAD - PATH_CHUNK.size) // _POINT.size
 FORMAT_VERSION = 1
 MAX_SIDE = 4000  # cells a side: 16 M cells (16 MB of int8 on each end), twice the default map's 2000
 VARINT_MAX = 5  # bytes of one LEB128 gap (gaps stay below 2**35)
@@ -156,7 +156,7 @@ class MapStreamer:
         self._last_path = rounded
         self.path_id = (self.path_id + 1) % 65536
         groups = [rounded[i:i + POINTS_PER_CHUNK] for i in range(0, len(rounded), POINTS_PER_CHUNK)] or [[]]
-        return [(PATH, _PATH.pack(self.path_id, index, len(groups)) + b"".join(_POINT.pack(*p) for p in group))
+        return [(PATH, PATH_CHUNK.pack(self.path_id, index, len(groups)) + b"".join(_POINT.pack(*p) for p in group))
                 for index, group in enumerate(groups)]
 
 
@@ -244,11 +244,11 @@ def snapshot_chunks(ident: int, blob: bytes) -> list[tuple[int, bytes]]:
 
 
 def _chunks(kind: int, ident: int, blob: bytes) -> list[tuple[int, bytes]]:
-    room = PAYLOAD - _CHUNK.size
+    room = PAYLOAD - SNAPSHOT_CHUNK.size
     parts = [blob[i:i + room] for i in range(0, len(blob), room)]
     if len(parts) > 65535:
         raise ValueError("map snapshot too large to chunk")
-    return [(kind, _CHUNK.pack(ident, index, len(parts)) + part) for index, part in enumerate(parts)]
+    return [(kind, SNAPSHOT_CHUNK.pack(ident, index, len(parts)) + part) for index, part in enumerate(parts)]
 
 
 # ---- receiving -----------------------------------------------------------------------------------
@@ -314,11 +314,11 @@ class MapReceiver:
         self.version += 1
 
     def _snapshot_chunk(self, payload: bytes) -> None:
-        ident, index, count = _CHUNK.unpack_from(payload)
+        ident, index, count = SNAPSHOT_CHUNK.unpack_from(payload)
         if index >= count:
             raise ValueError("chunk index past the chunk count")
         parts = self._parts.setdefault(ident, {})
-        parts[index] = payload[_CHUNK.size:]
+        parts[index] = payload[SNAPSHOT_CHUNK.size:]
         for other in [k for k in self._parts if k != ident]:  # an older snapshot will not complete now
             if len(self._parts[other]) < len(parts):
                 del self._parts[other]
@@ -351,10 +351,10 @@ class MapReceiver:
             self._apply(pending[seq])
 
     def _path_chunk(self, payload: bytes) -> None:
-        ident, index, count = _PATH.unpack_from(payload)
+        ident, index, count = PATH_CHUNK.unpack_from(payload)
         if index >= count:
             raise ValueError("chunk index past the chunk count")
-        body = payload[_PATH.size:]
+        body = payload[PATH_CHUNK.size:]
         points = [_POINT.unpack_from(body, i * _POINT.size) for i in range(len(body) // _POINT.size)]
         points = [p for p in points if math.isfinite(p[0]) and math.isfinite(p[1])]
         parts = self._path_parts.setdefault(ident, {})
