@@ -537,3 +537,24 @@ def test_the_gcs_failsafe_comes_after_exactly_its_timeout_and_again_each_time_th
     while (message := reader.recv_match(type="STATUSTEXT")) is not None:
         texts.append((message._timestamp, message.text))
     assert texts == [(105.0, failsafe), (107.0, "GCS failsafe cleared: ground station back"), (112.0, failsafe)]
+
+
+def command_acked_at(endpoint, gcs, now: float, command: int, *params: float) -> int:
+    """A ground station's COMMAND_LONG, without a heartbeat before it, taken in at wall time ``now``: its ACK's
+    result."""
+    gcs.conn.mav.command_long_send(1, 1, command, 0, *(list(params) + [0.0] * 7)[:7])
+    return wait_wall(lambda: endpoint.poll(now) or (m := gcs.recv(0.05)) is not None and m.get_type() ==
+                     "COMMAND_ACK" and m.command == command and m, 5, "the COMMAND_ACK").result
+
+
+def test_a_ground_station_silent_for_exactly_the_failsafe_timeout_is_no_longer_obeyed_as_the_failsafe_fires(scene):
+    """One rule for the failsafe and for whom the vehicle obeys: a silence that reaches the timeout (5 s) is a
+    lost ground station. Just short of it the station's command is obeyed; at exactly the timeout it is denied,
+    in the same poll in which the failsafe fires (it used to be obeyed by a vehicle that had given it up)."""
+    set_mode = mavlink.MAV_CMD_DO_SET_MODE
+    with endpoint_alone(scene) as (endpoint, autopilot, gcs):
+        gcs_heard(endpoint, gcs, 100.0)
+        assert command_acked_at(endpoint, gcs, 104.999, set_mode, 1, 5) == mavlink.MAV_RESULT_ACCEPTED
+        assert autopilot.mode == "LOITER" and not endpoint.in_failsafe
+        assert command_acked_at(endpoint, gcs, 105.0, set_mode, 1, 4) == mavlink.MAV_RESULT_DENIED
+        assert autopilot.mode == "LOITER" and endpoint.in_failsafe

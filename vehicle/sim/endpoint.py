@@ -205,12 +205,12 @@ class Endpoint:
         return (kind in COMMANDS or kind in ORDERS) and not self._obeys(message, now)
 
     def _obeys(self, message, now: float) -> bool:
-        """The sender is a ground station (its system's GCS heartbeat within the failsafe timeout) or the
-        vehicle's own companion computer."""
+        """The sender is a ground station (its system's GCS heartbeat less than the failsafe timeout ago: the
+        failsafe's own rule, ``_gcs_lost``) or the vehicle's own companion computer."""
         sender = message.get_srcSystem()
         if (sender, message.get_srcComponent()) == (self.sysid, COMPANION):
             return True
-        return now - self.stations.get(sender, -math.inf) <= self.failsafe_timeout
+        return not self._gcs_lost(self.stations.get(sender), now)
 
     def _refuse(self, message) -> list:
         """COMMAND_ACK DENIED for a command (nothing for other orders), and once per sender a STATUSTEXT why."""
@@ -418,8 +418,14 @@ class Endpoint:
             self.in_failsafe = False
             self.send(self._text("GCS failsafe cleared: ground station back"), now)
 
+    def _gcs_lost(self, heard: float | None, now: float) -> bool:
+        """Silent for the whole failsafe timeout (or never heard): as ArduPilot's Rover (``gcs_failsafe_check``:
+        ``last_gcs_update_ms >= gcs_timeout_ms``), a silence that reaches FS_GCS_TIMEOUT is a lost ground
+        station, both for the failsafe and for whom the vehicle obeys."""
+        return heard is None or now - heard >= self.failsafe_timeout
+
     def _check_failsafe(self, now: float) -> None:
-        if self.gcs_seen is None or self.in_failsafe or now - self.gcs_seen < self.failsafe_timeout:
+        if self.gcs_seen is None or self.in_failsafe or not self._gcs_lost(self.gcs_seen, now):
             return
         self.in_failsafe = True
         action = "RTL" if self.world.kind is Kind.COPTER else STOP_MODE["rover"]
