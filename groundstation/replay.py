@@ -8,11 +8,13 @@ two bytes).
 Seeking to a time then decodes only what rebuilds the state there: the
 latest of each status message (of the onboard agent's, the last few: a damaged
 one leaves the one before), a thinned-out trail, the recent messages and sonar
-hits (each reading after the attitude the vehicle had then), the map from its
-last complete snapshot on and the planned path from its last complete sending
-on (both found from the chunk headers in the raw TUNNEL payloads). Playing forward
+hits (each reading after the attitude and pose the vehicle had then), the map
+from its last complete snapshot on and the planned path from its last complete
+sending on (both found from the chunk headers in the raw TUNNEL payloads). Playing forward
 feeds the Fleet message by message, as a live link does: a log is just another
-MAVLink source, and the views cannot tell the difference.
+MAVLink source, and the views cannot tell the difference. What a system sent
+before its first vehicle heartbeat (a text at boot, say) playing drops, as a
+live station does, and so does a seek.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.state import Fleet
+from groundstation.state import Fleet, makes_a_vehicle
 from vehicle.protocol.agent_status import AGENT_STATUS
 from vehicle.protocol.mapstream import MAP_SNAPSHOT, PATH, PATH_CHUNK, SNAPSHOT_CHUNK
 from vehicle.protocol.mav import mavlink
@@ -35,8 +37,9 @@ V1, V2 = 0xFE, 0xFD
 SIGNED = 0x01
 EARLIEST, LATEST = 946684800, 4102444800  # plausible timestamps: 2000..2100
 TUNNEL = mavlink.MAVLINK_MSG_ID_TUNNEL
+HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
 POSES = (mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
-LATEST_ONLY = (mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_ATTITUDE, mavlink.MAVLINK_MSG_ID_VFR_HUD,
+LATEST_ONLY = (HEARTBEAT, mavlink.MAVLINK_MSG_ID_ATTITUDE, mavlink.MAVLINK_MSG_ID_VFR_HUD,
                mavlink.MAVLINK_MSG_ID_SYS_STATUS, mavlink.MAVLINK_MSG_ID_HOME_POSITION,
                mavlink.MAVLINK_MSG_ID_MISSION_CURRENT, mavlink.MAVLINK_MSG_ID_MISSION_ITEM_REACHED, *POSES)
 STATUSTEXT = mavlink.MAVLINK_MSG_ID_STATUSTEXT
@@ -157,6 +160,7 @@ class Replay:
     position: int = 0  # index of the next record to apply
     clock: float = 0.0  # seconds from the start of the log
     _data: bytes = field(default=b"", repr=False)
+    _vehicles_made_at: dict[int, int] | None = field(default=None, repr=False)  # sysid -> its first vehicle beat
     lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
 
     @classmethod
@@ -219,11 +223,24 @@ class Replay:
         length, body = self._data[start + 1], start + (10 if v2 else 6)
         return self._data[body + 11] if length > 11 else 0
 
-    def _apply(self, indices) -> None:
+    def _apply(self, indices, off_trail: set[int] | frozenset = frozenset()) -> None:
         for i in indices:
             message = self.decode(int(i))
-            if message is not None:
+            if message is None:
+                continue
+            if i in off_trail:
+                self._apply_off_trail(message, float(self.index.times[i]))
+            else:
                 self.fleet.apply(message, float(self.index.times[i]))
+
+    def _apply_off_trail(self, message, now: float) -> None:
+        """A pose applied only to place the sonar readings after it: its point is left off the trail, which a
+        seek draws from an even sample of the poses."""
+        vehicle = self.fleet.get(message.get_srcSystem())
+        points = len(vehicle.trail) if vehicle is not None else 0
+        self.fleet.apply(message, now)
+        if vehicle is not None and len(vehicle.trail) > points:
+            vehicle.trail.pop()
 
     # ---- seeking ----------------------------------------------------------------------------------
     def seek(self, seconds: float) -> None:
@@ -233,8 +250,8 @@ class Replay:
             end = int(np.searchsorted(self.index.times, self.index.start + seconds, side="right"))
             with self.fleet.lock:
                 self.fleet.clear()
-                needed, latest = self._needed(end)
-                self._apply(needed)
+                needed, latest, off_trail = self._needed(end)
+                self._apply(needed, set(off_trail.tolist()))
                 for sysid, i in latest.items():  # the records applied end with a pose or a text, not the last
                     vehicle = self.fleet.get(sysid)
                     if vehicle is not None:
@@ -242,19 +259,22 @@ class Replay:
             self.position = end
             self.clock = seconds
 
-    def _needed(self, end: int) -> tuple[np.ndarray, dict[int, int]]:
-        """Indices of the records before ``end`` that rebuild the state at ``end``, and each vehicle's last
-        record before ``end`` (when it was last heard).
+    def _needed(self, end: int) -> tuple[np.ndarray, dict[int, int], np.ndarray]:
+        """Indices of the records before ``end`` that rebuild the state at ``end``, each vehicle's last
+        record before ``end`` (when it was last heard), and the poses among them to keep off the trail.
 
         The first heartbeat of each component comes first (the autopilot's creates
         the vehicle), then its map from the last whole snapshot on (so the
         readings that follow draw hits, not a map of the ground station's own)
         and its planned path from the last whole one on, then the rest in time
-        order: each sonar reading after the latest attitude before it, so that
-        its hit lands where it did. Status messages count per component: a
-        vehicle's autopilot and its companion computer each have a latest one;
-        of the agent's statuses the last few are applied, so that a damaged
-        latest one leaves the one before it, as when playing.
+        order: each sonar reading after the latest attitude and the latest pose
+        (of each kind) before it, so that its hit lands where it did (a pose
+        there only for that stays off the trail, which is an even sample).
+        Status messages count per component: a vehicle's autopilot and its
+        companion computer each have a latest one; of the agent's statuses the
+        last few are applied, so that a damaged latest one leaves the one before
+        it, as when playing. What a system sent before the heartbeat that made
+        it a vehicle is left out: playing drops it.
         """
         index = self.index
         msgids, sysids, compids = index.msgids[:end], index.sysids[:end], index.compids[:end]
@@ -262,12 +282,16 @@ class Replay:
         maps: list[np.ndarray] = []
         rest: list[np.ndarray] = []
         latest: dict[int, int] = {}
+        placing: list[np.ndarray] = []
+        made = self._vehicles_made()
         for sysid in np.unique(sysids):
             mine = sysids == sysid
             latest[int(sysid)] = int(np.flatnonzero(mine)[-1])
+            if (made_at := made.get(int(sysid))) is not None:
+                mine[:made_at] = False  # not yet a vehicle: the fleet drops what it sent
             for compid in np.unique(compids[mine]):
                 theirs = mine & (compids == compid)
-                firsts.append(np.flatnonzero(theirs & (msgids == mavlink.MAVLINK_MSG_ID_HEARTBEAT))[:1])
+                firsts.append(np.flatnonzero(theirs & (msgids == HEARTBEAT))[:1])
                 for msgid in LATEST_ONLY:
                     rest.append(np.flatnonzero(theirs & (msgids == msgid))[-1:])
                 statuses = np.flatnonzero(theirs & (msgids == TUNNEL))
@@ -288,12 +312,41 @@ class Replay:
             attitudes = np.flatnonzero(mine & (msgids == ATTITUDE))
             before = np.searchsorted(attitudes, readings) - 1  # the latest attitude before each reading
             rest.append(attitudes[before[before >= 0]])
+            for msgid in POSES:  # and the latest pose of each kind, which the trail's sample may have left out
+                of_kind = poses[msgids[poses] == msgid]
+                before = np.searchsorted(of_kind, readings) - 1
+                placing.append(of_kind[before[before >= 0]])
             rest.append(readings)
+        none = np.zeros(0, dtype=np.int64)
         if not firsts:
-            return np.zeros(0, dtype=np.int64), latest
+            return none, latest, none
         first = np.unique(np.concatenate(firsts))
-        return np.concatenate([first, np.unique(np.concatenate(maps + [np.zeros(0, dtype=np.int64)])),
-                               np.setdiff1d(np.concatenate(rest), first)]), latest
+        off_trail = np.setdiff1d(np.concatenate(placing + [none]), np.concatenate(rest))
+        return np.concatenate([first, np.unique(np.concatenate(maps + [none])),
+                               np.setdiff1d(np.concatenate(rest + [off_trail]), first)]), latest, off_trail
+
+    def _vehicles_made(self) -> dict[int, int]:
+        """Per system id, the record of the heartbeat that makes it a vehicle in the fleet (the first that says
+        a vehicle, by its raw type and autopilot bytes, and decodes); found once for the whole log."""
+        if self._vehicles_made_at is None:
+            index = self.index
+            heartbeats = np.flatnonzero(index.msgids == HEARTBEAT)
+            made: dict[int, int] = {}
+            for i in heartbeats.tolist():
+                sysid = int(index.sysids[i])
+                if sysid not in made and makes_a_vehicle(*self._heartbeat_kind(i)):
+                    message = self.decode(i)
+                    if message is not None and message.get_type() == "HEARTBEAT":
+                        made[sysid] = i
+            self._vehicles_made_at = made
+        return self._vehicles_made_at
+
+    def _heartbeat_kind(self, i: int) -> tuple[int, int]:
+        """The type and autopilot of a HEARTBEAT record, undecoded (its 5th and 6th payload bytes; MAVLink 2
+        drops trailing zero bytes, so a short payload means 0)."""
+        start = int(self.index.offsets[i])
+        length, body = self._data[start + 1], start + (10 if self._data[start] == V2 else 6)
+        return (self._data[body + 4] if length > 4 else 0), (self._data[body + 5] if length > 5 else 0)
 
     def _whole_start(self, chunks: np.ndarray, header: struct.Struct) -> int:
         """Record index where the last complete one among ``chunks`` (of map snapshots, or of paths, as

@@ -88,6 +88,12 @@ NOT_VEHICLES = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavli
                 mavlink.MAV_TYPE_ADSB, mavlink.MAV_TYPE_CAMERA, mavlink.MAV_TYPE_ANTENNA_TRACKER}
 
 
+def makes_a_vehicle(mav_type: int, autopilot: int) -> bool:
+    """Whether a heartbeat of this type and autopilot makes a vehicle (a replay's seek asks it of the raw
+    bytes, to leave out what a system sent before it was one, as playing does)."""
+    return mav_type not in NOT_VEHICLES and autopilot != mavlink.MAV_AUTOPILOT_INVALID
+
+
 def colour_of(sysid: int) -> tuple[int, int, int]:
     return COLOURS[(sysid - 1) % len(COLOURS)]
 
@@ -257,8 +263,7 @@ class Fleet:
                 self._command_sent(message, now)  # a ground station's (ours, or another's) to a vehicle
                 return
             if vehicle is None:
-                if kind != "HEARTBEAT" or message.type in NOT_VEHICLES or message.autopilot == \
-                        mavlink.MAV_AUTOPILOT_INVALID:
+                if kind != "HEARTBEAT" or not makes_a_vehicle(message.type, message.autopilot):
                     return  # only a vehicle's heartbeat makes a vehicle
                 if len(self.vehicles) >= self.max_vehicles:
                     self.refused += 1

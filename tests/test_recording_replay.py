@@ -35,7 +35,7 @@ from harness import (
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
 from groundstation.replay import Player, Replay, ReplayError, index_tlog
-from groundstation.state import Fleet
+from groundstation.state import HITS_KEPT, Fleet
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol import agent_status
 from vehicle.protocol.geodesy import Datum
@@ -1088,7 +1088,7 @@ def survey_log(path: Path, steps: int = 1200) -> Path:
     (it idles throughout). Their agents send planned paths: copter 2's one, early;
     copter 1's at the steps of SURVEY_PATHS, all but one whole. Copter 1's last two agent statuses are damaged:
     one that does not decode as a status, one whose packet fails its checksum. The log opens with a text of
-    copter 1 and a heartbeat of copter 2."""
+    copter 1, before its first heartbeat (playing drops it: no vehicle yet), and a heartbeat of copter 2."""
     log = TlogWriter()
     (one, one_companion), (two, two_companion) = packers(1), packers(2)
     onboard = MemoryMap((0.0, 0.0), 10.0, 5.0)
@@ -1181,6 +1181,7 @@ def shown(vehicle) -> dict:
         "battery": (vehicle.voltage, vehicle.remaining),
         "home": vehicle.home,
         "heard": (vehicle.last_heartbeat, vehicle.last_message, vehicle.companion_heartbeat),
+        "status": vehicle.status,
         "boot": vehicle.time_boot_s,
         "mission": (vehicle.mission_current, vehicle.mission_total),
         "trail": list(vehicle.trail),
@@ -1196,8 +1197,9 @@ def test_after_a_seek_two_mapping_vehicles_show_what_the_log_played_up_to_there_
     its last whole sending, the latest of each status message per component, the recent texts and readings) and
     still shows each vehicle as playing the log from its start up to the seek time does: the planned path sent
     before the last snapshot, each sonar hit where the vehicle's attitude then put it, the agent's last status that
-    decodes; its messages are its last texts in the log, each once. It decodes each record it applies once, and of
-    the planned path's records only those from the last whole path on."""
+    decodes; its messages are the last of those playing shows, each once (not the text copter 1 sent before its
+    first heartbeat, which playing drops). It decodes each record it applies once, and of the planned path's
+    records only those from the last whole path on."""
     path = survey_log(tmp_path / "survey.tlog")
     index = index_tlog(path)
     datum = Datum(*PLANE_CENTRE, 0.0)
@@ -1207,7 +1209,6 @@ def test_after_a_seek_two_mapping_vehicles_show_what_the_log_played_up_to_there_
     monkeypatch.setattr(replay, "decode", lambda i, decoder=None: decoding.append(i) or decode(i, decoder))
     path_ids = {i: struct.unpack_from("<H", packet, 10 + 5)[0] for i, (_, packet) in enumerate(records(path))
                 if index.tunnel_types[i] == PATH and index.sysids[i] == 1}  # copter 1's path records: their path id
-    texts = [(m._timestamp, m.get_srcSystem(), m.text) for m in decoded(path) if m.get_type() == "STATUSTEXT"]
     first_status = np.flatnonzero((index.tunnel_types == agent_status.AGENT_STATUS) & (index.sysids == 1))[0]
     at = [
         float(index.times[first_status] - index.start),  # copter 1's agent has sent one status so far
@@ -1227,9 +1228,7 @@ def test_after_a_seek_two_mapping_vehicles_show_what_the_log_played_up_to_there_
         for sysid in (1, 2):
             got, expected = replay.fleet.get(sysid), fleet.get(sysid)
             assert shown(got) == shown(expected), (seconds, sysid)
-            assert [m["text"] for m in got.messages] == [
-                text for when, who, text in texts if who == sysid and when <= until
-            ][-20:]
+            assert [m["text"] for m in got.messages] == [m["text"] for m in expected.messages][-20:]
             assert got.status == (got.messages[-1]["text"] if got.messages else "")
         copter = replay.fleet.get(1)
         grid, synced, applied = maps[until]
@@ -1327,9 +1326,9 @@ def test_after_a_seek_the_map_is_the_vehicles_also_when_a_delta_came_between_sna
     assert stream.synced and np.array_equal(stream.grid, after_first)
 
 
-def long_flight_log(path: Path, poses: int = 5997) -> Path:
+def long_flight_log(path: Path, poses: int = 5997, readings: bool = False) -> Path:
     """A rover driving east 1 m per LOCAL_POSITION_NED (its pose number is its x), a heartbeat every 10 poses and
-    a text every 500."""
+    a text every 500; with ``readings``, a reading of its forward sonar after every pose."""
     log = TlogWriter()
     rover = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     for k in range(poses):
@@ -1348,6 +1347,8 @@ def long_flight_log(path: Path, poses: int = 5997) -> Path:
         if k % 500 == 250:
             log.write(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, f"pose {k}".encode(), 0, 0), rover)
         log.write(mavlink.MAVLink_local_position_ned_message(k * 100, 0.0, float(k), 0.0, 0.0, 1.0, 0.0), rover)
+        if readings:
+            log.write(mavlink.MAVLink_distance_sensor_message(k * 100, 20, 1000, 300 + k % 7, 1, 0, 0, 0), rover)
     return log.save(path)
 
 
@@ -1363,6 +1364,23 @@ def test_after_a_seek_a_long_flights_trail_is_thinned_evenly_from_the_first_fix_
         gaps = np.diff(numbers)
         assert 1000 < len(numbers) <= 1500 and gaps.min() >= gaps.max() - 1 >= 1, sorted(Counter(gaps).items())
     assert rover.x == 5996.0
+
+
+def test_after_a_seek_in_a_long_flight_each_sonar_hit_is_where_the_latest_pose_before_its_reading_put_it(tmp_path):
+    """A seek draws a long flight's trail from a sample of its poses, yet places each sonar reading with the latest
+    pose before it, as playing the log does (with the sample's poses, hits landed up to 3 m behind here), and adds
+    no point to the trail for it: the trail stays the even sample."""
+    path = long_flight_log(tmp_path / "long.tlog", readings=True)
+    replay = Replay.open(path, Fleet(Datum()))
+    for seconds in (60.0, replay.duration):  # some 1800 poses, then all 5997
+        replay.seek(seconds)
+        rover, expected = replay.fleet.get(1), played(path, replay.now, Datum()).get(1)
+        assert len(rover.hits) == HITS_KEPT and list(rover.hits) == list(expected.hits)
+        assert rover.sonar == expected.sonar and (rover.x, rover.y) == (expected.x, expected.y)
+        numbers = [round(x) for x, y, z in rover.trail]
+        gaps = np.diff(numbers)
+        assert numbers[0] == 0 and numbers[-1] == round(rover.x)
+        assert 1000 < len(numbers) <= 1500 and gaps.min() >= gaps.max() - 1 >= 1, sorted(Counter(gaps).items())
 
 
 def test_stepping_forward_and_backwards_after_a_seek_moves_a_tenth_of_a_second(tmp_path):
