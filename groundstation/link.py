@@ -49,6 +49,7 @@ TELEMETRY = {  # message -> Hz asked of every vehicle
 DATA_STREAMS = {mavlink.MAV_DATA_STREAM_POSITION: 10, mavlink.MAV_DATA_STREAM_EXTRA1: 10,
                 mavlink.MAV_DATA_STREAM_EXTRA2: 4, mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: 2}
 STALLED_AFTER = 5.0  # s without a turn of the loop: the health report says the link thread is stuck
+REPLY_LOOK = 0.05  # s at most between looks at the clock while a try waits for its reply
 
 
 class LinkError(Exception):
@@ -64,7 +65,8 @@ class _Waiter:
 
 class Link:
     def __init__(self, urls: list[str], fleet: Fleet, recorder=None, sysid: int = GCS_SYSID,
-                 signing_key: bytes | None = None, require_signing: bool = False):
+                 signing_key: bytes | None = None, require_signing: bool = False,
+                 retry_clock: Callable[[], float] = time.monotonic):
         if require_signing and signing_key is None:
             raise ValueError("requiring signed vehicles needs a signing key")
         self.fleet = fleet
@@ -88,6 +90,7 @@ class Link:
         self.last_error = ""
         self.recording_error = ""
         self.turned = time.monotonic()  # when the loop last went round
+        self.retry_clock = retry_clock  # what a try's wait for its reply is timed on (a test's own, or monotonic)
 
     def start(self) -> Link:
         self._thread.start()
@@ -248,15 +251,25 @@ class Link:
             self._waiters.append(waiter)
         try:
             for attempt in range(retries):
+                deadline = self.retry_clock() + timeout  # read before the send: once the try is out, it may move
                 self.send(resend(attempt) if resend is not None and attempt else message, sysid)
-                try:
-                    return waiter.replies.get(timeout=timeout)
-                except queue.Empty:
-                    continue
+                reply = self._reply(waiter, deadline)
+                if reply is not None:
+                    return reply
             raise LinkError(f"vehicle {sysid} did not answer {message.get_type()} after {retries} tries")
         finally:
             with self._lock:
                 self._waiters.remove(waiter)
+
+    def _reply(self, waiter: _Waiter, deadline: float):
+        """The reply that came by ``deadline`` on the retry clock, None if none did. The clock is looked at
+        every REPLY_LOOK of wall time at least: a test's clock moves when the test moves it."""
+        while (left := deadline - self.retry_clock()) > 0:
+            try:
+                return waiter.replies.get(timeout=min(left, REPLY_LOOK))
+            except queue.Empty:
+                continue
+        return None
 
     def command(self, sysid: int, command: int, *params: float, timeout: float = 1.0, retries: int = 3,
                 component: int = AUTOPILOT) -> str:

@@ -6,12 +6,13 @@ from __future__ import annotations
 import socket
 import threading
 import time
+from concurrent.futures import Future
 from contextlib import contextmanager
 
 import pytest
 from harness import free_udp_port, wait_wall
 
-from groundstation.link import Link, LinkError
+from groundstation.link import REPLY_LOOK, Link, LinkError
 from groundstation.state import Fleet
 from vehicle.protocol.mav import RESULT_WORDS, mavlink
 
@@ -63,7 +64,6 @@ class ScriptedVehicle:
             for message in self.parser.parse_buffer(data) or []:
                 if message.get_type() not in ("COMMAND_LONG", "COMMAND_INT"):
                     continue
-                message.arrived = time.monotonic()  # when this vehicle got it (for the time between tries)
                 self.received.append(message)
                 script = self.answers.get(message.command, [mavlink.MAV_RESULT_ACCEPTED])
                 answer = script.pop(0) if len(script) > 1 else script[0]
@@ -76,10 +76,24 @@ class ScriptedVehicle:
         return [m for m in list(self.received) if m.command == command]
 
 
+class StationClock:
+    """The station's retry clock in a test: it stands still until the test moves it, so however slow the machine,
+    a try waits exactly as long as the test says (it starts at 1024 s and moves by 1/1024ths: sums are exact)."""
+
+    def __init__(self):
+        self.now = 1024.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def advance(self, seconds: float) -> None:
+        self.now += seconds
+
+
 @contextmanager
-def station_and_vehicle():
+def station_and_vehicle(retry_clock: StationClock | None = None):
     port = free_udp_port()
-    link = Link([f"udpin:127.0.0.1:{port}"], Fleet()).start()
+    link = Link([f"udpin:127.0.0.1:{port}"], Fleet(), retry_clock=retry_clock or time.monotonic).start()
     vehicle = ScriptedVehicle(port)
     vehicle._thread.start()
     try:
@@ -211,51 +225,89 @@ def test_a_request_waits_for_the_reply_it_accepts():
         assert len(vehicle.tries(command)) == 1
 
 
-SECOND = (0.9, 1.95)  # wall s between two tries a second apart as the vehicle receives them; two apart are >= 2 s
+JUST_SHORT = 1 - 1 / 1024  # s of the station's clock: a try still waits for its reply
+HELD = 1.5  # wall s the station's clock is held just short of a second, once: longer than a try on the wall clock
 
 
-def a_second_apart(first, second) -> bool:
-    """Two tries as the vehicle received them: the second came about a second after the first."""
-    return SECOND[0] < second.arrived - first.arrived < SECOND[1]
+def in_background(call) -> Future:
+    """``call()`` on a daemon thread of its own, as it waits on the station's clock that the test moves (a test
+    that fails leaves it waiting: it must not keep the run from ending)."""
+    future: Future = Future()
+
+    def run() -> None:
+        try:
+            future.set_result(call())
+        except BaseException as error:  # noqa: BLE001 - the test reads it from the future
+            future.set_exception(error)
+
+    threading.Thread(target=run, daemon=True).start()
+    return future
+
+
+def tried_a_second_apart(clock: StationClock, vehicle: ScriptedVehicle, command: int, tries: int) -> None:
+    """The vehicle gets ``tries`` tries of ``command``, each sent once a whole second of the station's clock has
+    passed since the one before, not earlier: the clock is held just short of it (the first time longer than a
+    try lasts on the wall clock) before it is moved on to the second. It stays where the last try was sent."""
+    wait_wall(lambda: vehicle.tries(command), 5, f"the first try of command {command}")
+    for sent in range(1, tries):
+        clock.advance(JUST_SHORT)
+        time.sleep(HELD if sent == 1 else 3 * REPLY_LOOK)  # what a try sent too early needs to arrive
+        assert len(vehicle.tries(command)) == sent, f"try {sent + 1} came before its second had passed"
+        clock.advance(1 - JUST_SHORT)
+        wait_wall(lambda sent=sent: len(vehicle.tries(command)) > sent, 5, f"try {sent + 1} of command {command}")
 
 
 def test_a_command_is_tried_three_times_a_second_apart_unless_told_with_its_missing_params_zero():
     """What the station's commands rely on (commands.py gives no timeout or retries): three tries, each
-    waiting a second for the ACK; parameters not given are sent as 0."""
+    waiting a second of the station's clock for the ACK; parameters not given are sent as 0."""
     land = mavlink.MAV_CMD_NAV_LAND
-    with station_and_vehicle() as (link, vehicle):
+    clock = StationClock()
+    with station_and_vehicle(clock) as (link, vehicle):
         vehicle.answers[TAKEOFF] = [None]
+        unanswered = in_background(lambda: link.command(1, TAKEOFF))
+        tried_a_second_apart(clock, vehicle, TAKEOFF, 3)
+        clock.advance(1.0)  # the last try's second: no more tries
         with pytest.raises(LinkError, match="vehicle 1 did not answer COMMAND_LONG after 3 tries"):
-            link.command(1, TAKEOFF, timeout=TIMEOUT)
+            unanswered.result(timeout=5)
         assert [m.confirmation for m in vehicle.tries(TAKEOFF)] == [0, 1, 2]
 
         vehicle.answers[land] = [None, mavlink.MAV_RESULT_ACCEPTED]
-        assert link.command(1, land, 2.0) == "accepted"
+        answered = in_background(lambda: link.command(1, land, 2.0))
+        tried_a_second_apart(clock, vehicle, land, 2)
+        assert answered.result(timeout=5) == "accepted"
         tries = vehicle.tries(land)
         assert [m.confirmation for m in tries] == [0, 1]
-        assert a_second_apart(*tries)
         assert all(
             [m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7] == [2.0] + [0.0] * 6 for m in tries
         )
 
 
 def test_command_int_is_tried_three_times_a_second_apart_as_current_and_without_autocontinue():
-    """COMMAND_INT as commands.py sends it (a goto): three tries a second apart unless told, each with
-    current and autocontinue 0 (fields MAVLink leaves unused in COMMAND_INT, to be sent as 0)."""
+    """COMMAND_INT as commands.py sends it (a goto): three tries a second apart (of the station's clock) unless
+    told, each with current and autocontinue 0 (fields MAVLink leaves unused in COMMAND_INT, to be sent as 0)."""
     reposition = mavlink.MAV_CMD_DO_REPOSITION
     frame = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
-    with station_and_vehicle() as (link, vehicle):
+    clock = StationClock()
+    with station_and_vehicle(clock) as (link, vehicle):
+
+        def goto():
+            return link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0)
+
         vehicle.answers[reposition] = [None]
+        unanswered = in_background(goto)
+        tried_a_second_apart(clock, vehicle, reposition, 3)
+        clock.advance(1.0)
         with pytest.raises(LinkError, match="vehicle 1 did not answer COMMAND_INT after 3 tries"):
-            link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0, timeout=TIMEOUT)
+            unanswered.result(timeout=5)
         assert len(vehicle.tries(reposition)) == 3
 
         vehicle.received.clear()
         vehicle.answers[reposition] = [None, mavlink.MAV_RESULT_ACCEPTED]
-        assert link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0) == "accepted"
+        answered = in_background(goto)
+        tried_a_second_apart(clock, vehicle, reposition, 2)
+        assert answered.result(timeout=5) == "accepted"
         tries = vehicle.tries(reposition)
         assert len(tries) == 2
-        assert a_second_apart(*tries)
         assert all((m.current, m.autocontinue) == (0, 0) for m in tries)
 
 
@@ -283,8 +335,8 @@ def test_command_int_is_answered_only_by_the_ack_of_its_command_and_names_a_resu
 
 
 def test_a_request_is_sent_again_unchanged_three_times_a_second_apart_unless_told():
-    """``request`` (the mission protocol's path) resends the very message, waits a second per try and tries
-    three times, unless told otherwise."""
+    """``request`` (the mission protocol's path) resends the very message, waits a second of the station's clock
+    per try and tries three times, unless told otherwise."""
     command = mavlink.MAV_CMD_PREFLIGHT_CALIBRATION  # one the station never sends by itself
     message = mavlink.MAVLink_command_long_message(1, 1, command, 0, 0, 0, 0, 0, 0, 0, 0)
 
@@ -294,18 +346,23 @@ def test_a_request_is_sent_again_unchanged_three_times_a_second_apart_unless_tol
     def answer(vehicle, message):
         vehicle.send(vehicle.mav.statustext_encode(6, b"calibrated"))
 
-    with station_and_vehicle() as (link, vehicle):
+    clock = StationClock()
+    with station_and_vehicle(clock) as (link, vehicle):
         vehicle.answers[command] = [None]
+        unanswered = in_background(lambda: link.request(1, message, accepts))
+        tried_a_second_apart(clock, vehicle, command, 3)
+        clock.advance(1.0)
         with pytest.raises(LinkError, match="vehicle 1 did not answer COMMAND_LONG after 3 tries"):
-            link.request(1, message, accepts, timeout=TIMEOUT)
+            unanswered.result(timeout=5)
         assert [m.confirmation for m in vehicle.tries(command)] == [0, 0, 0]
 
         vehicle.received.clear()
         vehicle.answers[command] = [None, answer]
-        assert link.request(1, message, accepts).text == "calibrated"
+        answered = in_background(lambda: link.request(1, message, accepts))
+        tried_a_second_apart(clock, vehicle, command, 2)
+        assert answered.result(timeout=5).text == "calibrated"
         tries = vehicle.tries(command)
         assert [m.confirmation for m in tries] == [0, 0]
-        assert a_second_apart(*tries)
 
 
 def test_a_command_goes_only_to_the_vehicle_it_is_for():
