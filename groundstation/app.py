@@ -356,6 +356,8 @@ def create_app(station: GroundStation) -> FastAPI:
             raise HTTPException(409, "nothing is being replayed")
         if body.speed is not None:
             replay.speed = body.speed
+        if body.play is False:  # before a seek or step: the player would otherwise move on from where it lands
+            replay.playing = False
         if body.seek is not None:
             await asyncio.to_thread(replay.seek, body.seek)
         if body.step is not None:

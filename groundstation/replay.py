@@ -421,6 +421,7 @@ class Player:
         last = time.monotonic()
         while not self._stop.wait(self.TICK):
             now = time.monotonic()
-            if self.replay.playing:
-                self.replay.advance((now - last) * self.replay.speed)
+            with self.replay.lock:  # playing is read under the lock: a pause and seek leaves nothing to come
+                if self.replay.playing:
+                    self.replay.advance((now - last) * self.replay.speed)
             last = now

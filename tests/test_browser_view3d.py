@@ -41,6 +41,7 @@ TOKEN = "view3d-test-token-77c1"
 GROUNDED, HOVERING = 1, 2
 HOVER_AT = (6.0, 6.0)
 UI_TIMEOUT = 30_000
+BUSY_PAGE = 90_000  # ms for an action on the page: viser drawing in software WebGL holds its main thread
 VIEWPORT = (1200, 760)
 BYSTANDER = (400, 300)  # the other viewer's page: small, so that its software WebGL leaves the cores to ours
 SHOTS = Path(__file__).resolve().parent.parent / "build" / "screenshots"  # left for a person to look at
@@ -145,7 +146,7 @@ class View:
         so that took 10 to 30 s a picture where this takes a few."""
         if self._devtools is None:
             self._devtools = self.context.new_cdp_session(self.page)
-            self._box = self.page.locator("#view").bounding_box()  # the layout never moves it
+            self._box = self.page.locator("#view").bounding_box(timeout=BUSY_PAGE)  # the layout never moves it
         try:
             data = self._devtools.send("Page.captureScreenshot", {
                 "format": "png", "clip": {**self._box, "scale": 1}, "optimizeForSpeed": True})
@@ -217,7 +218,7 @@ def near(a, b, tolerance: float) -> bool:
 def press(button) -> None:
     """Click a panel button. Dispatched to it, with time to spare: viser drawing in software WebGL holds
     the page's main thread (its frame is same-origin) for seconds now and then, longer with two views open."""
-    button.dispatch_event("click", timeout=90_000)
+    button.dispatch_event("click", timeout=BUSY_PAGE)
 
 
 def choose(view: View, sysid: int) -> None:
@@ -309,20 +310,20 @@ def test_keys_switch_modes_fit_and_go_to_the_vehicle(view, station):
     choose(one, HOVERING)
     expect(page.locator("#view3d-vehicle")).to_have_text(f"camera on vehicle {HOVERING}")
 
-    page.locator("body").press("4")  # top-down, north up
+    page.locator("body").press("4", timeout=BUSY_PAGE)  # top-down, north up
     expect(one.mode_button("top")).to_have_attribute("aria-pressed", "true")
     one.poll(lambda: near(one.pose()[0][:2], hover[:2], 0.5) and one.pose()[0][2] > hover[2] + 10
              and near(one.pose()[1], hover, 0.5), 30, "the camera straight above vehicle 2")
 
     # keys work with the focus inside the 3D view too (its frame is ours, same origin)
     frame = page.frame_locator("#view")
-    frame.locator("canvas").first.focus()
-    frame.locator("body").press("3")  # onboard: from the vehicle itself, along its heading
+    frame.locator("canvas").first.focus(timeout=BUSY_PAGE)
+    frame.locator("body").press("3", timeout=BUSY_PAGE)  # onboard: from the vehicle itself, along its heading
     expect(one.mode_button("onboard")).to_have_attribute("aria-pressed", "true")
     one.poll(lambda: near(one.pose()[0], hover, 0.6), 30, "the camera on board vehicle 2")
     assert one.visibility(f"/vehicles/{HOVERING}/body/dart") is False  # its own marker would fill the view
 
-    page.locator("body").press("f")  # fit: the whole scene, the camera free again
+    page.locator("body").press("f", timeout=BUSY_PAGE)  # fit: the whole scene, the camera free again
     expect(one.mode_button("orbit")).to_have_attribute("aria-pressed", "true")
     low, high = station.station.scene.bounds
     cam = one.camera
@@ -331,11 +332,11 @@ def test_keys_switch_modes_fit_and_go_to_the_vehicle(view, station):
                            cam.aspect)
     one.poll(lambda: near(one.pose()[0], eye, 2.0), 30, "the camera fits the scene")
 
-    page.locator("body").press("v")  # go to the selected vehicle
+    page.locator("body").press("v", timeout=BUSY_PAGE)  # go to the selected vehicle
     eye, look = camera.overview(hover, station.station.live.vehicles[HOVERING].yaw)
     one.poll(lambda: near(one.pose()[1], hover, 1.0) and near(one.pose()[0], hover, 12.0), 30,
              "the camera next to vehicle 2")
-    page.locator("body").press("1")
+    page.locator("body").press("1", timeout=BUSY_PAGE)
     expect(one.mode_button("orbit")).to_have_attribute("aria-pressed", "true")
 
 
@@ -343,7 +344,7 @@ def test_the_wheel_zooms_towards_the_cursor(view, station):
     one = view()
     one.wait_for_scene()
     one.poll(lambda: one.camera.image_height > 0, 30, "the view reported its size")
-    box = one.page.locator("#view").bounding_box()
+    box = one.page.locator("#view").bounding_box(timeout=BUSY_PAGE)
     x, y = 0.4, -0.3  # left of the middle and below it: the ground south-west of the centre
     cam = one.camera
     eye, look = one.pose()
@@ -372,9 +373,9 @@ def test_layers_and_map_opacity_are_each_viewers_own(view, station):
     expect(legend.nth(1)).to_have_text("occupied")
 
     for layer in ("trails", "beams", "echoes", "waypoints", "paths", "map"):
-        page.locator(f'#view3d input[data-layer="{layer}"]').uncheck(timeout=90_000)
+        page.locator(f'#view3d input[data-layer="{layer}"]').uncheck(timeout=BUSY_PAGE)
         one.poll(lambda layer=layer: one.visibility(f"/layers/{layer}") is False, 30, f"{layer} hidden")
-    page.select_option("#map-opacity", "0.3", timeout=90_000)
+    page.select_option("#map-opacity", "0.3", timeout=BUSY_PAGE)
     one.poll(lambda: one.visibility("/layers/map/o30") is True and one.visibility("/layers/map/o100") is False,
              30, "the faint map shown instead of the opaque one")
 
@@ -392,7 +393,7 @@ def test_layers_and_map_opacity_are_each_viewers_own(view, station):
         shares.append(spread(image))
         return shares[-1] < 0.5 if shown else shares[-1] > 0.6
     one.poll(lambda: scene_shown(True), 150, "the scene drawn")
-    page.locator('#view3d input[data-layer="scene"]').uncheck(timeout=90_000)
+    page.locator('#view3d input[data-layer="scene"]').uncheck(timeout=BUSY_PAGE)
     one.poll(lambda: one.visibility("/layers/scene") is False, 30, "the scene layer hidden")
     try:
         one.poll(lambda: scene_shown(False), 150, "the view without the scene")

@@ -648,6 +648,24 @@ def test_the_stream_follows_the_replay(flight, plane_in_record_dir):
         api.post("/api/replay/stop", headers=api.operator)
 
 
+def test_a_pause_and_seek_while_playing_stays_where_it_landed(flight, plane_in_record_dir):
+    """The player must not move on from a seek that also paused (it used to, when it woke during the seek)."""
+    api = flight.api
+    assert api.post("/api/replay", json={"name": plane_in_record_dir.name}, headers=api.operator).status_code == 200
+    try:
+        for attempt in range(15):
+            control = {"seek": 0.0, "play": True, "speed": 20.0}
+            assert api.post("/api/replay/control", json=control, headers=api.operator).json()["playing"]
+            time.sleep(0.12)  # a few of the player's ticks: it is playing, and wakes at any moment
+            paused = api.post("/api/replay/control", json={"seek": 5.0, "play": False}, headers=api.operator).json()
+            assert not paused["playing"] and paused["time"] == 5.0, attempt
+            time.sleep(0.12)
+            status = api.get("/api/replay").json()["replay"]
+            assert not status["playing"] and status["time"] == 5.0, (attempt, status)
+    finally:
+        api.post("/api/replay/stop", headers=api.operator)
+
+
 def test_export_is_one_html_file(flight, plane_in_record_dir):
     api = flight.api
     assert api.post("/api/replay", json={"name": plane_in_record_dir.name}, headers=api.operator).status_code == 200
