@@ -30,7 +30,7 @@ from vehicle.sim.autopilot import (
     VELOCITY_TIMEOUT,
     Autopilot,
 )
-from vehicle.sim.avoidance import MARGIN
+from vehicle.sim.avoidance import MARGIN, ObstacleDatabase
 from vehicle.sim.physics import Body, Limits
 from vehicle.sim.simulation import Simulation
 from vehicle.world.sonar import Sonar
@@ -565,6 +565,34 @@ def test_rtl_held_back_by_a_tall_wall_says_so(make_scene, box):
     told = [text for text in texts(world) if text.startswith("RTL:") and "cannot reach home" in text]
     assert len(told) == 1 and "obstacle" in told[0], texts(world)
     assert world.collision is None
+
+
+def test_rtl_flies_home_over_a_wall_it_was_held_back_by_below(wall_scene):
+    """Avoidance keeps each echo's height: the 5 m wall that stopped the copter at 4 m does not hold it back
+    at RTL's 15 m, so it flies over it home (it used to hover there, saying it could not reach home)."""
+    world = armed_copter(wall_scene)
+    world.autopilot.goto(0.0, 20.0)
+    world.run_for(20.0)
+    assert world.autopilot.blocked and world.pose.y < 9.9  # stopped south of the wall, which it saw
+    world.autopilot.home = (0.0, 25.0, 0.0)  # home lies behind it
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    step_until(world, lambda: not world.autopilot.armed, limit=90.0)
+    assert math.hypot(world.pose.x - 0.0, world.pose.y - 25.0) < 0.3, texts(world)
+    assert not [text for text in texts(world) if "cannot reach home" in text]
+    assert world.collision is None
+
+
+def test_remembered_echoes_hold_back_only_within_a_metre_of_the_vehicles_height():
+    """An echo 1 m above or below the vehicle still caps its speed towards it; one further away does not."""
+    database = ObstacleDatabase(margin=MARGIN, accel=2.5)
+    database.add(0.0, 1.5, 4.0, time=0.0)
+    capped = math.sqrt(2 * 2.5 * (1.5 - database.body_radius - MARGIN))
+    for height in (3.0, 4.0, 5.0):
+        assert database.speed_limit(0.0, 0.0, height, 0.0, 2.0, now=1.0) == pytest.approx(capped), height
+        assert database.obstacle_ahead(0.0, 0.0, height, 0.0, 2.0, now=1.0)[0] == pytest.approx(1.5), height
+    for height in (2.99, 5.01, 15.0):
+        assert database.speed_limit(0.0, 0.0, height, 0.0, 2.0, now=1.0) == math.inf, height
+        assert database.obstacle_ahead(0.0, 0.0, height, 0.0, 2.0, now=1.0) is None, height
 
 
 def test_rtl_rover_returns_home_and_holds(flat_scene):
@@ -1104,7 +1132,7 @@ def creeping_rover(flat_scene, speed: float) -> Simulation:
     avoidance = world.avoidance
     corridor = avoidance.body_radius + avoidance.margin
     assert (corridor + gap) - corridor == gap and math.sqrt(2 * avoidance.accel * gap) == speed
-    avoidance.add(0.0, corridor + gap, world.time)
+    avoidance.add(0.0, corridor + gap, world.pose.z, world.time)
     assert world.body.speed == 0.0 and world.pose.yaw == 0.0
     return world
 

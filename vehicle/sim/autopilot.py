@@ -293,7 +293,7 @@ class Autopilot:
         if self.avoidance is not None and (vx or vy):
             body = self.body
             pose = body.pose
-            limit = self.avoidance.speed_limit(pose.x, pose.y, vx, vy, self.time)
+            limit = self.avoidance.speed_limit(pose.x, pose.y, pose.z, vx, vy, self.time)
             limit = max(0.0, limit - math.hypot(body.vx, body.vy) * dt)  # one step of reaction time
             wanted = math.hypot(vx, vy)
             if wanted > limit:
@@ -316,7 +316,7 @@ class Autopilot:
         self._told_blocked = True
         pose = self.body.pose
         wanted_x, wanted_y = self.wanted
-        found = self.avoidance.obstacle_ahead(pose.x, pose.y, wanted_x, wanted_y, self.time)
+        found = self.avoidance.obstacle_ahead(pose.x, pose.y, pose.z, wanted_x, wanted_y, self.time)
         where = "" if found is None else f"obstacle {found[0]:.1f} m ahead at ({found[1]:.1f}, {found[2]:.1f}); "
         tx, ty = self.destination
         if self.mode == "RTL":

@@ -4,7 +4,10 @@ Like ArduPilot's simple avoidance with a proximity database (AP_OADatabase),
 the autopilot remembers recent sonar hits near its operating height and caps
 its speed towards any of them so that it can always brake to a stop ``margin``
 short of the obstacle. Missions decide where to go; this only decides how fast
-the body may go there.
+the body may go there. Each echo keeps its height, as the database's points
+do: only those within ``BAND`` of the vehicle's height hold it back, so a
+copter that climbed (RTL climbs to its return height) flies over the walls it
+saw below.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ import numba
 import numpy as np
 
 MARGIN = 0.1  # m kept between the body and any remembered echo (planning keeps at least twice that)
+BAND = 1.0  # m: echoes further above or below the vehicle are no obstacle to it (the ground, a roof, a wall far below)
 
 
 class ObstacleDatabase:
@@ -24,16 +28,16 @@ class ObstacleDatabase:
         self.accel = accel
         self.body_radius = body_radius
         self.lifetime = lifetime
-        self._points = np.zeros((capacity, 2))
+        self._points = np.zeros((capacity, 3))
         self._times = np.full(capacity, -np.inf)
         self._next = 0
-        self._clear_from: tuple[float, float] | None = None  # no obstacle within _clear_radius of here
+        self._clear_from: tuple[float, float] | None = None  # no echo at any height within _clear_radius of here
         self._clear_radius = 0.0
 
-    def add(self, x: float, y: float, time: float) -> None:
+    def add(self, x: float, y: float, z: float, time: float) -> None:
         if self._clear_from is not None:
             self._clear_radius = min(self._clear_radius, math.dist(self._clear_from, (x, y)))
-        self._points[self._next] = (x, y)
+        self._points[self._next] = (x, y, z)
         self._times[self._next] = time
         self._next = (self._next + 1) % len(self._times)
 
@@ -41,8 +45,9 @@ class ObstacleDatabase:
         self._times[:] = -np.inf
         self._clear_from = None
 
-    def speed_limit(self, x: float, y: float, vx: float, vy: float, now: float) -> float:
-        """Highest speed along (vx, vy) from (x, y) that can still stop short of every known obstacle."""
+    def speed_limit(self, x: float, y: float, z: float, vx: float, vy: float, now: float) -> float:
+        """Highest speed along (vx, vy) from (x, y) at height z that can still stop short of every known
+        obstacle."""
         speed = math.hypot(vx, vy)
         if speed < 1e-9:
             return 0.0
@@ -50,7 +55,7 @@ class ObstacleDatabase:
         if self._clear_from is not None and math.dist(self._clear_from, (x, y)) + reach < self._clear_radius:
             return math.inf  # nothing known anywhere near: skip the search
         ux, uy = vx / speed, vy / speed
-        nearest, gap = _nearest_and_ahead(self._points, self._times, now - self.lifetime, x, y, ux, uy,
+        nearest, gap = _nearest_and_ahead(self._points, self._times, now - self.lifetime, x, y, z, ux, uy,
                                           reach, self.body_radius + self.margin)
         self._clear_from, self._clear_radius = (x, y), nearest
         if gap == math.inf:
@@ -58,14 +63,14 @@ class ObstacleDatabase:
         return math.sqrt(2 * self.accel * gap) if gap > 0 else 0.0
 
 
-    def obstacle_ahead(self, x: float, y: float, vx: float, vy: float, now: float):
+    def obstacle_ahead(self, x: float, y: float, z: float, vx: float, vy: float, now: float):
         """The nearest remembered obstacle in the corridor along (vx, vy): (distance, x, y), or None. Asked
         rarely (to say what holds the vehicle back), so plain numpy."""
         speed = math.hypot(vx, vy)
         if speed < 1e-9:
             return None
         ux, uy = vx / speed, vy / speed
-        live = self._times > now - self.lifetime
+        live = (self._times > now - self.lifetime) & (np.abs(self._points[:, 2] - z) <= BAND)
         dx, dy = self._points[live, 0] - x, self._points[live, 1] - y
         ahead = dx * ux + dy * uy
         inside = (ahead > 0) & (np.abs(dx * uy - dy * ux) < self.body_radius + self.margin)
@@ -76,10 +81,11 @@ class ObstacleDatabase:
 
 
 @numba.njit(cache=True)
-def _nearest_and_ahead(points, times, oldest, x, y, ux, uy, reach, corridor):
-    """Over the points remembered after ``oldest``: the distance to the nearest, and how far (less the
-    corridor's half-width) the nearest one within ``reach`` lies ahead inside the corridor along (ux, uy),
-    inf if none. A loop over a few hundred points, asked at every simulated step."""
+def _nearest_and_ahead(points, times, oldest, x, y, z, ux, uy, reach, corridor):
+    """Over the points remembered after ``oldest``: the distance to the nearest at any height, and how far
+    (less the corridor's half-width) the nearest one within ``reach`` and ``BAND`` of height z lies ahead
+    inside the corridor along (ux, uy), inf if none. A loop over a few hundred points, asked at every
+    simulated step."""
     nearest = math.inf
     gap = math.inf
     for k in range(len(times)):
@@ -88,7 +94,7 @@ def _nearest_and_ahead(points, times, oldest, x, y, ux, uy, reach, corridor):
         dx, dy = points[k, 0] - x, points[k, 1] - y
         distance = math.hypot(dx, dy)
         nearest = min(nearest, distance)
-        if distance >= reach:
+        if distance >= reach or abs(points[k, 2] - z) > BAND:
             continue
         ahead = dx * ux + dy * uy
         if ahead > 0 and abs(dx * uy - dy * ux) < corridor:

@@ -18,6 +18,7 @@ from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.modes import Kind
 from vehicle.protocol.rangefinder import Reading, Servo
 from vehicle.sim.autopilot import Autopilot
+from vehicle.sim.avoidance import BAND as AVOID_BAND
 from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.sim.avoidance import ObstacleDatabase
 from vehicle.sim.battery import Battery
@@ -152,8 +153,9 @@ class Simulation:
                 distance = reading.distance
                 if distance is not None:
                     dx, dy, dz = reading.direction.tolist()  # reading.hit, in plain floats
-                    if abs(oz + dz * distance - pose.z) <= 1.0:
-                        self.avoidance.add(ox + dx * distance, oy + dy * distance, self.time)
+                    hz = oz + dz * distance
+                    if abs(hz - pose.z) <= AVOID_BAND:
+                        self.avoidance.add(ox + dx * distance, oy + dy * distance, hz, self.time)
         return readings
 
     def run_for(self, seconds: float) -> list[Reading]:
