@@ -1,5 +1,9 @@
 """The ground station's command path (groundstation.link: request, command, command_int) against a scripted
-vehicle on real UDP sockets: retries with confirmation + 1, which COMMAND_ACK counts, result words, giving up."""
+vehicle on real UDP sockets: retries with confirmation + 1, which COMMAND_ACK counts, result words, giving up.
+
+Every try waits for its reply on the station's clock that the test moves (StationClock), never on the wall clock:
+however slow the machine, a try is repeated only when the test moves that clock past its timeout. The wall clock
+only bounds how long the test waits for something that must happen (5 s)."""
 
 from __future__ import annotations
 
@@ -17,7 +21,9 @@ from groundstation.state import Fleet
 from vehicle.protocol.mav import RESULT_WORDS, mavlink
 
 TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
-TIMEOUT = 0.25  # s per try: short, as the scripted vehicle answers at once or never
+TIMEOUT = 0.25  # s of the station's clock per try, where a test gives one
+SHORT = 1 / 1024  # s of the station's clock a try is held short of its timeout: it still waits for its reply
+HELD = 1.5  # wall s the station's clock is held just short of a second, once: longer than a try on the wall clock
 
 
 class ScriptedVehicle:
@@ -64,9 +70,9 @@ class ScriptedVehicle:
             for message in self.parser.parse_buffer(data) or []:
                 if message.get_type() not in ("COMMAND_LONG", "COMMAND_INT"):
                     continue
-                self.received.append(message)
                 script = self.answers.get(message.command, [mavlink.MAV_RESULT_ACCEPTED])
                 answer = script.pop(0) if len(script) > 1 else script[0]
+                self.received.append(message)  # once its answer is taken: a test that sees it may script the next
                 if callable(answer):
                     answer(self, message)
                 elif answer is not None:
@@ -91,9 +97,9 @@ class StationClock:
 
 
 @contextmanager
-def station_and_vehicle(retry_clock: StationClock | None = None):
+def station_and_vehicle(retry_clock: StationClock):
     port = free_udp_port()
-    link = Link([f"udpin:127.0.0.1:{port}"], Fleet(), retry_clock=retry_clock or time.monotonic).start()
+    link = Link([f"udpin:127.0.0.1:{port}"], Fleet(), retry_clock=retry_clock).start()
     vehicle = ScriptedVehicle(port)
     vehicle._thread.start()
     try:
@@ -106,26 +112,86 @@ def station_and_vehicle(retry_clock: StationClock | None = None):
         link.close()
 
 
+def in_background(call) -> Future:
+    """``call()`` on a daemon thread of its own, as it waits on the station's clock that the test moves (a test
+    that fails leaves it waiting: it must not keep the run from ending)."""
+    future: Future = Future()
+
+    def run() -> None:
+        try:
+            future.set_result(call())
+        except BaseException as error:  # noqa: BLE001 - the test reads it from the future
+            future.set_exception(error)
+
+    threading.Thread(target=run, daemon=True).start()
+    return future
+
+
+def answered(call):
+    """What ``call()`` returns (or raises) while the station's clock stands still: every try waits for its reply
+    however slow the machine, so the try answered is the only one."""
+    return in_background(call).result(timeout=5)
+
+
+def tried_apart(
+    clock: StationClock,
+    vehicle: ScriptedVehicle,
+    command: int,
+    tries: int,
+    timeout: float = TIMEOUT,
+    held: float = 3 * REPLY_LOOK,
+) -> None:
+    """The vehicle gets ``tries`` tries of ``command``, each sent once ``timeout`` of the station's clock has passed
+    since the one before, not earlier: the clock is held just short of it (``held`` wall s the first time, then
+    what a try sent too early needs to arrive) before it is moved on to the timeout. It stays where the last try
+    was sent (the station read its deadline before sending it)."""
+    wait_wall(lambda: vehicle.tries(command), 5, f"the first try of command {command}")
+    for sent in range(1, tries):
+        clock.advance(timeout - SHORT)
+        time.sleep(held if sent == 1 else 3 * REPLY_LOOK)
+        assert len(vehicle.tries(command)) == sent, f"try {sent + 1} came before its {timeout} s had passed"
+        clock.advance(SHORT)
+        wait_wall(lambda sent=sent: len(vehicle.tries(command)) > sent, 5, f"try {sent + 1} of command {command}")
+
+
+def noted(link: Link, ack: str) -> bool:
+    """Whether vehicle 1's history notes the COMMAND_ACK ``ack`` ("NAV_LAND: accepted"): the station heard it."""
+    return ("ack", ack) in [(e["kind"], e["text"]) for e in link.fleet.history.of(1).as_json()["events"]]
+
+
+def tried_a_second_apart(clock: StationClock, vehicle: ScriptedVehicle, command: int, tries: int) -> None:
+    """``tried_apart`` by the station's default timeout, a second: the first hold is longer than a try lasts on
+    the wall clock."""
+    tried_apart(clock, vehicle, command, tries, 1.0, HELD)
+
+
 def test_an_answered_command_is_sent_once_and_its_result_named():
-    with station_and_vehicle() as (link, vehicle):
-        assert link.command(1, TAKEOFF, 0, 0, 0, 0, 0, 0, 4.0, timeout=TIMEOUT) == "accepted"
+    with station_and_vehicle(StationClock()) as (link, vehicle):
+        assert answered(lambda: link.command(1, TAKEOFF, 0, 0, 0, 0, 0, 0, 4.0)) == "accepted"
         (sent,) = vehicle.tries(TAKEOFF)
         assert sent.confirmation == 0 and sent.param7 == 4.0
         assert (sent.target_system, sent.target_component) == (1, mavlink.MAV_COMP_ID_AUTOPILOT1)
 
 
 def test_unanswered_tries_are_repeated_with_confirmation_plus_one_until_answered():
-    with station_and_vehicle() as (link, vehicle):
+    clock = StationClock()
+    with station_and_vehicle(clock) as (link, vehicle):
         vehicle.answers[TAKEOFF] = [None, None, mavlink.MAV_RESULT_DENIED]
-        assert link.command(1, TAKEOFF, timeout=TIMEOUT) == "denied"
+        denied = in_background(lambda: link.command(1, TAKEOFF, timeout=TIMEOUT))
+        tried_apart(clock, vehicle, TAKEOFF, 3)
+        assert denied.result(timeout=5) == "denied"
         assert [m.confirmation for m in vehicle.tries(TAKEOFF)] == [0, 1, 2]
 
 
 def test_a_command_never_answered_gives_up_after_its_tries():
-    with station_and_vehicle() as (link, vehicle):
+    clock = StationClock()
+    with station_and_vehicle(clock) as (link, vehicle):
         vehicle.answers[TAKEOFF] = [None]
+        unanswered = in_background(lambda: link.command(1, TAKEOFF, timeout=TIMEOUT, retries=4))
+        tried_apart(clock, vehicle, TAKEOFF, 4)
+        clock.advance(TIMEOUT)  # the last try's timeout: no more tries
         with pytest.raises(LinkError, match="vehicle 1 did not answer COMMAND_LONG after 4 tries"):
-            link.command(1, TAKEOFF, timeout=TIMEOUT, retries=4)
+            unanswered.result(timeout=5)
         assert [m.confirmation for m in vehicle.tries(TAKEOFF)] == [0, 1, 2, 3]
         assert not link._waiters  # nothing left waiting for a late answer
 
@@ -140,9 +206,14 @@ def test_only_the_ack_of_this_command_from_this_vehicle_answers_it():
             other.command_ack_encode(TAKEOFF, mavlink.MAV_RESULT_ACCEPTED, 0, 0, 255, 0).pack(other), vehicle.target
         )  # another vehicle
 
-    with station_and_vehicle() as (link, vehicle):
+    clock = StationClock()
+    with station_and_vehicle(clock) as (link, vehicle):
         vehicle.answers[TAKEOFF] = [wrong_acks, mavlink.MAV_RESULT_FAILED]
-        assert link.command(1, TAKEOFF, timeout=TIMEOUT) == "failed"
+        failed = in_background(lambda: link.command(1, TAKEOFF, timeout=TIMEOUT))
+        # the wrong ACKs reach the station while the first try waits (the other vehicle's is the last of them)
+        wait_wall(lambda: 2 in link.route, 5, "the wrong ACKs heard")
+        tried_apart(clock, vehicle, TAKEOFF, 2)
+        assert failed.result(timeout=5) == "failed"
         assert len(vehicle.tries(TAKEOFF)) == 2
 
 
@@ -160,9 +231,9 @@ def test_only_the_ack_of_this_command_from_this_vehicle_answers_it():
     ],
 )
 def test_result_words(result, word):
-    with station_and_vehicle() as (link, vehicle):
+    with station_and_vehicle(StationClock()) as (link, vehicle):
         vehicle.answers[TAKEOFF] = [result]
-        assert link.command(1, TAKEOFF, timeout=TIMEOUT) == word
+        assert answered(lambda: link.command(1, TAKEOFF)) == word
 
 
 def test_every_mav_result_the_dialect_defines_has_a_word():
@@ -183,25 +254,27 @@ def test_a_cancelled_command_reads_cancelled_in_the_answer_the_history_and_anoth
         vehicle.send(vehicle.mav.command_ack_encode(mavlink.MAV_CMD_NAV_LAND, cancelled, 0, 0, 254, 0))
         vehicle.ack(message.command, mavlink.MAV_RESULT_ACCEPTED)
 
-    with station_and_vehicle() as (link, vehicle):
+    with station_and_vehicle(StationClock()) as (link, vehicle):
         vehicle.answers[TAKEOFF] = [cancelled]
-        assert link.command(1, TAKEOFF, timeout=TIMEOUT) == "cancelled"
-        history = link.fleet.history.of(1)
-        wait_wall(lambda: ("ack", "NAV_TAKEOFF: cancelled") in [(e["kind"], e["text"]) for e in
-                                                                history.as_json()["events"]], 5, "the ACK noted")
+        assert answered(lambda: link.command(1, TAKEOFF)) == "cancelled"
+        wait_wall(lambda: noted(link, "NAV_TAKEOFF: cancelled"), 5, "the ACK noted")
         vehicle.answers[mavlink.MAV_CMD_DO_SET_MODE] = [cancelled_for_another_station]
-        assert link.command(1, mavlink.MAV_CMD_DO_SET_MODE, timeout=TIMEOUT) == "accepted"
+        assert answered(lambda: link.command(1, mavlink.MAV_CMD_DO_SET_MODE)) == "accepted"
         wait_wall(lambda: link.fleet.get(1).other_gcs is not None, 5, "the other station noted")
         assert link.fleet.get(1).other_gcs[:2] == (254, "COMMAND_ACK MAV_CMD_NAV_LAND cancelled")
 
 
 def test_command_int_repeats_the_same_message_and_names_the_result():
-    with station_and_vehicle() as (link, vehicle):
+    clock = StationClock()
+    with station_and_vehicle(clock) as (link, vehicle):
         reposition = mavlink.MAV_CMD_DO_REPOSITION
         vehicle.answers[reposition] = [None, mavlink.MAV_RESULT_ACCEPTED]
         frame = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
-        result = link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0, timeout=TIMEOUT)
-        assert result == "accepted"
+        result = in_background(
+            lambda: link.command_int(1, reposition, frame, [-1.0, 0, 0, 0], 123456789, 987654321, 5.0, timeout=TIMEOUT)
+        )
+        tried_apart(clock, vehicle, reposition, 2)
+        assert result.result(timeout=5) == "accepted"
         tries = vehicle.tries(reposition)
         assert len(tries) == 2
         assert all((m.frame, m.x, m.y, m.z, m.param1) == (frame, 123456789, 987654321, 5.0, -1.0) for m in tries)
@@ -209,7 +282,7 @@ def test_command_int_repeats_the_same_message_and_names_the_result():
 
 def test_a_request_waits_for_the_reply_it_accepts():
     """``request`` is the path of every command and of the mission protocol: the first reply that ``accepts``."""
-    with station_and_vehicle() as (link, vehicle):
+    with station_and_vehicle(StationClock()) as (link, vehicle):
 
         def answer(vehicle, message):
             vehicle.send(vehicle.mav.statustext_encode(6, b"not this"))
@@ -218,43 +291,11 @@ def test_a_request_waits_for_the_reply_it_accepts():
         command = mavlink.MAV_CMD_PREFLIGHT_CALIBRATION  # one the station never sends by itself
         vehicle.answers[command] = [answer]
         message = mavlink.MAVLink_command_long_message(1, 1, command, 0, 0, 0, 0, 0, 0, 0, 0)
-        reply = link.request(
-            1, message, lambda m: m.get_type() == "STATUSTEXT" and m.text == "this one", timeout=TIMEOUT
+        reply = answered(
+            lambda: link.request(1, message, lambda m: m.get_type() == "STATUSTEXT" and m.text == "this one")
         )
         assert reply.text == "this one"
         assert len(vehicle.tries(command)) == 1
-
-
-JUST_SHORT = 1 - 1 / 1024  # s of the station's clock: a try still waits for its reply
-HELD = 1.5  # wall s the station's clock is held just short of a second, once: longer than a try on the wall clock
-
-
-def in_background(call) -> Future:
-    """``call()`` on a daemon thread of its own, as it waits on the station's clock that the test moves (a test
-    that fails leaves it waiting: it must not keep the run from ending)."""
-    future: Future = Future()
-
-    def run() -> None:
-        try:
-            future.set_result(call())
-        except BaseException as error:  # noqa: BLE001 - the test reads it from the future
-            future.set_exception(error)
-
-    threading.Thread(target=run, daemon=True).start()
-    return future
-
-
-def tried_a_second_apart(clock: StationClock, vehicle: ScriptedVehicle, command: int, tries: int) -> None:
-    """The vehicle gets ``tries`` tries of ``command``, each sent once a whole second of the station's clock has
-    passed since the one before, not earlier: the clock is held just short of it (the first time longer than a
-    try lasts on the wall clock) before it is moved on to the second. It stays where the last try was sent."""
-    wait_wall(lambda: vehicle.tries(command), 5, f"the first try of command {command}")
-    for sent in range(1, tries):
-        clock.advance(JUST_SHORT)
-        time.sleep(HELD if sent == 1 else 3 * REPLY_LOOK)  # what a try sent too early needs to arrive
-        assert len(vehicle.tries(command)) == sent, f"try {sent + 1} came before its second had passed"
-        clock.advance(1 - JUST_SHORT)
-        wait_wall(lambda sent=sent: len(vehicle.tries(command)) > sent, 5, f"try {sent + 1} of command {command}")
 
 
 def test_a_command_is_tried_three_times_a_second_apart_unless_told_with_its_missing_params_zero():
@@ -318,19 +359,25 @@ def test_command_int_is_answered_only_by_the_ack_of_its_command_and_names_a_resu
     def another_commands_ack(vehicle, message):
         vehicle.ack(mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_RESULT_ACCEPTED)
 
-    with station_and_vehicle() as (link, vehicle):
+    clock = StationClock()
+    with station_and_vehicle(clock) as (link, vehicle):
         vehicle.answers[reposition] = [another_commands_ack, 99]
-        result = link.command_int(
-            1,
-            reposition,
-            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-            [-1.0, 0, 0, 0],
-            123456789,
-            987654321,
-            5.0,
-            timeout=TIMEOUT,
+        result = in_background(
+            lambda: link.command_int(
+                1,
+                reposition,
+                mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                [-1.0, 0, 0, 0],
+                123456789,
+                987654321,
+                5.0,
+                timeout=TIMEOUT,
+            )
         )
-        assert result == "result 99"
+        # the other command's ACK reaches the station while the first try waits
+        wait_wall(lambda: noted(link, "NAV_LAND: accepted"), 5, "the other command's ACK heard")
+        tried_apart(clock, vehicle, reposition, 2)
+        assert result.result(timeout=5) == "result 99"
         assert len(vehicle.tries(reposition)) == 2
 
 
@@ -367,14 +414,14 @@ def test_a_request_is_sent_again_unchanged_three_times_a_second_apart_unless_tol
 
 def test_a_command_goes_only_to_the_vehicle_it_is_for():
     """Two vehicles on one link: a command to one is sent to where that one was heard, not to both."""
-    with station_and_vehicle() as (link, first):
+    with station_and_vehicle(StationClock()) as (link, first):
         second = ScriptedVehicle(first.target[1], sysid=2)
         second._thread.start()
         try:
             wait_wall(lambda: link.fleet.get(2) is not None and 2 in link.route, 5, "the second vehicle heard")
-            assert link.command(1, TAKEOFF, 0, 0, 0, 0, 0, 0, 4.0, timeout=TIMEOUT) == "accepted"
+            assert answered(lambda: link.command(1, TAKEOFF, 0, 0, 0, 0, 0, 0, 4.0)) == "accepted"
             land = mavlink.MAV_CMD_NAV_LAND
-            assert link.command(2, land, timeout=TIMEOUT) == "accepted"  # after the first, on the same path
+            assert answered(lambda: link.command(2, land)) == "accepted"  # after the first, on the same path
             assert len(first.tries(TAKEOFF)) == 1 and not first.tries(land)
             assert len(second.tries(land)) == 1 and not second.tries(TAKEOFF)
         finally:
