@@ -1344,9 +1344,9 @@ def test_after_a_seek_the_map_is_the_vehicles_also_when_a_delta_came_between_sna
     assert stream.synced and np.array_equal(stream.grid, after_first)
 
 
-def long_flight_log(path: Path, poses: int = 5997, readings: bool = False) -> Path:
+def long_flight_log(path: Path, poses: int = 5997, readings: int = 0) -> Path:
     """A rover driving east 1 m per LOCAL_POSITION_NED (its pose number is its x), a heartbeat every 10 poses and
-    a text every 500; with ``readings``, a reading of its forward sonar after every pose."""
+    a text every 500; with ``readings`` N, a reading of its forward sonar after every N-th pose."""
     log = TlogWriter()
     rover = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     for k in range(poses):
@@ -1365,7 +1365,7 @@ def long_flight_log(path: Path, poses: int = 5997, readings: bool = False) -> Pa
         if k % 500 == 250:
             log.write(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, f"pose {k}".encode(), 0, 0), rover)
         log.write(mavlink.MAVLink_local_position_ned_message(k * 100, 0.0, float(k), 0.0, 0.0, 1.0, 0.0), rover)
-        if readings:
+        if readings and k % readings == readings - 1:
             log.write(mavlink.MAVLink_distance_sensor_message(k * 100, 20, 1000, 300 + k % 7, 1, 0, 0, 0), rover)
     return log.save(path)
 
@@ -1387,8 +1387,9 @@ def test_after_a_seek_a_long_flights_trail_is_thinned_evenly_from_the_first_fix_
 def test_after_a_seek_in_a_long_flight_each_sonar_hit_is_where_the_latest_pose_before_its_reading_put_it(tmp_path):
     """A seek draws a long flight's trail from a sample of its poses, yet places each sonar reading with the latest
     pose before it, as playing the log does (with the sample's poses, hits landed up to 3 m behind here), and adds
-    no point to the trail for it: the trail stays the even sample."""
-    path = long_flight_log(tmp_path / "long.tlog", readings=True)
+    no point to the trail for it: the trail stays the even sample. Two poses come to a reading, so the pose before
+    the latest is not the one it needs."""
+    path = long_flight_log(tmp_path / "long.tlog", readings=2)
     replay = Replay.open(path, Fleet(Datum()))
     for seconds in (60.0, replay.duration):  # some 1800 poses, then all 5997
         replay.seek(seconds)

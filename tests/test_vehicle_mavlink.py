@@ -539,6 +539,30 @@ def test_the_gcs_failsafe_comes_after_exactly_its_timeout_and_again_each_time_th
     assert texts == [(105.0, failsafe), (107.0, "GCS failsafe cleared: ground station back"), (112.0, failsafe)]
 
 
+def test_the_gcs_failsafe_needs_a_station_once_heard_and_fires_once_per_silence(scene, tmp_path):
+    """A vehicle that never heard a ground station has none to lose (ArduPilot waits for the first), and one
+    silence is one failsafe: polls through it neither say it again nor take back a mode set since."""
+    log = TlogWriter(tmp_path / "vehicle.tlog")
+    with endpoint_alone(scene, log) as (endpoint, autopilot, gcs):
+        assert autopilot.arm() == mavlink.MAV_RESULT_ACCEPTED
+        for now in (100.0, 1000.0):
+            endpoint.poll(now)
+        assert autopilot.mode == "GUIDED" and not endpoint.in_failsafe
+        gcs_heard(endpoint, gcs, 1000.0)
+        endpoint.poll(1005.0)
+        assert (autopilot.mode, autopilot.mode_source) == ("RTL", "failsafe")
+        assert autopilot.set_mode("LOITER") == mavlink.MAV_RESULT_ACCEPTED  # a pilot's switch, on the vehicle
+        for now in (1005.05, 1010.0, 1100.0):
+            endpoint.poll(now)
+        assert autopilot.mode == "LOITER" and endpoint.in_failsafe
+    log.close()
+    reader = mavutil.mavlink_connection(str(tmp_path / "vehicle.tlog"))
+    texts = []
+    while (message := reader.recv_match(type="STATUSTEXT")) is not None:
+        texts.append((message._timestamp, message.text))
+    assert texts == [(1005.0, "GCS failsafe: no ground station for 5 s, RTL")]
+
+
 def command_acked_at(endpoint, gcs, now: float, command: int, *params: float) -> int:
     """A ground station's COMMAND_LONG, without a heartbeat before it, taken in at wall time ``now``: its ACK's
     result."""
