@@ -23,6 +23,7 @@ import mmap
 import struct
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -159,6 +160,7 @@ class Replay:
     scene: dict | None = None  # the scene it is shown in and how it was found (``replay_scene``)
     position: int = 0  # index of the next record to apply
     clock: float = 0.0  # seconds from the start of the log
+    seeks: int = 0  # seeks so far: the player does not count a seek's own time as played
     _data: bytes = field(default=b"", repr=False)
     _vehicles_made_at: dict[int, int] | None = field(default=None, repr=False)  # sysid -> its first vehicle beat
     lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
@@ -258,6 +260,7 @@ class Replay:
                         vehicle.last_message = float(self.index.times[i])
             self.position = end
             self.clock = seconds
+            self.seeks += 1
 
     def _needed(self, end: int) -> tuple[np.ndarray, dict[int, int], np.ndarray]:
         """Indices of the records before ``end`` that rebuild the state at ``end``, each vehicle's last
@@ -400,12 +403,20 @@ class Replay:
 
 
 class Player:
-    """Runs a Replay in real time times its speed, on its own thread."""
+    """Runs a Replay in real time times its speed, on its own thread.
+
+    Only time the replay spends playing counts: the tick after a seek starts
+    from the seek's end, so a seek that took a while does not jump on by it.
+    ``clock`` is the wall clock (``time.monotonic``); a test steps its own.
+    """
 
     TICK = 0.05
 
-    def __init__(self, replay: Replay):
+    def __init__(self, replay: Replay, clock: Callable[[], float] = time.monotonic):
         self.replay = replay
+        self._clock = clock
+        self._last = clock()
+        self._seeks = replay.seeks
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="replay", daemon=True)
 
@@ -418,10 +429,14 @@ class Player:
         self._thread.join(timeout=2)
 
     def _run(self) -> None:
-        last = time.monotonic()
         while not self._stop.wait(self.TICK):
-            now = time.monotonic()
-            with self.replay.lock:  # playing is read under the lock: a pause and seek leaves nothing to come
-                if self.replay.playing:
-                    self.replay.advance((now - last) * self.replay.speed)
-            last = now
+            self.tick()
+
+    def tick(self) -> None:
+        """Play on by the time since the last tick (or since the last seek, if one came between)."""
+        replay = self.replay
+        with replay.lock:  # read under the lock: a pause and seek leaves nothing to come, a seek's time is its own
+            now = self._clock()
+            if replay.playing and replay.seeks == self._seeks:
+                replay.advance((now - self._last) * replay.speed)
+            self._last, self._seeks = now, replay.seeks

@@ -1443,3 +1443,31 @@ def test_playing_on_after_a_seek_applies_each_record_once_up_to_its_exact_time_a
     replay.advance(replay.duration)
     assert replay.clock == replay.duration and replay.playing is False
     assert replay.fleet.get(1).x == 1999.0 and [m["text"] for m in replay.fleet.get(1).messages][-1] == "pose 1750"
+
+
+def test_the_player_plays_wall_time_times_speed_and_not_the_time_a_seek_took(tmp_path):
+    """At 10x, a tenth of a second of wall time plays a second of the log; a seek that took 0.3 s (a long
+    log's seek does) is not played on by the next tick, and a paused replay stays put."""
+    path = long_flight_log(tmp_path / "long.tlog", 2000)
+    replay = Replay.open(path, Fleet(Datum()))
+    wall = [100.0]
+    player = Player(replay, clock=lambda: wall[0])
+    replay.speed, replay.playing = 10.0, True
+    wall[0] += 0.1
+    player.tick()
+    assert replay.clock == pytest.approx(1.0)
+    replay.seek(20.0)
+    wall[0] += 0.3  # the seek's own time
+    player.tick()
+    assert replay.clock == 20.0
+    wall[0] += 0.05
+    player.tick()
+    assert replay.clock == pytest.approx(20.5)
+    replay.playing = False
+    wall[0] += 0.05
+    player.tick()
+    assert replay.clock == pytest.approx(20.5)
+    replay.playing = True  # the time paused is not played either
+    wall[0] += 0.05
+    player.tick()
+    assert replay.clock == pytest.approx(21.0)
