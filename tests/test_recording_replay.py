@@ -1344,9 +1344,11 @@ def test_after_a_seek_the_map_is_the_vehicles_also_when_a_delta_came_between_sna
     assert stream.synced and np.array_equal(stream.grid, after_first)
 
 
-def long_flight_log(path: Path, poses: int = 5997, readings: int = 0) -> Path:
+def long_flight_log(path: Path, poses: int = 5997, readings: int = 0, fix_from: int | None = None) -> Path:
     """A rover driving east 1 m per LOCAL_POSITION_NED (its pose number is its x), a heartbeat every 10 poses and
-    a text every 500; with ``readings`` N, a reading of its forward sonar after every N-th pose."""
+    a text every 500; with ``readings`` N, a reading of its forward sonar after every N-th pose; with ``fix_from``,
+    from that pose on a GLOBAL_POSITION_INT after each local one, that puts it 50 m north of where the local one
+    does (the station takes the global one once it has one)."""
     log = TlogWriter()
     rover = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     for k in range(poses):
@@ -1365,6 +1367,10 @@ def long_flight_log(path: Path, poses: int = 5997, readings: int = 0) -> Path:
         if k % 500 == 250:
             log.write(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, f"pose {k}".encode(), 0, 0), rover)
         log.write(mavlink.MAVLink_local_position_ned_message(k * 100, 0.0, float(k), 0.0, 0.0, 1.0, 0.0), rover)
+        if fix_from is not None and k >= fix_from:
+            lat, lon = Datum().to_global(float(k), 50.0)
+            log.write(mavlink.MAVLink_global_position_int_message(k * 100, round(lat * 1e7), round(lon * 1e7), 0, 0,
+                                                                  100, 0, 0, 9000), rover)
         if readings and k % readings == readings - 1:
             log.write(mavlink.MAVLink_distance_sensor_message(k * 100, 20, 1000, 300 + k % 7, 1, 0, 0, 0), rover)
     return log.save(path)
@@ -1400,6 +1406,23 @@ def test_after_a_seek_in_a_long_flight_each_sonar_hit_is_where_the_latest_pose_b
         gaps = np.diff(numbers)
         assert numbers[0] == 0 and numbers[-1] == round(rover.x)
         assert 1000 < len(numbers) <= 1500 and gaps.min() >= gaps.max() - 1 >= 1, sorted(Counter(gaps).items())
+
+
+def test_after_a_seek_the_reading_after_the_first_fix_is_placed_by_that_fix(tmp_path):
+    """A rover placed by its local position until its first GPS fix: after a seek the reading right after the fix is
+    placed by the fix, as playing places it, though the trail's sample of poses (here) left that fix out."""
+    path = long_flight_log(tmp_path / "fix.tlog", 2100, readings=1, fix_from=2000)
+    replay = Replay.open(path, Fleet(Datum()))
+    index = replay.index
+    first_fix = np.flatnonzero(index.msgids == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT)[0]
+    replay.seek(float(index.times[first_fix] - index.start) + 0.3)  # a few readings after it
+    rover, expected = replay.fleet.get(1), played(path, replay.now, Datum()).get(1)
+    assert (2000, 50) not in [(round(x), round(y)) for x, y, z in rover.trail]
+    assert list(rover.hits) == list(expected.hits)
+    # facing north on its local position, east once the fix gives a heading: the fix's reading hits 3 m east
+    hits = [(round(x), round(y)) for x, y, z in expected.hits]
+    fixed = hits.index((2003, 50))
+    assert hits[fixed - 1] == (1999, 3) and all(y == 50 for x, y in hits[fixed:])
 
 
 def test_stepping_forward_and_backwards_after_a_seek_moves_a_tenth_of_a_second(tmp_path):
