@@ -12,6 +12,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path("tests").resolve()))  # run from the repository's root
 
+import pytest  # noqa: E402
 from playwright.sync_api import expect  # noqa: E402
 from test_browser import (  # noqa: E402, F401 - fixtures are used by name
     FLYER,
@@ -25,6 +26,8 @@ from test_browser import (  # noqa: E402, F401 - fixtures are used by name
     wait_sim,
     wait_wall,
 )
+
+pytestmark = pytest.mark.browser
 
 
 def test_click_to_go(browser_page, station, copters, tmp_path):

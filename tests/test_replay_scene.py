@@ -288,6 +288,7 @@ def test_an_export_carries_the_recordings_scene_and_a_telemetry_label(exported):
 
 
 @pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="needs Debian's chromium at /usr/bin/chromium")
+@pytest.mark.browser
 def test_an_export_plays_offline_in_chromium_and_draws_the_scene(exported, tmp_path):
     from playwright.sync_api import sync_playwright
 
