@@ -322,9 +322,7 @@ class Autopilot:
         if self.mode == "RTL":
             doing = "holding; climb higher or steer it round" if self.kind is Kind.COPTER else "holding"
             self.say(f"RTL: {where}cannot reach home, {doing}", mav.MAV_SEVERITY_WARNING)
-        elif self.mode == "GUIDED":
-            self.say(f"Go here: {where}stopped short of ({tx:.1f}, {ty:.1f})", mav.MAV_SEVERITY_WARNING)
-        else:
+        else:  # a GUIDED target may be the operator's or an onboard agent's: the autopilot cannot tell whose
             self.say(f"{self.mode}: {where}stopped short of ({tx:.1f}, {ty:.1f})", mav.MAV_SEVERITY_WARNING)
 
     def _touchdown(self) -> None:
