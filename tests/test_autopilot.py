@@ -463,13 +463,23 @@ def test_auto_loiter_unlimited_holds_forever(flat_scene):
     assert world.pose.xyz() == pytest.approx((-6.0, 5.0, ALTITUDE), abs=0.2)
 
 
-def test_start_mission_refused_outside_auto_and_without_items(flat_scene):
+def test_auto_and_start_mission_are_refused_without_items(flat_scene):
+    """As ArduPilot: with only home, an armed copter and any rover are refused AUTO, saying why; a disarmed copter
+    may wait in AUTO for a mission, but starting one fails."""
     world = Simulation(flat_scene, Kind.COPTER)
     autopilot = world.autopilot
+    assert autopilot.set_mode("AUTO") == ACCEPTED
     autopilot.arm()
-    assert autopilot.start_mission() == DENIED  # GUIDED
-    autopilot.set_mode("AUTO")
     assert autopilot.start_mission() == FAILED  # only home
+    assert autopilot.set_mode("GUIDED") == ACCEPTED
+    assert autopilot.start_mission() == DENIED  # not in AUTO
+    assert autopilot.set_mode("AUTO") == FAILED and autopilot.mode == "GUIDED"
+    assert texts(world)[-3:] == ["Mission: no items", "No Mission. Can't set AUTO.", "Flight mode change failed"]
+    rover = Simulation(flat_scene, Kind.ROVER)
+    mode = rover.autopilot.mode
+    assert rover.autopilot.set_mode("AUTO") == FAILED and rover.autopilot.mode == mode  # disarmed too
+    rover.autopilot.set_mission([MissionItem(NAV_WAYPOINT), position_item(rover, NAV_WAYPOINT, 0.0, 8.0)])
+    assert rover.autopilot.set_mode("AUTO") == ACCEPTED
 
 
 def test_unsupported_mission_items_are_skipped_with_a_warning(flat_scene):
@@ -773,14 +783,14 @@ def said(world: Simulation) -> list[tuple[str, int]]:
 
 def test_the_operator_hears_what_arming_disarming_and_missions_do_with_their_severity(flat_scene):
     """The texts a ground station shows (STATUSTEXT) are part of the behaviour: wording and severity."""
-    info, warning, critical = 6, 4, 2
+    info, notice, warning, critical = 6, 5, 4, 2
     world = armed_copter(flat_scene)
     autopilot = world.autopilot
     assert autopilot.disarm() == FAILED
     assert autopilot.start_mission() == DENIED  # not in AUTO: refused quietly
-    autopilot.set_mode("AUTO")
-    assert autopilot.start_mission() == FAILED  # no items
+    assert autopilot.set_mode("AUTO") == FAILED  # no items
     autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
+    assert autopilot.set_mode("AUTO") == ACCEPTED
     assert autopilot.start_mission() == ACCEPTED
     assert autopilot.disarm(force=True) == ACCEPTED
     ground = Simulation(flat_scene, Kind.ROVER)
@@ -790,7 +800,8 @@ def test_the_operator_hears_what_arming_disarming_and_missions_do_with_their_sev
         ("Arming motors", info),
         ("Takeoff to 4.0 m", info),
         ("Disarm: vehicle is flying", critical),
-        ("Mission: no items", warning),
+        ("No Mission. Can't set AUTO.", notice),
+        ("Flight mode change failed", warning),
         ("Mission: 1 started", info),
         ("Disarming motors (forced)", info),
     ]
@@ -891,8 +902,8 @@ def test_mission_start_resumes_restarts_or_jumps_to_an_item(flat_scene):
     assert autopilot.start_mission() == ACCEPTED and autopilot.current == 1  # starts over
     one = Simulation(flat_scene, Kind.ROVER).autopilot
     one.arm()
-    one.set_mode("AUTO")
     one.set_mission([one.home_item(), MissionItem(NAV_WAYPOINT, *one.datum.to_global(3.0, 0.0), 0.0)])
+    assert one.set_mode("AUTO") == ACCEPTED
     assert one.start_mission() == ACCEPTED  # a mission of one item
 
 

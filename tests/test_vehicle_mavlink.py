@@ -242,6 +242,15 @@ def test_arm_auto_and_mission_start_start_the_onboard_mission(fly):
     gcs.wait_text("browse: finished", sim_timeout=120)
 
 
+def test_a_plain_autopilot_refuses_auto_without_a_mission_as_ardupilot_does(fly):
+    """With no agent on board, AUTO needs items to fly (the all-in-one vehicle's agent takes AUTO as its start)."""
+    gcs, _ = fly("rover", mission=None)
+    assert gcs.set_mode(10) == mavlink.MAV_RESULT_FAILED  # AUTO
+    gcs.wait_text("No Mission. Can't set AUTO.")
+    gcs.wait_text("Flight mode change failed")
+    assert gcs.wait("HEARTBEAT").custom_mode == 4  # still HOLD
+
+
 def test_operator_takeover_pauses_and_resume_continues(fly):
     gcs, sim = fly(mission="browse", autostart=True)
     gcs.wait_text("browse: start", sim_timeout=20)

@@ -160,13 +160,19 @@ class Autopilot:
         self.say("Disarming motors" + (" (forced)" if force else ""))
         return ACCEPTED
 
-    def set_mode(self, name: str, source: str = "gcs") -> int:
+    def set_mode(self, name: str, source: str = "gcs", agent_on_board: bool = False) -> int:
+        """As ArduPilot: AUTO with nothing to fly but home is refused (but for a disarmed copter), unless
+        ``agent_on_board``: then AUTO is the signal that starts or resumes an onboard agent's mission."""
         name = name.upper()
         if name not in MODES[self.kind]:
             return UNSUPPORTED
         if name == self.mode:
             self.mode_source = source
             return ACCEPTED
+        if name == "AUTO" and len(self.mission) <= 1 and (self.armed or self.kind is Kind.ROVER) and not agent_on_board:
+            self.say("No Mission. Can't set AUTO.", mav.MAV_SEVERITY_NOTICE)
+            self.say("Flight mode change failed", mav.MAV_SEVERITY_WARNING)
+            return FAILED
         self.mode = name
         self.mode_source = source
         self.mode_changes += 1

@@ -317,7 +317,7 @@ class Endpoint:
         return UNSUPPORTED if name is None else self._set_mode_named(name)
 
     def _set_mode_named(self, name: str) -> int:
-        return self.autopilot.set_mode(name, source="gcs")
+        return self.autopilot.set_mode(name, source="gcs", agent_on_board=self.onboard is not None)
 
     def _mission_start(self, first: int) -> int:
         """AUTO + MISSION_START: start the onboard mission if it waits, resume it if paused, else run AUTO."""
