@@ -231,7 +231,7 @@ MODULES = [
             "tests/test_recording_replay.py",
             "-k",
             "experiment_log or backwards or after_a_seek or lost_snapshot "
-            "or truncated or cut_in or corrupt or is_refused or index_is_exact or foreign_plane",
+            "or truncated or cut_in or corrupt or is_refused or index_is_exact or foreign_plane or player_plays",
         ],
         focus={
             "groundstation/replay.py": [
