@@ -372,8 +372,13 @@ def test_layers_and_map_opacity_are_each_viewers_own(view, station):
     expect(legend.nth(0)).to_have_text("free")
     expect(legend.nth(1)).to_have_text("occupied")
 
-    for layer in ("trails", "beams", "echoes", "waypoints", "paths", "map"):
-        page.locator(f'#view3d input[data-layer="{layer}"]').uncheck(timeout=BUSY_PAGE)
+    layers = ["trails", "beams", "echoes", "waypoints", "paths", "map"]
+    # six clicks in one turn of the page's main thread: a Playwright click waits for a turn of its own, 14 s
+    # each while viser draws in software WebGL (see press)
+    page.evaluate("(layers) => layers.forEach((layer) => document.querySelector("
+                  "`#view3d input[data-layer='${layer}']`).click())", layers)
+    for layer in layers:
+        expect(page.locator(f'#view3d input[data-layer="{layer}"]')).not_to_be_checked()
         one.poll(lambda layer=layer: one.visibility(f"/layers/{layer}") is False, 30, f"{layer} hidden")
     page.select_option("#map-opacity", "0.3", timeout=BUSY_PAGE)
     one.poll(lambda: one.visibility("/layers/map/o30") is True and one.visibility("/layers/map/o100") is False,
@@ -393,7 +398,7 @@ def test_layers_and_map_opacity_are_each_viewers_own(view, station):
         shares.append(spread(image))
         return shares[-1] < 0.5 if shown else shares[-1] > 0.6
     one.poll(lambda: scene_shown(True), 150, "the scene drawn")
-    page.locator('#view3d input[data-layer="scene"]').uncheck(timeout=BUSY_PAGE)
+    press(page.locator('#view3d input[data-layer="scene"]'))
     one.poll(lambda: one.visibility("/layers/scene") is False, 30, "the scene layer hidden")
     try:
         one.poll(lambda: scene_shown(False), 150, "the view without the scene")
