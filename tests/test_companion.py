@@ -319,6 +319,10 @@ class ScriptedAutopilot:
                 mav.command_ack_send(*self.late_acks.pop(0), 0, 0, 1, 191)
             while (message := self.link.recv_msg()) is not None:
                 self.received.append(message)
+                if message.get_type() == "COMMAND_LONG" and message.command == mavlink.MAV_CMD_REQUEST_MESSAGE \
+                        and message.param1 == mavlink.MAVLINK_MSG_ID_HEARTBEAT:  # as ArduPilot: one now, beating or not
+                    mav.heartbeat_send(self.mav_type, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 217, self.mode,
+                                       mavlink.MAV_STATE_ACTIVE)
                 if message.get_type() == "COMMAND_LONG" or message.get_type() == "COMMAND_INT":
                     result = self.answer.get(message.command, mavlink.MAV_RESULT_ACCEPTED)
                     if isinstance(result, list):  # one answer per try, the last one for every later try
@@ -383,6 +387,22 @@ def test_a_mode_change_the_autopilot_announced_as_a_failsafe_is_the_failsafes(sa
             wait_wall(lambda: any(m.get_type() == "STATUSTEXT" for m in fc.pump()), 5, "the autopilot's text")
         fake.mode = 6  # RTL
         assert wait_wall(lambda: fc.pump() is not None and fc.took_over(), 5, "the mode change noticed") == reason
+
+
+def test_a_target_refused_because_an_operator_just_switched_mode_pauses_for_the_operator():
+    """The operator's RTL reaches the autopilot as the agent sends a target: the autopilot refuses the target
+    (not GUIDED any more) before its next heartbeat says RTL. The agent asks for a heartbeat, and pauses for the
+    operator, not for the refusal; a refusal in the agent's own mode stays a problem."""
+    with controller() as (fc, fake):
+        fc.connect(10)
+        assert fc.set_mode("GUIDED") == mavlink.MAV_RESULT_ACCEPTED
+        fake.answer[mavlink.MAV_CMD_DO_REPOSITION] = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+        assert fc.goto(5.0, 5.0) == mavlink.MAV_RESULT_TEMPORARILY_REJECTED  # still GUIDED: a problem
+        assert fc.took_over() == "flight controller: do_reposition temporarily rejected" and fc.problems == 1
+        fake.beating, fake.mode = False, 6  # RTL, not yet told
+        assert fc.goto(6.0, 6.0) == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+        assert fc.took_over() == "operator switched to RTL"
+        assert fc.took_over() is None and fc.problems == 1
 
 
 def test_a_command_never_answered_is_tried_three_times_then_reported():

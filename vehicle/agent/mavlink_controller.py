@@ -421,9 +421,23 @@ class MavlinkController:
                 continue
             if result != NO_ANSWER:
                 break
-        if report and result not in (ACCEPTED, UNSUPPORTED):
+        if report and result not in (ACCEPTED, UNSUPPORTED) and not self._refused_for_a_new_mode(result):
             self._problem(f"flight controller: {NAMES.get(command, command)} {RESULTS.get(result, result)}")
         return result
+
+    def _refused_for_a_new_mode(self, result: int) -> bool:
+        """A command "temporarily rejected" may be refused only because an operator changed the mode a moment
+        ago, which the autopilot's next heartbeat (1 Hz) would tell. Ask for one now: then the agent pauses
+        for the operator's takeover, not for the refusal it caused."""
+        if result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED or self._wanted_mode is None:
+            return False
+        heard = self._heard
+        self.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT, report=False)
+        deadline = time.monotonic() + self.timeout
+        while self._heard == heard and time.monotonic() < deadline:
+            self.pump()
+            time.sleep(0.002)
+        return self._mode != self._wanted_mode
 
     def _problem(self, text: str) -> None:
         self.problems += 1
