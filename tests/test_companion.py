@@ -403,6 +403,10 @@ def test_a_target_refused_because_an_operator_just_switched_mode_pauses_for_the_
         assert fc.goto(6.0, 6.0) == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
         assert fc.took_over() == "operator switched to RTL"
         assert fc.took_over() is None and fc.problems == 1
+        asked = len(fake.sent(mavlink.MAV_CMD_REQUEST_MESSAGE))
+        assert fc.goto(7.0, 7.0) == mavlink.MAV_RESULT_TEMPORARILY_REJECTED  # the takeover already known
+        assert fc.took_over() is None and fc.problems == 1
+        assert len(fake.sent(mavlink.MAV_CMD_REQUEST_MESSAGE)) == asked  # nothing to ask
 
 
 def test_a_command_never_answered_is_tried_three_times_then_reported():

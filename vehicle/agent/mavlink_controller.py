@@ -431,6 +431,8 @@ class MavlinkController:
         for the operator's takeover, not for the refusal it caused."""
         if result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED or self._wanted_mode is None:
             return False
+        if self._mode != self._wanted_mode:  # the heartbeat that tells came before the refusal
+            return True
         heard = self._heard
         self.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT, report=False)
         deadline = time.monotonic() + self.timeout

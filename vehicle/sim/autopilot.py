@@ -169,7 +169,8 @@ class Autopilot:
         if name == self.mode:
             self.mode_source = source
             return ACCEPTED
-        if name == "AUTO" and len(self.mission) <= 1 and (self.armed or self.kind is Kind.ROVER) and not agent_on_board:
+        nothing_to_fly = len(self.mission) <= 1 and (self.armed or self.kind is Kind.ROVER)
+        if name == "AUTO" and nothing_to_fly and not agent_on_board:
             self.say("No Mission. Can't set AUTO.", mav.MAV_SEVERITY_NOTICE)
             self.say("Flight mode change failed", mav.MAV_SEVERITY_WARNING)
             return FAILED
