@@ -354,20 +354,7 @@ def create_app(station: GroundStation) -> FastAPI:
         replay = station.replay
         if replay is None:
             raise HTTPException(409, "nothing is being replayed")
-        if body.speed is not None:
-            replay.speed = body.speed
-        if body.play is False:  # before a seek or step: the player would otherwise move on from where it lands
-            replay.playing = False
-        if body.seek is not None:
-            await asyncio.to_thread(replay.seek, body.seek)
-        if body.step is not None:
-            replay.playing = False
-            await asyncio.to_thread(replay.step, body.step)
-        if body.play is not None:
-            if body.play and replay.clock >= replay.duration:
-                await asyncio.to_thread(replay.seek, 0.0)
-            replay.playing = body.play
-        return replay.status()
+        return await asyncio.to_thread(replay.control, body.play, body.speed, body.seek, body.step)
 
     @app.post("/api/replay/stop", tags=["replay"], dependencies=[Depends(operator)])
     def stop_replay():

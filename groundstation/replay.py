@@ -181,6 +181,7 @@ class Replay:
         return self.index.duration
 
     def status(self) -> dict:
+        """Read without the lock, which a seek holds for a while: the event loop asks for it."""
         return {"name": self.name, "time": round(self.clock, 3), "duration": round(self.duration, 3),
                 "playing": self.playing, "speed": self.speed, "warning": self.index.warning or None,
                 "scene": self.scene}
@@ -393,6 +394,25 @@ class Replay:
             self.clock = target
             if self.clock >= self.duration:
                 self.playing = False
+
+    def control(self, play: bool | None = None, speed: float | None = None, seek: float | None = None,
+                step: int | None = None) -> dict:
+        """Apply an operator's control at once, under the lock, and answer the status it left: a player's tick
+        comes wholly before or wholly after it, so a pause answers the time it stays at."""
+        with self.lock:
+            if speed is not None:
+                self.speed = speed
+            if play is False or step is not None:  # before a seek or step: no tick moves on from where it lands
+                self.playing = False
+            if seek is not None:
+                self.seek(seek)
+            if step is not None:
+                self.step(step)
+            if play:
+                if self.clock >= self.duration:
+                    self.seek(0.0)
+                self.playing = True
+            return self.status()
 
     def step(self, direction: int) -> None:
         """One step of 1/10 s of log time forward (or back)."""

@@ -16,6 +16,7 @@ import shutil
 import struct
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter, deque
 from dataclasses import dataclass
@@ -1494,3 +1495,56 @@ def test_the_player_plays_wall_time_times_speed_and_not_the_time_a_seek_took(tmp
     wall[0] += 0.05
     player.tick()
     assert replay.clock == pytest.approx(21.0)
+
+
+def test_a_pause_that_comes_during_a_players_tick_answers_the_time_the_replay_stays_at(tmp_path):
+    """An operator's pause waits for a tick in progress and answers the time that tick left: it used to answer the
+    time before the tick, and the replay then stood a tick further on (CI saw 0.052 s after a pause at 0.0)."""
+    path = long_flight_log(tmp_path / "long.tlog", 2000)
+    replay = Replay.open(path, Fleet(Datum()))
+    wall = [100.0]
+    player = Player(replay, clock=lambda: wall[0])
+    replay.speed, replay.playing = 10.0, True
+    wall[0] += 0.1
+    in_tick, go_on = threading.Event(), threading.Event()
+    advance = replay.advance
+
+    def slow_advance(seconds):  # the tick holds the lock while it plays on
+        in_tick.set()
+        go_on.wait(5)
+        advance(seconds)
+
+    replay.advance = slow_advance
+    ticking = threading.Thread(target=player.tick)
+    ticking.start()
+    assert in_tick.wait(5)
+    answered = []
+    pausing = threading.Thread(target=lambda: answered.append(replay.control(play=False)))
+    pausing.start()
+    pausing.join(0.2)
+    assert pausing.is_alive() and not answered  # it waits for the tick
+    go_on.set()
+    ticking.join(5)
+    pausing.join(5)
+    assert answered[0]["playing"] is False and answered[0]["time"] == pytest.approx(1.0) == replay.clock
+    wall[0] += 0.1
+    player.tick()
+    assert replay.status()["time"] == answered[0]["time"]
+
+
+def test_replay_controls_apply_in_order_pause_seek_step_play(tmp_path):
+    """One control may carry several changes: speed, then a pause, a seek, a step, then play (from the start once
+    the end was reached)."""
+    path = long_flight_log(tmp_path / "long.tlog", 2000)
+    replay = Replay.open(path, Fleet(Datum()))
+    replay.playing = True
+    status = replay.control(speed=5.0, seek=10.0, step=1)
+    assert status["speed"] == 5.0 and status["time"] == pytest.approx(10.1) and status["playing"] is False
+    status = replay.control(seek=12.0, play=True)
+    assert status["time"] == 12.0 and status["playing"] is True
+    replay.advance(replay.duration)
+    assert replay.playing is False
+    status = replay.control(play=True)
+    assert status["time"] == 0.0 and status["playing"] is True
+    status = replay.control(play=False)
+    assert status["time"] == 0.0 and status["playing"] is False
