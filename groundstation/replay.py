@@ -219,12 +219,16 @@ class Replay:
         return self._chunk_header(i)
 
     def sensor_id(self, i: int) -> int:
-        """The sensor id of a DISTANCE_SENSOR record, undecoded (its 12th payload byte; MAVLink 2 drops
-        trailing zero bytes, so a short payload means 0)."""
+        """The sensor id of a DISTANCE_SENSOR record, undecoded (its 12th payload byte)."""
+        return self._payload(i, 12)[11]
+
+    def _payload(self, i: int, size: int) -> bytes:
+        """The first ``size`` bytes of record ``i``'s payload, undecoded. MAVLink 2 drops a payload's trailing
+        zero bytes (the packet's length byte says how many are left): the missing ones are zeros, not the
+        checksum after the payload."""
         start = int(self.index.offsets[i])
-        v2 = self._data[start] == V2
-        length, body = self._data[start + 1], start + (10 if v2 else 6)
-        return self._data[body + 11] if length > 11 else 0
+        body = start + (10 if self._data[start] == V2 else 6)
+        return self._data[body:body + min(self._data[start + 1], size)].ljust(size, b"\0")
 
     def _apply(self, indices, off_trail: set[int] | frozenset = frozenset()) -> None:
         for i in indices:
@@ -346,11 +350,9 @@ class Replay:
         return self._vehicles_made_at
 
     def _heartbeat_kind(self, i: int) -> tuple[int, int]:
-        """The type and autopilot of a HEARTBEAT record, undecoded (its 5th and 6th payload bytes; MAVLink 2
-        drops trailing zero bytes, so a short payload means 0)."""
-        start = int(self.index.offsets[i])
-        length, body = self._data[start + 1], start + (10 if self._data[start] == V2 else 6)
-        return (self._data[body + 4] if length > 4 else 0), (self._data[body + 5] if length > 5 else 0)
+        """The type and autopilot of a HEARTBEAT record, undecoded (its 5th and 6th payload bytes)."""
+        payload = self._payload(i, 6)
+        return payload[4], payload[5]
 
     def _whole_start(self, chunks: np.ndarray, header: struct.Struct) -> int:
         """Record index where the last complete one among ``chunks`` (of map snapshots, or of paths, as
@@ -374,13 +376,9 @@ class Replay:
     def _chunk_header(self, i: int, header: struct.Struct = SNAPSHOT_CHUNK) -> tuple[int, int, int]:
         """Id, chunk index and chunk count inside a MAP_SNAPSHOT (or, by ``header``, PATH) TUNNEL record, from
         the raw packet."""
-        start = int(self.index.offsets[i])
-        body = start + (10 if self._data[start] == V2 else 6)
         # TUNNEL on the wire: payload_type u16, target system, target component, payload length, payload; the
-        # chunk header opens the payload. MAVLink 2 drops trailing zero bytes (the packet's length byte says how
-        # many are left): a header cut short ends in zeros.
-        fields = self._data[body:body + self._data[start + 1]]
-        return header.unpack(fields[5:5 + header.size].ljust(header.size, b"\0"))
+        # chunk header opens the payload
+        return header.unpack_from(self._payload(i, 5 + header.size), 5)
 
     # ---- playing ----------------------------------------------------------------------------------
     def advance(self, seconds: float) -> None:

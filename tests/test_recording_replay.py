@@ -1024,6 +1024,38 @@ def test_the_index_is_exact_on_map_snapshot_chunk_headers(tmp_path):
     assert len(cut) >= 5 and sum(replay.chunk_header(i) == (0, 0, 0) for i in cut) >= 1
 
 
+
+def test_raw_reads_of_heartbeats_and_sensor_ids_are_pymavlinks_in_mavlink_1_and_2(tmp_path):
+    """A heartbeat's type and autopilot and a distance sensor's id, read from the raw packet, are the ones
+    pymavlink decodes: from MAVLink 1 packets (a 6-byte header) and MAVLink 2 ones (10 bytes, trailing zero
+    bytes of the payload dropped, so a zero id or autopilot may not be on the wire at all)."""
+    rng = random.Random(7)
+    senders = [mavlink1.MAVLink(None, srcSystem=3, srcComponent=1), mavlink.MAVLink(None, srcSystem=1, srcComponent=1)]
+    records = []
+    for k in range(400):
+        sender = senders[k % 2]
+        if k % 4 < 2:
+            message = sender.heartbeat_encode(rng.choice((0, 1, 2, 10, 255)), rng.choice((0, 3, 8)), 0, 0, 0, 3)
+        else:
+            message = sender.distance_sensor_encode(k, 2, 4000, rng.randrange(4000), 1, rng.choice((0, 1, 7, 255)),
+                                                    0, 0)
+        records.append(TLOG_STAMP.pack(int((PLANE_START + k / 10) * 1e6)) + message.pack(sender))
+    path = tmp_path / "both.tlog"
+    path.write_bytes(b"".join(records))
+    replay = Replay.open(path, Fleet(Datum()))
+    messages = decoded(path)
+    assert len(messages) == len(replay.index) == 400
+    seen = Counter()
+    for i, message in enumerate(messages):
+        version = message.get_msgbuf()[0]
+        if message.get_type() == "HEARTBEAT":
+            assert replay._heartbeat_kind(i) == (message.type, message.autopilot), i
+            seen[version, "heartbeat", message.autopilot == 0] += 1
+        else:
+            assert replay.sensor_id(i) == message.id, i
+            seen[version, "sensor", message.id == 0] += 1
+    assert len(seen) == 8  # each kind from each version, with a zero and a non-zero field
+
 # ---- seeking and playing a log of two mapping vehicles --------------------------------------------------
 TICK = 1 / 64  # s between records of the logs below: exact in binary, so a seek can land exactly on a record
 
