@@ -90,6 +90,14 @@ def bare(tmp_path_factory):
         yield running, api
 
 
+def copy_in(recording: Path, running) -> str:
+    """Copy a recording into the station's record folder under a name of its own (the station records there
+    too: a station started within the same second as the recording's names its own session the same)."""
+    name = f"copied-{recording.name}"
+    shutil.copy(recording, running.station.record_dir / name)
+    return name
+
+
 def replay(running, api, name: str) -> dict:
     started = api.post("/api/replay", json={"name": name}, headers=api.operator)
     assert started.status_code == 200, started.text
@@ -109,9 +117,9 @@ def test_a_session_recording_names_the_stations_scene_first(recorded):
 
 def test_a_station_without_a_scene_replays_a_recording_in_its_scene(recorded, bare):
     running, api = bare
-    shutil.copy(recorded, running.station.record_dir / recorded.name)
+    name = copy_in(recorded, running)
     assert "/layers/scene/mesh" not in view_nodes(running.station.view.port, seconds=2.0)  # no scene of its own
-    status = replay(running, api, recorded.name)
+    status = replay(running, api, name)
     try:
         assert status["scene"] == {"name": "default.wrl", "sha256": DEFAULT_DIGEST, "found": True,
                                    "shown": "default.wrl", "note": "default.wrl found in the bundled scenes"}
@@ -259,8 +267,7 @@ def texts_in(value) -> list[str]:
 def exported(recorded, bare, tmp_path_factory) -> Path:
     """The recording replayed in the station without a scene, exported as HTML (GET /api/replay/export)."""
     running, api = bare
-    shutil.copy(recorded, running.station.record_dir / recorded.name)
-    replay(running, api, recorded.name)
+    replay(running, api, copy_in(recorded, running))
     try:
         response = api.get("/api/replay/export", timeout=120)
     finally:
