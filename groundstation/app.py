@@ -435,19 +435,21 @@ def create_app(station: GroundStation) -> FastAPI:
 
 
 async def _send_status(socket: WebSocket, inbox: asyncio.Queue, station: GroundStation) -> None:
-    """Notes as they come, and the status when none came for a period. A frame that cannot be JSON (it
-    never should: the fleet keeps only finite numbers) is logged and skipped, never sent as NaN."""
+    """The status at once, then notes as they come, and the status when none came for a period. A frame
+    that cannot be JSON (it never should: the fleet keeps only finite numbers) is logged and skipped, never
+    sent as NaN."""
+    frame = station.status()  # a new viewer sees the vehicles now, not a period later
     while True:
-        try:
-            frame = await asyncio.wait_for(inbox.get(), timeout=STREAM_PERIOD)
-        except TimeoutError:
-            frame = station.status()
         try:
             text = json.dumps(frame, allow_nan=False)
         except ValueError as error:
             log.error("a status frame could not be sent: %s", error)
-            continue
-        await socket.send_text(text)
+        else:
+            await socket.send_text(text)
+        try:
+            frame = await asyncio.wait_for(inbox.get(), timeout=STREAM_PERIOD)
+        except TimeoutError:
+            frame = station.status()
 
 
 def _swagger_assets() -> Path:

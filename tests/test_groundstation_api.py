@@ -571,6 +571,17 @@ def test_websocket_streams_the_vehicles_while_they_fly(station, api, flyer):
     goto_and_wait(api, 1, 0.0, 0.0)
 
 
+
+def test_a_new_stream_gets_the_status_at_once_not_a_period_later(station, monkeypatch):
+    """The first frame is the status, sent as the stream opens: with a period of an hour between status frames,
+    one still comes (a page used to show nothing for its first quarter of a second)."""
+    import groundstation.app as app
+
+    monkeypatch.setattr(app, "STREAM_PERIOD", 3600.0)
+    with websockets.sync.client.connect(f"ws://127.0.0.1:{station.http_port}/ws", open_timeout=5) as socket_:
+        frame = json.loads(socket_.recv(timeout=5))
+    assert frame["type"] == "vehicles" and frame["mode"] == "live" and isinstance(frame["vehicles"], list)
+
 # ---- the page, the docs, the 3D view -----------------------------------------------------------------
 def test_the_page_docs_and_3d_view(api):
     page = api.get("/")
