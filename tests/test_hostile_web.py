@@ -301,9 +301,12 @@ def targets(stream, seconds: float) -> list[dict]:
 
 def test_a_racing_client_cannot_become_the_operators_viewer(station):
     clients = station.station.view.server.get_clients
+    # the view sockets keep taking what viser sends (max_queue=None), as a browser does: a client that stops
+    # reading its socket cannot close it before its close timeout, 10 s (this test took 37 s so)
+    views = {"subprotocols": [SUBPROTOCOL], "max_size": None, "max_queue": None}
     with ws_connect(ws_url(station, f"/ws?viewer={VIEWER}")) as stream, \
-            ws_connect(ws_url(station, "/viz"), subprotocols=[SUBPROTOCOL], max_size=None) as intruder, \
-            ws_connect(ws_url(station, f"/viz/v/{VIEWER}"), subprotocols=[SUBPROTOCOL], max_size=None) as view:
+            ws_connect(ws_url(station, "/viz"), **views) as intruder, \
+            ws_connect(ws_url(station, f"/viz/v/{VIEWER}"), **views) as view:
         before = len(clients())
         intruder.send(camera_message())  # its first message while the operator's view is connecting
         wait_wall(lambda: len(clients()) == before + 1, 10, "viser knows the intruder")
