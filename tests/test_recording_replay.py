@@ -1501,14 +1501,20 @@ def test_playing_on_after_a_seek_applies_each_record_once_up_to_its_exact_time_a
     assert replay.fleet.get(1).x == 1999.0 and [m["text"] for m in replay.fleet.get(1).messages][-1] == "pose 1750"
 
 
-def test_the_player_plays_wall_time_times_speed_and_not_the_time_a_seek_took(tmp_path):
-    """At 10x, a tenth of a second of wall time plays a second of the log; a seek that took 0.3 s (a long
-    log's seek does) is not played on by the next tick, and a paused replay stays put."""
-    path = long_flight_log(tmp_path / "long.tlog", 2000)
-    replay = Replay.open(path, Fleet(Datum()))
+def playing_at_10x(tmp_path) -> tuple[Replay, Player, list[float]]:
+    """A long flight's replay playing at 10x, its player (not started: a test ticks it) and the player's clock,
+    which stands still until the test moves ``wall[0]``."""
+    replay = Replay.open(long_flight_log(tmp_path / "long.tlog", 2000), Fleet(Datum()))
     wall = [100.0]
     player = Player(replay, clock=lambda: wall[0])
     replay.speed, replay.playing = 10.0, True
+    return replay, player, wall
+
+
+def test_the_player_plays_wall_time_times_speed_and_not_the_time_a_seek_took(tmp_path):
+    """At 10x, a tenth of a second of wall time plays a second of the log; a seek that took 0.3 s (a long
+    log's seek does) is not played on by the next tick, and a paused replay stays put."""
+    replay, player, wall = playing_at_10x(tmp_path)
     wall[0] += 0.1
     player.tick()
     assert replay.clock == pytest.approx(1.0)
@@ -1532,11 +1538,7 @@ def test_the_player_plays_wall_time_times_speed_and_not_the_time_a_seek_took(tmp
 def test_a_pause_that_comes_during_a_players_tick_answers_the_time_the_replay_stays_at(tmp_path):
     """An operator's pause waits for a tick in progress and answers the time that tick left: it used to answer the
     time before the tick, and the replay then stood a tick further on (CI saw 0.052 s after a pause at 0.0)."""
-    path = long_flight_log(tmp_path / "long.tlog", 2000)
-    replay = Replay.open(path, Fleet(Datum()))
-    wall = [100.0]
-    player = Player(replay, clock=lambda: wall[0])
-    replay.speed, replay.playing = 10.0, True
+    replay, player, wall = playing_at_10x(tmp_path)
     wall[0] += 0.1
     in_tick, go_on = threading.Event(), threading.Event()
     advance = replay.advance
