@@ -235,6 +235,7 @@ def _search(blocked: np.ndarray, start: tuple[int, int], goal: tuple[int, int], 
 
 _ROW_STEPS = np.array([-1, -1, -1, 0, 0, 1, 1, 1])  # the neighbours in pyastar2d's order
 _COL_STEPS = np.array([-1, 0, 1, -1, 1, -1, 0, 1])
+_UNSEEN = 1 << 30  # the cost of a free cell not reached yet
 
 
 @numba.njit(cache=True)
@@ -245,35 +246,45 @@ def _astar_cells(blocked, start, goal, heap, diagonal=True):
     the very one pyastar2d returns. Costs are whole numbers, as pyastar2d's float32 sums of ones are.
     Flat cell indices in; out an (n, 2) array of (row, col), empty when the goal is unreachable, and
     False if ``heap`` was too small to finish. Not ``diagonal``: 4-connected, with the L1 distance to the
-    goal as the heuristic (pyastar2d's ``allow_diagonal=False``)."""
+    goal as the heuristic (pyastar2d's ``allow_diagonal=False``).
+
+    The costs live on the grid with a border of one cell, and a blocked or border cell costs 0: as every
+    step costs at least 1, "no cheaper than what the cell has" then also rejects blocked cells and cells
+    off the grid, one test where there were three. The heap orders by priority alone, so its items
+    carry the bordered cell indices without changing the order."""
     h, w = blocked.shape
-    flat = blocked.reshape(-1)
-    costs = np.full(h * w, np.int32(1 << 30))  # 32 bits: less memory to fill and to read
-    parents = np.empty(h * w, dtype=np.int32)
+    width = w + 2
+    costs = np.zeros((h + 2) * width, dtype=np.int32)  # 32 bits: less memory to fill and to read
+    for r in range(h):
+        for c in range(w):
+            if not blocked[r, c]:
+                costs[(r + 1) * width + c + 1] = _UNSEEN
+    parents = np.empty((h + 2) * width, dtype=np.int32)
+    steps = _ROW_STEPS * width + _COL_STEPS
+    start = (start // w + 1) * width + start % w + 1
+    goal = (goal // w + 1) * width + goal % w + 1
     costs[start] = 0
     heap[0] = start  # priority << 32 | cell: the heap compares priorities only
     size = 1
-    goal_row, goal_col = goal // w, goal % w
+    goal_row, goal_col = goal // width, goal % width
     while size > 0:
         cell = heap[0] & 0xFFFFFFFF
         if cell == goal:
-            return _walk_back(parents, start, goal, w), True
+            return _walk_back(parents, start, goal, width), True
         size = _pop(heap, size)
-        row, col = cell // w, cell % w
+        row, col = cell // width, cell % width
         cost = costs[cell] + 1
         for k in range(8):
             if not diagonal and _ROW_STEPS[k] != 0 and _COL_STEPS[k] != 0:
                 continue
-            r, c = row + _ROW_STEPS[k], col + _COL_STEPS[k]
-            if not (0 <= r < h and 0 <= c < w):
-                continue
-            nb = r * w + c
-            if flat[nb] or cost >= costs[nb]:
+            nb = cell + steps[k]
+            if cost >= costs[nb]:
                 continue
             if size == len(heap):
                 return np.empty((0, 2), dtype=np.int64), False
             costs[nb] = cost
             parents[nb] = cell
+            r, c = row + _ROW_STEPS[k], col + _COL_STEPS[k]
             if diagonal:
                 priority = np.int64(cost + max(abs(r - goal_row), abs(c - goal_col)))
             else:
@@ -318,8 +329,9 @@ def _pop(heap, size):
 
 
 @numba.njit(cache=True)
-def _walk_back(parents, start, goal, w):
-    """The cells from start to goal, following parents back from the goal."""
+def _walk_back(parents, start, goal, width):
+    """The cells from start to goal, following parents back from the goal (bordered cell indices in, cells
+    of the grid out)."""
     count = 1
     cell = goal
     while cell != start:
@@ -328,7 +340,7 @@ def _walk_back(parents, start, goal, w):
     path = np.empty((count, 2), dtype=np.int64)
     cell = goal
     for i in range(count - 1, -1, -1):
-        path[i, 0], path[i, 1] = cell // w, cell % w
+        path[i, 0], path[i, 1] = cell // width - 1, cell % width - 1
         if i:
             cell = parents[cell]
     return path
