@@ -69,19 +69,20 @@ class VizProxy:
         if self.connections >= MAX_VIEWS:
             await client.close(code=1013, reason="too many 3D views open; try again later")
             return
-        requested = client.headers.get("sec-websocket-protocol", "")
-        protocols = [p.strip() for p in requested.split(",") if p.strip()]
-        try:
-            upstream = await websockets.connect(f"ws://{self.base}", subprotocols=protocols or None,
-                                                max_size=None, ping_interval=None, compression=None)
-        except OSError:
-            await client.close(code=1011)
-            return
+        # claimed and counted before the first await: connections arriving together see each other
         self.connections += 1
         if viewer is not None:
             self._claimed.add(viewer)
         tie = _Tie(self.viewers, viewer)
         try:
+            requested = client.headers.get("sec-websocket-protocol", "")
+            protocols = [p.strip() for p in requested.split(",") if p.strip()]
+            try:
+                upstream = await websockets.connect(f"ws://{self.base}", subprotocols=protocols or None,
+                                                    max_size=None, ping_interval=None, compression=None)
+            except OSError:
+                await client.close(code=1011)
+                return
             await client.accept(subprotocol=upstream.subprotocol)
             await _relay(client, upstream, tie)
         finally:

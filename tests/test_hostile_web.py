@@ -321,6 +321,31 @@ def test_a_racing_client_cannot_become_the_operators_viewer(station):
     wait_wall(lambda: not station.station.proxy.viewers, 10, "ties released when the views close")
 
 
+def test_connections_arriving_together_cannot_share_a_viewer_id(station):
+    """Five sockets asking for one viewer id at the same moment: one gets it, the others are refused, and the
+    id is free again once its holder closed (the claim was made only after connecting upstream, so all five
+    opened, and the first to close freed the id while another still held it)."""
+    viewer = "together-0123456789abcdef"
+
+    async def race() -> list:
+        return await asyncio.gather(*(websockets.connect(ws_url(station, f"/viz/v/{viewer}"),
+                                                         subprotocols=[SUBPROTOCOL], max_size=None)
+                                      for _ in range(5)), return_exceptions=True)
+
+    async def attempt() -> None:
+        opened = [c for c in await race() if not isinstance(c, Exception)]
+        refused = [c for c in await race() if isinstance(c, websockets.InvalidStatus)]
+        assert len(opened) == 1 and len(refused) == 5  # while one holds it, nobody else gets it
+        await opened[0].close()
+        await asyncio.sleep(0.5)
+        again = [c for c in await race() if not isinstance(c, Exception)]
+        assert len(again) == 1
+        await again[0].close()
+
+    asyncio.run(attempt())
+    wait_wall(lambda: viewer not in station.station.proxy._claimed, 10, "the id released")
+
+
 def test_garbage_on_the_view_socket_harms_no_one_else(station):
     for junk in (b"\xc1\xff\x00", "text viser never expects", msgspec.msgpack.encode({"type": "NoSuchMessage"})):
         with ws_connect(ws_url(station, "/viz"), subprotocols=[SUBPROTOCOL]) as hostile:
