@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import asyncio
 import secrets
+import stat as file_mode
 import sys
 import threading
 import time
 from collections.abc import Iterable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import uvicorn
@@ -80,7 +82,9 @@ class GroundStation:
         self._replay_world: tuple = (scene, self.datum, self.live.ground_height)  # its scene, datum, ground
         self._player: Player | None = None
         self._replay_lock = threading.Lock()
-        self._durations: dict[tuple, float | None] = {}
+        self._durations: dict[Path, tuple[tuple, float | None]] = {}  # path -> (its size and time, duration)
+        self._indexing: set[Path] = set()  # recordings the indexer has yet to read
+        self._indexer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recording-index")
         self._inboxes: dict[str | None, set[asyncio.Queue]] = {}  # viewer id -> its pages' /ws queues
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -127,6 +131,7 @@ class GroundStation:
         self.view.close()
         if self.recorder is not None:
             self.recorder.close()
+        self._indexer.shutdown(wait=False, cancel_futures=True)
 
     # ---- what the app asks for -------------------------------------------------------------------
     def status(self) -> dict:
@@ -144,26 +149,44 @@ class GroundStation:
 
     # ---- recordings and replay -----------------------------------------------------------------------
     def recordings(self) -> list[dict]:
+        """The recordings in the record folder, newest first: regular files only (never a pipe that would
+        block a read, nor a folder), listed without reading them (see ``_duration``)."""
         if self.record_dir is None or not self.record_dir.is_dir():
             return []
         found = []
-        for path in sorted(self.record_dir.glob("*.tlog"), key=lambda p: p.stat().st_mtime, reverse=True):
-            stat = path.stat()
+        for path in self.record_dir.glob("*.tlog"):
+            try:
+                stat = path.stat()
+            except OSError:  # gone since the listing
+                continue
+            if not file_mode.S_ISREG(stat.st_mode):
+                continue
             recording = self.recorder is not None and path == self.recorder.path
             found.append({"name": path.name, "size": stat.st_size, "modified": stat.st_mtime,
                           "recording": recording,
                           "duration_s": self.recorder.duration if recording else self._duration(path, stat)})
-        return found
+        return sorted(found, key=lambda r: r["modified"], reverse=True)
 
     def _duration(self, path: Path, stat) -> float | None:
-        """How long a recording lasts (from its index, kept while the file does not change)."""
-        key = (path, stat.st_mtime, stat.st_size)
-        if key not in self._durations:
-            try:
-                self._durations[key] = round(index_tlog(path).duration, 1)
-            except (ReplayError, OSError):
-                self._durations[key] = None
-        return self._durations[key]
+        """How long a recording lasts, from its index, kept while the file does not change; None until the
+        indexer has read it. Indexing reads the whole file (a gigabyte takes some 20 s), and the status
+        stream lists recordings on the event loop, so it is done in the background, one file at a time."""
+        version = (stat.st_mtime, stat.st_size)
+        known = self._durations.get(path)
+        if known is not None and known[0] == version:
+            return known[1]
+        if path not in self._indexing:
+            self._indexing.add(path)
+            self._indexer.submit(self._index, path, version)
+        return None
+
+    def _index(self, path: Path, version: tuple) -> None:
+        try:
+            duration = round(index_tlog(path).duration, 1)
+        except (ReplayError, OSError):
+            duration = None
+        self._durations[path] = (version, duration)  # a file that changed meanwhile is indexed again
+        self._indexing.discard(path)
 
     def recording_path(self, name: str) -> Path | None:
         """The recording called ``name`` in the record folder (no paths, only .tlog files), or None."""

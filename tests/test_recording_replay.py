@@ -10,7 +10,9 @@ replay of the recording can be held against it.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import os
 import random
 import shutil
 import struct
@@ -34,6 +36,7 @@ from harness import (
     wait_wall,
 )
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
+from websockets.sync.client import connect as ws_connect
 
 from groundstation.replay import Player, Replay, ReplayError, index_tlog
 from groundstation.state import HITS_KEPT, Fleet
@@ -190,6 +193,43 @@ def test_recordings_are_listed(flight):
     session = next(r for r in listed.json() if r["name"] == flight.session.name)
     assert session["recording"] is True
     assert session["size"] > 0 and session["modified"] == pytest.approx(time.time(), abs=60)
+
+
+def test_listing_recordings_reads_none_of_them_and_lists_only_files(flight, monkeypatch):
+    """A recording is indexed (its duration read) in the background: while that is held back, the list and
+    the status stream answer at once, the duration coming later. A pipe named like a recording, which
+    would block whoever reads it, and a folder are not recordings."""
+    held, released = threading.Event(), threading.Event()
+    real = index_tlog
+
+    def slow_index(path):
+        held.set()
+        released.wait(30)
+        return real(path)
+
+    monkeypatch.setattr("groundstation.server.index_tlog", slow_index)
+    copy, pipe, folder = (flight.record_dir / name for name in ("held-copy.tlog", "pipe.tlog", "folder.tlog"))
+    shutil.copyfile(flight.session, copy)
+    os.mkfifo(pipe)
+    folder.mkdir()
+    try:
+        listed = {r["name"]: r for r in flight.api.get("/api/recordings").json()}
+        assert "pipe.tlog" not in listed and "folder.tlog" not in listed
+        assert listed["held-copy.tlog"]["duration_s"] is None  # not read yet
+        assert held.wait(10)  # the indexer is reading it now, and stays there until released
+        stream_url = flight.running.base.replace("http://", "ws://") + "/ws"
+        with ws_connect(stream_url) as stream:  # the stream's first status lists recordings, read or not
+            frame = json.loads(stream.recv(timeout=5))
+        assert "held-copy.tlog" in [r["name"] for r in frame["recordings"]]
+        assert flight.api.get("/api/recordings/pipe.tlog").status_code == 404
+        released.set()
+        wait_wall(lambda: {r["name"]: r for r in flight.api.get("/api/recordings").json()}["held-copy.tlog"]
+                  ["duration_s"] == round(real(copy).duration, 1), 10, "the duration, once read")
+    finally:
+        released.set()
+        copy.unlink(missing_ok=True)
+        pipe.unlink(missing_ok=True)
+        folder.rmdir()
 
 
 def test_a_finished_recording_downloads_byte_for_byte(flight):
