@@ -492,6 +492,9 @@ def test_replay_seek_rejects_nan(api):
     assert response.status_code == 422
 
 
+HOME = "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.363261\t149.165230\t584\t1\n"
+
+
 @pytest.mark.parametrize(("text", "reason"), [
     ("QGC WPL 110\n" + "".join(f"{i}\t0\t3\t16\t0\t0\t0\t0\t-35.36\t149.16\t10\t1\n" for i in range(65536)),
      "at most 65535"),
@@ -499,12 +502,30 @@ def test_replay_seek_rejects_nan(api):
     ("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.36\tinf\t0\t1\n", "not a number"),
     ("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-135.36\t149.16\t0\t1\n", "not on Earth"),
     ("QGC WPL 110\n0 1 0 16 0 0 0\n", "not a QGC WPL 110 mission"),
+    (HOME + "1\t0\t3\t16\t0\t0\t0\t0\t-35.36\t149.16\t1e39\t1\n", "altitude beyond"),  # was a 500
+    (HOME + "1\t0\t3\t16\t3.5e38\t0\t0\t0\t-35.36\t149.16\t10\t1\n", "float32"),  # was a 500
+    (HOME + "1\t0\t3\t16\t0\t0\t0\t0\t1_0\t149.16\t10\t1\n", "line 3: field 9 is not a decimal number"),
+    (HOME + "1\t0\t3\t16\t0x10\t0\t0\t0\t-35.36\t149.16\t10\t1\n", "field 5 is not a decimal number"),
+    (HOME + "1\t0\t3.0\t16\t0\t0\t0\t0\t-35.36\t149.16\t10\t1\n", "field 3 is not a whole number (frame)"),
+    (HOME + "1\t0\t200\t16\t0\t0\t0\t0\t-35.36\t149.16\t10\t1\n", "out of range"),  # no MAV_FRAME
+    (HOME + "5\t0\t3\t16\t0\t0\t0\t0\t-35.36\t149.16\t10\t1\n", "numbered 0, 1, 2, ... in order"),
+    (HOME + "1\t7\t3\t16\t0\t0\t0\t0\t-35.36\t149.16\t10\t1\n", "'current' is 0 or 1"),
 ])
 def test_a_mission_mavlink_cannot_carry_is_422_naming_no_path(api, vehicle, text, reason):
+    before = api.get("/api/vehicles/1/mission").text
     response = api.put("/api/vehicles/1/mission", content=text.encode(), headers=api.operator)
     assert response.status_code == 422
     detail = response.json()["detail"]
     assert reason in detail and "/tmp" not in detail and ".waypoints" not in detail
+    assert api.get("/api/vehicles/1/mission").text == before  # the vehicle's mission is untouched
+
+
+def test_a_mission_with_comments_blank_lines_and_nan_params_is_taken(api, vehicle):
+    """What planners write and MAVLink allows still goes: comment and blank lines, signs and exponents, and
+    NaN in a parameter (MAVLink's "leave unchanged")."""
+    text = (HOME + "# a comment\n\n1\t0\t3\t16\tnan\t+0\t.5\t-0.0\t-3.536E1\t149.16\t10\t1\n")
+    response = api.put("/api/vehicles/1/mission", content=text.encode(), headers=api.operator)
+    assert response.status_code == 200 and response.json() == {"result": "accepted", "items": 2}
 
 
 # ---- 10. nothing left behind ----------------------------------------------------------------------------------

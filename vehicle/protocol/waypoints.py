@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tempfile
 from pathlib import Path
 
 from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mav import mavlink
 from vehicle.protocol.mission import MissionItem
 
 
@@ -26,11 +28,14 @@ def load_mission(path: str | Path, source: str | None = None) -> list[MissionIte
     from pymavlink import mavwp  # loaded when a mission file is read (mavutil comes with it)
 
     source = source or str(path)
-    loader = mavwp.MAVWPLoader()
     try:
+        _check_fields(Path(path).read_text(encoding="utf-8"), source)  # before mavwp, whose errors quote fields
+        loader = mavwp.MAVWPLoader()
         loader.load(str(path))
     except (OSError, UnicodeDecodeError) as error:
         raise WaypointError(f"{source}: {error.strerror if isinstance(error, OSError) else error}") from None
+    except WaypointError:
+        raise
     except Exception as error:  # mavwp raises MAVWPError and bare ValueErrors/IndexErrors on bad lines
         raise WaypointError(f"{source}: not a QGC WPL 110 mission ({error})") from None
     items = [MissionItem(command=w.command, lat=w.x, lon=w.y, alt=w.z, param1=w.param1, param2=w.param2,
@@ -52,6 +57,41 @@ def parse_mission(text: str) -> list[MissionItem]:
 
 
 MAX_ITEMS = 65535  # MAVLink numbers mission items with 16 bits
+FLOAT32_MAX = 3.4028234663852886e38  # MAVLink carries params and altitudes as float32
+MAX_ALTITUDE = 2**31 / 100  # m: ArduPilot keeps altitudes as 32-bit centimetres
+FRAMES = frozenset(mavlink.enums["MAV_FRAME"]) - {mavlink.MAV_FRAME_ENUM_END}
+_INTEGER = re.compile(r"[+-]?\d+")
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|[+-]?(nan|inf|infinity)", re.IGNORECASE)
+_INTEGER_FIELDS = {0: "seq", 1: "current", 2: "frame", 3: "command", 11: "autocontinue"}
+
+
+def _check_fields(text: str, source: str) -> None:
+    """What mavwp leaves unchecked in QGC WPL 110 text: each field a plain decimal number (Python's int and
+    float also take "1_0", which would put a mistyped waypoint in another country), whole numbers where
+    MAVLink has integers, items numbered 0, 1, 2, ... and "current" 0 or 1. Errors name the line and the
+    field, never the text (it may be anyone's)."""
+    lines = text.splitlines()
+    if not lines or lines[0].strip() != "QGC WPL 110":
+        return  # the older formats mavwp reads have other columns
+    seq = 0
+    for number, line in enumerate(lines[1:], start=2):
+        if line.startswith("#") or not line.strip():
+            continue  # as mavwp skips them
+        where = f"{source}: line {number}"
+        fields = line.split()
+        if len(fields) != 12:
+            raise WaypointError(f"{source}: not a QGC WPL 110 mission (line {number} has {len(fields)} fields, "
+                                "not 12)")
+        for column, field in enumerate(fields):
+            name = _INTEGER_FIELDS.get(column)
+            if not (_INTEGER if name else _NUMBER).fullmatch(field):
+                raise WaypointError(f"{where}: field {column + 1} is not " +
+                                    (f"a whole number ({name})" if name else "a decimal number"))
+        if int(fields[0]) != seq:
+            raise WaypointError(f"{where}: items must be numbered 0, 1, 2, ... in order (this one should be {seq})")
+        if int(fields[1]) not in (0, 1):
+            raise WaypointError(f"{where}: 'current' is 0 or 1")
+        seq += 1
 
 
 def _check(items: list[MissionItem], source: str) -> None:
@@ -64,11 +104,14 @@ def _check(items: list[MissionItem], source: str) -> None:
             raise WaypointError(f"{where}: its position is not a number")
         if abs(item.lat) > 90 or abs(item.lon) > 180:
             raise WaypointError(f"{where}: latitude {item.lat} or longitude {item.lon} is not on Earth")
-        if not (0 <= item.command <= 65535 and 0 <= item.frame <= 255 and item.autocontinue in (0, 1)):
+        if abs(item.alt) > MAX_ALTITUDE:
+            raise WaypointError(f"{where}: altitude beyond {MAX_ALTITUDE / 1000:,.0f} km, more than an autopilot "
+                                "can hold")
+        if not (0 <= item.command <= 65535 and item.frame in FRAMES and item.autocontinue in (0, 1)):
             raise WaypointError(f"{where}: command {item.command}, frame {item.frame} or autocontinue "
                                 f"{item.autocontinue} out of range")
-        if any(math.isinf(p) for p in (item.param1, item.param2, item.param3, item.param4)):
-            raise WaypointError(f"{where}: a parameter is infinite")
+        if any(math.isinf(p) or abs(p) > FLOAT32_MAX for p in (item.param1, item.param2, item.param3, item.param4)):
+            raise WaypointError(f"{where}: a parameter is infinite or beyond what MAVLink's float32 carries")
 
 
 def mission_text(items: list[MissionItem]) -> str:
