@@ -32,7 +32,7 @@ from fastapi.responses import (
     StreamingResponse,
 )
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from groundstation.commands import Command, execute, outside_space
 from groundstation.link import LinkError
@@ -68,6 +68,13 @@ class ReplayControl(BaseModel):
     speed: float | None = Field(None, ge=0.1, le=20)
     seek: float | None = Field(None, ge=0, le=1e7, description="seconds from the start of the recording")
     step: Literal[-1, 1] | None = None
+
+    @field_validator("step", mode="before")
+    @classmethod
+    def _step_is_a_number(cls, value):
+        if isinstance(value, bool):  # true == 1 to the Literal
+            raise ValueError("step is -1 or 1, not true or false")
+        return value
 
 
 MAX_HISTORY = 3000  # samples per vehicle in a history or timeline answer

@@ -25,9 +25,10 @@ SCENE_MARGIN = 20.0  # m beyond the scene's bounds a goto may go
 
 
 class Command(BaseModel):
-    """A command from the operator (JSON body of POST /api/vehicles/{sysid}/commands)."""
+    """A command from the operator (JSON body of POST /api/vehicles/{sysid}/commands). Strict: a number
+    given as a string, or as true, is refused rather than read as one."""
 
-    model_config = ConfigDict(allow_inf_nan=False)
+    model_config = ConfigDict(allow_inf_nan=False, strict=True)
 
     action: Action
     mode: str | None = Field(None, max_length=32, description="flight mode name for set_mode, e.g. GUIDED")

@@ -456,6 +456,8 @@ def post_raw_json(api, text: str, sysid: int = 1, headers: dict | None = None) -
     '{"action": "goto", "x": 0, "y": Infinity}', '{"action": "goto", "x": 1e7, "y": 0}',
     '{"action": "goto", "x": 1e300, "y": 1e300}', '{"action": "kill", "confirm": "yes"}',
     '{"action": "kill", "confirm": 1}', '{"action": "set_mode", "mode": "' + "G" * 5000 + '"}',
+    '{"action": "goto", "x": "5", "y": 0}', '{"action": "goto", "x": true, "y": 0}',  # flew to (5, 0) and (1, 0)
+    '{"action": "speed", "speed": "2"}', '{"action": "set_mode", "mode": 4}',
 ])
 def test_unusable_numbers_and_lax_truths_are_422(api, vehicle, body):
     response = post_raw_json(api, body)
@@ -486,10 +488,11 @@ def test_a_non_ascii_token_is_401(station):
         assert raw.recv(65536).startswith(b"HTTP/1.1 401")
 
 
-def test_replay_seek_rejects_nan(api):
-    response = api.post("/api/replay/control", content=b'{"seek": NaN}',
+@pytest.mark.parametrize("body", ['{"seek": NaN}', '{"step": true}', '{"step": 0}', '{"seek": "3"}'])
+def test_replay_control_rejects_what_is_no_such_number(api, body):
+    response = api.post("/api/replay/control", content=body.encode(),
                         headers={"Content-Type": "application/json", **api.operator})
-    assert response.status_code == 422
+    assert response.status_code == 422, body
 
 
 HOME = "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.363261\t149.165230\t584\t1\n"
