@@ -50,9 +50,19 @@ from groundstation.link import Link
 from groundstation.replay import Replay
 from groundstation.state import FORGET_AFTER, MAX_VEHICLES, Fleet
 from vehicle.agent.companion import tunnel
+from vehicle.agent.settings import Settings
 from vehicle.cli import DEFAULT_SIM_LINK
+from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol import links, signing
-from vehicle.protocol.mapstream import MAP_DELTA, MAX_SIDE, MapReceiver, snapshot_chunks
+from vehicle.protocol.mapstream import (
+    MAP_DELTA,
+    MAX_SIDE,
+    MAX_SPACE,
+    MIN_RESOLUTION,
+    MapReceiver,
+    MapStreamer,
+    snapshot_chunks,
+)
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.statustext import Reassembler, statustexts
 from vehicle.protocol.tlog import TlogWriter
@@ -184,6 +194,14 @@ def test_a_snapshot_with_a_geometry_that_is_no_number_is_refused():
         receiver = MapReceiver()
         feed_all(receiver, snapshot_chunks(1, snapshot_blob(4, (0, 0, 0, 0), zlib.compress(b""), resolution)))
         assert receiver.grid is None
+
+
+def test_the_widest_and_the_coarsest_maps_the_settings_allow_are_received():
+    for space, resolution in ((MAX_SPACE, MAX_SIDE / (2 * MAX_SPACE)), (MAX_SPACE, MIN_RESOLUTION), (0.1, 50.0)):
+        memory_map = MemoryMap((0.0, 0.0), Settings(space_size=space, resolution=resolution).space_size, resolution)
+        receiver = MapReceiver()
+        feed_all(receiver, MapStreamer(memory_map, (0.0, 0.0)).snapshot())
+        assert receiver.grid is not None and receiver.grid.shape == memory_map.grid.shape, (space, resolution)
 
 
 def test_the_largest_map_a_vehicle_may_stream_is_received():

@@ -443,7 +443,13 @@ def test_one_varint_reads_back_as_its_number_at_every_length_boundary(number):
     ("size", "resolution", "accepted"),
     [
         (1, 1.0, True),
-        (4000, 0.5, True),
+        (4000, 2.0, True),  # 2 km a side: the widest space the settings allow
+        (2, 0.01, True),  # the coarsest
+        (4, 50.0, True),  # the finest
+        (4000, 0.5, False),  # 8 km a side
+        (4, 1e-30, False),  # a space of 1e31 m would let every goto pass the station's check
+        (4, 0.005, False),
+        (4, 60.0, False),
         (0, 1.0, False),
         (4001, 1.0, False),
         (4, 0.0, False),
@@ -451,17 +457,18 @@ def test_one_varint_reads_back_as_its_number_at_every_length_boundary(number):
         (4, float("inf"), False),
     ],
 )
-def test_a_snapshot_is_taken_from_1_to_4000_cells_a_side_at_any_finite_positive_resolution(size, resolution, accepted):
+def test_a_snapshot_is_taken_at_the_sizes_and_resolutions_the_settings_allow(size, resolution, accepted):
     box = (0, 0, 1, 1) if size else (0, 0, 0, 0)
     receiver = _fed(*_snapshot(size=size, resolution=resolution, box=box, cells=b"\x05" if size else b""))
     assert receiver.synced is accepted and receiver.snapshots == int(accepted)
     if accepted:
         assert receiver.grid.shape == (size, size) and receiver.grid[0, 0] == 5
-        assert receiver.geometry.resolution == resolution
+        assert receiver.geometry.resolution == pytest.approx(resolution)  # float32 on the wire
 
 
 @pytest.mark.parametrize(
-    "origin", [(float("nan"), 0.0), (0.0, float("nan")), (float("inf"), 0.0), (0.0, -float("inf"))]
+    "origin", [(float("nan"), 0.0), (0.0, float("nan")), (float("inf"), 0.0), (0.0, -float("inf")), (3e38, 0.0),
+               (0.0, -2200.0)]
 )
 def test_a_snapshot_placed_nowhere_is_refused(origin):
     assert not _fed(*_snapshot(origin=origin)).synced

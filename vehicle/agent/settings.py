@@ -11,7 +11,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from vehicle.protocol.mapstream import MAX_SIDE
+from vehicle.protocol.mapstream import MAX_RESOLUTION, MAX_SIDE, MAX_SPACE, MIN_RESOLUTION
 
 
 def _setting(default: float, unit: str, help: str, param_id: str, **bounds) -> float:
@@ -25,8 +25,9 @@ class Settings(BaseModel):
                                gt=0, le=120)
     speed: float = _setting(2.5, "m/s", "cruise speed", "SCN_SPEED", gt=0, le=20)
     space_size: float = _setting(100.0, "m", "half-width of the memory map and of the allowed space around home",
-                                 "SCN_SPACE_SIZE", gt=0, le=1000)
-    resolution: float = _setting(10.0, "cells/m", "memory-map resolution", "SCN_RESOLUTION", gt=0, le=50)
+                                 "SCN_SPACE_SIZE", gt=0, le=MAX_SPACE)
+    resolution: float = _setting(10.0, "cells/m", "memory-map resolution", "SCN_RESOLUTION",
+                                 ge=MIN_RESOLUTION, le=MAX_RESOLUTION)
     padding: float = _setting(0.5, "m", "clearance kept between the vehicle body and obstacles when planning",
                               "SCN_PADDING", ge=0, le=20)
     closeness: float = _setting(2.0, "m", "distance at which a waypoint counts as reached and an obstacle as "

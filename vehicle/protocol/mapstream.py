@@ -28,11 +28,12 @@ equals the onboard map cell for cell. Snapshots go out every few seconds, less
 often when they are big, so that they use at most a set share of the link.
 
 A receiver believes nothing a stream claims beyond what a vehicle can send: a
-map is at most ``MAX_SIDE`` cells a side (the mission settings refuse bigger
-ones, so both ends agree), a snapshot's part is inflated no further than the
-claimed geometry holds (a zlib bomb stops there), and a delta that names more
-cells than its map has, or a cell twice, is dropped. Non-finite numbers (geometry, path points)
-are no map and no path.
+map is at most ``MAX_SIDE`` cells a side, at a resolution and over an extent
+the mission settings allow (they refuse others, so both ends agree), a
+snapshot's part is inflated no further than the claimed geometry holds (a zlib
+bomb stops there), and a delta that names more cells than its map has, or a
+cell twice, is dropped. Non-finite numbers (geometry, path points) are no map
+and no path.
 """
 
 from __future__ import annotations
@@ -58,6 +59,9 @@ DELTA_ROOM = PAYLOAD - _DELTA.size
 POINTS_PER_CHUNK = (PAYLOAD - PATH_CHUNK.size) // _POINT.size
 FORMAT_VERSION = 1
 MAX_SIDE = 4000  # cells a side: 16 M cells (16 MB of int8 on each end), twice the default map's 2000
+MAX_SPACE = 1000.0  # m: the widest half-width of a vehicle's space (its settings' space_size)
+MIN_RESOLUTION, MAX_RESOLUTION = 0.01, 50.0  # cells/m of a vehicle's map (its settings' resolution)
+MAX_REACH = 2 * MAX_SPACE + 1 / MIN_RESOLUTION  # m: the widest map a vehicle makes (its side rounds up a cell)
 VARINT_MAX = 5  # bytes of one LEB128 gap (gaps stay below 2**35)
 
 
@@ -333,6 +337,9 @@ class MapReceiver:
             raise ValueError(f"a map of {size} cells a side (at most {MAX_SIDE}), or a part outside it")
         if not (math.isfinite(resolution) and resolution > 0 and math.isfinite(ox) and math.isfinite(oy)):
             raise ValueError("a map geometry that is not a number")
+        if not (MIN_RESOLUTION * 0.999 <= resolution <= MAX_RESOLUTION * 1.001  # as float32 carries them
+                and size / resolution <= MAX_REACH and abs(ox) <= MAX_REACH and abs(oy) <= MAX_REACH):
+            raise ValueError("a map geometry no vehicle makes (resolution or extent beyond the settings' bounds)")
         part = np.frombuffer(_inflate(zlib.decompressobj(), blob[_SNAPSHOT.size:], nr * nc), dtype=np.int8)
         if part.size != nr * nc:
             raise ValueError("snapshot size mismatch")
