@@ -263,8 +263,8 @@ class Fleet:
                 self._command_sent(message, now)  # a ground station's (ours, or another's) to a vehicle
                 return
             if vehicle is None:
-                if kind != "HEARTBEAT" or not makes_a_vehicle(message.type, message.autopilot):
-                    return  # only a vehicle's heartbeat makes a vehicle
+                if kind != "HEARTBEAT" or not makes_a_vehicle(message.type, message.autopilot) or sysid == 0:
+                    return  # only a vehicle's heartbeat makes a vehicle; 0 is MAVLink's broadcast, no one's id
                 if len(self.vehicles) >= self.max_vehicles:
                     self.refused += 1
                     return

@@ -69,6 +69,15 @@ def test_the_companions_heartbeat_neither_makes_a_vehicle_nor_changes_its_mode(f
     assert vehicle.has_companion(1.5) and not vehicle.has_companion(10.0)  # heard within the link timeout
 
 
+def test_system_0_is_no_vehicle(fleet):
+    """0 is MAVLink's broadcast address: a "vehicle" there would have every command to it go to all of them."""
+    broadcast = mavlink.MAVLink(None, srcSystem=0, srcComponent=1)
+    hear(fleet, 0.0, mavlink.MAVLink(None).decode(bytearray(heartbeat().pack(broadcast))))
+    assert fleet.ids() == []
+    hear(fleet, 1.0, autopilot(heartbeat()))
+    assert fleet.ids() == [SYSID]
+
+
 def test_the_agents_status_shows_on_its_vehicle(fleet):
     status = agent_status.AgentStatus("mission", True, "", "search", "operator switched to BRAKE")
     payload = agent_status.encode(status)
