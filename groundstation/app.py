@@ -309,7 +309,8 @@ def create_app(station: GroundStation) -> FastAPI:
     def recording_or_404(name: str) -> Path:
         path = station.recording_path(name)
         if path is None:
-            raise HTTPException(404, f"no recording called {name!r}")
+            shown = name if len(name) <= 80 else f"{name[:80]}..."  # the start of a long name says enough
+            raise HTTPException(404, f"no recording called {shown!r}")
         return path
 
     @app.get("/api/recordings", tags=["recordings"])

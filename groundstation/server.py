@@ -193,7 +193,10 @@ class GroundStation:
         if self.record_dir is None or Path(name).name != name or not name.endswith(".tlog"):
             return None
         path = self.record_dir / name
-        return path if path.is_file() else None
+        try:
+            return path if path.is_file() else None
+        except OSError:  # a name too long for the file system, say
+            return None
 
     def start_replay(self, path: Path) -> Replay:
         """Show a recording instead of the live vehicles (the live link goes on in the background), in the

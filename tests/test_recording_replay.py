@@ -305,6 +305,8 @@ def test_recording_names_cannot_leave_the_folder(flight, tmp_path):
             assert flight.station.recording_path(name) is None, name
         replay = api.post("/api/replay", json={"name": "../outside.tlog"}, headers=api.operator)
         assert replay.status_code == 404
+        long = api.get(f"/api/recordings/{'x' * 5000}.tlog")
+        assert long.status_code == 404 and len(long.text) < 200  # the name is not echoed back whole
     finally:
         outside.unlink()
     assert outside.parent.exists()
