@@ -247,6 +247,18 @@ def test_a_mode_change_from_the_ground_station_pauses_the_agent(scene_of):
     assert flight.agent.phase is Phase.MISSION and flight.agent.outcome is None
 
 
+def test_a_new_go_here_drops_the_path_to_the_last_one_at_once(scene_of):
+    """The page shows the agent's planned path: a second "Go here" must not show the way to the first one
+    while the agent looks around before planning anew."""
+    flight = Flight(scene_of(), "browse")
+    assert flight.run(60, until=lambda: flight.agent.phase is Phase.MISSION)
+    assert flight.agent.go_to((8.0, 8.0)) is None
+    assert flight.run(10, until=lambda: flight.agent.ctx.planned_path[-1:] == [(8.0, 8.0)])
+    assert flight.agent.go_to((-8.0, 0.0)) is None
+    assert flight.agent.ctx.planned_path == []
+    assert flight.run(30, until=lambda: flight.agent.ctx.planned_path[-1:] == [(-8.0, 0.0)])
+
+
 def test_resume_hands_control_back_to_the_agent(scene_of):
     flight = Flight(scene_of(), "pathfind", waypoints=[(0.0, 8.0)])
     assert not flight.agent.resume()  # not paused: nothing to resume

@@ -137,6 +137,7 @@ class Agent:
         if not fc.armed or (fc.kind is Kind.COPTER and not fc.flying):
             return "not flying: arm and take off first"
         self._errand = Travel(ctx, point, HOME_TOLERANCE)
+        ctx.planned_path = []  # the way to where it was going is not the way there
         self.paused = True
         self.pause_reason = f"going to {where} for the operator"
         if fc.mode != "GUIDED":
