@@ -20,6 +20,7 @@ command lost.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import json
 import os
 import random
@@ -36,6 +37,7 @@ from pathlib import Path
 
 import httpx
 import msgspec
+import websockets
 from common import DEFAULT_SCENE, ROOT, code_state, table
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 from websockets.sync.client import connect as ws_connect
@@ -63,6 +65,7 @@ class Target:
     http: int
     station: subprocess.Popen
     vehicle: subprocess.Popen
+    record_dir: Path
     api: httpx.Client = field(init=False)
 
     def __post_init__(self):
@@ -105,7 +108,7 @@ def start(folder: Path) -> Target:
          "--token", TOKEN, "--record-dir", str(folder), "--mavlink", f"udpin:127.0.0.1:{station_udp}",
          "--mavlink", f"udpout:127.0.0.1:{vehicle_udp}"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
-    target = Target(station_udp, vehicle_udp, http, station, vehicle)
+    target = Target(station_udp, vehicle_udp, http, station, vehicle, folder)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         try:
@@ -213,10 +216,10 @@ def tunnel(sysid: int, kind: int, payload: bytes) -> bytes:
     return message.pack(packer(sysid, mavlink.MAV_COMP_ID_ONBOARD_COMPUTER))
 
 
-def snapshot_packets(sysid: int, ident: int, size: int, rows: int, data: bytes) -> list[bytes]:
-    """A map snapshot (see vehicle/protocol/mapstream.py) claiming ``size`` cells a side, its part ``rows``
-    square, with ``data`` as the compressed cells."""
-    blob = struct.pack("<BHfffIHHHH", 1, size, 5.0, -size / 10, -size / 10, 0, 0, 0, rows, rows) + data
+def snapshot_packets(sysid: int, ident: int, size: int, rows: int, data: bytes, resolution: float = 5.0) -> list[bytes]:
+    """A map snapshot (see vehicle/protocol/mapstream.py) claiming ``size`` cells a side at ``resolution``, its
+    part ``rows`` square, with ``data`` as the compressed cells."""
+    blob = struct.pack("<BHfffIHHHH", 1, size, resolution, -size / 10, -size / 10, 0, 0, 0, rows, rows) + data
     room = PAYLOAD - 6
     chunks = [blob[i:i + room] for i in range(0, len(blob), room)]
     return [tunnel(sysid, MAP_SNAPSHOT, struct.pack("<HHH", ident, index, len(chunks)) + chunk)
@@ -446,6 +449,97 @@ def garbage_flood(target: Target):
     return True, f"{sent} datagrams in 10 s ({sent / 10:,.0f}/s)"
 
 
+def beside_a_stuck_recording(target: Target):
+    """A pipe named like a recording (reading it blocks until someone writes) and a 200 MB recording copied
+    into the record folder: the list and the status stream must answer at once."""
+    folder = target.record_dir
+    pipe, big = folder / "pipe.tlog", folder / "copied-in.tlog"
+    os.mkfifo(pipe)
+    session = max(folder.glob("session-*.tlog"), key=lambda p: p.stat().st_size).read_bytes()
+    with open(big, "wb") as handle:
+        while handle.tell() < 200 << 20:
+            handle.write(session)
+    try:
+        started = time.monotonic()
+        listed = target.api.get("/api/recordings", timeout=30).json()
+        listing = time.monotonic() - started
+        with ws_connect(f"{target.ws}/ws") as stream:
+            started = time.monotonic()
+            frames = sum(json.loads(stream.recv(timeout=5)).get("type") == "vehicles" for _ in range(8))
+            streamed = time.monotonic() - started
+        names = [r["name"] for r in listed]
+    finally:
+        pipe.unlink()
+        big.unlink()
+    held = listing < 1.0 and frames == 8 and streamed < 4.0 and "pipe.tlog" not in names
+    return held, f"list answered in {listing * 1000:.0f} ms, pipe listed: {'pipe.tlog' in names}; 8 status frames " \
+                 f"in {streamed:.1f} s"
+
+
+def broadcast_system(target: Target):
+    """A heartbeat from system 0, MAVLink's broadcast address, then a kill sent to it through the API."""
+    beat = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                             0, 0, mavlink.MAV_STATE_ACTIVE, 3)
+    sender = udp_sender()
+    for _ in range(5):
+        sender.sendto(beat.pack(packer(0)), ("127.0.0.1", target.station_udp))
+    time.sleep(1.0)
+    listed = [v["sysid"] for v in target.api.get("/api/vehicles").json()]
+    kill = target.api.post("/api/vehicles/0/commands", json={"action": "kill", "confirm": True}).status_code
+    armed = (target.vehicle_state() or {}).get("armed")
+    return 0 not in listed and kill == 404, f"vehicles {listed}; a kill to system 0 answered {kill}; " \
+                                            f"vehicle 1 armed: {armed}"
+
+
+def viewer_id_pileup(target: Target):
+    """Ten sockets asking for one viewer id at the same moment."""
+    import viser
+
+    async def race() -> list:
+        return await asyncio.gather(*(websockets.connect(f"{target.ws}/viz/v/pileup-0123456789abcdef",
+                                                         subprotocols=[f"viser-v{viser.__version__}"], max_size=None)
+                                      for _ in range(10)), return_exceptions=True)
+
+    async def attempt() -> int:
+        opened = [c for c in await race() if not isinstance(c, Exception)]
+        for connection in opened:
+            await connection.close()
+        return len(opened)
+
+    opened = asyncio.run(attempt())
+    return opened == 1, f"{opened} of 10 opened"
+
+
+LAX_BODIES = ['{"action": "goto", "x": "5", "y": 0}', '{"action": "goto", "x": true, "y": 0}',
+              '{"action": "speed", "speed": "2"}']
+HOME_LINE = "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.363261\t149.165230\t584\t1\n"
+LAX_MISSIONS = ["1\t0\t3\t16\t0\t0\t0\t0\t-35.36\t149.16\t1e39\t1",
+                "1\t0\t3\t16\t3.5e38\t0\t0\t0\t-35.36\t149.16\t10\t1",
+                "1\t0\t3\t16\t0\t0\t0\t0\t1_0\t149.16\t10\t1",
+                "1\t0\t200\t16\t0\t0\t0\t0\t-35.36\t149.16\t10\t1"]
+
+
+def lax_numbers(target: Target):
+    """Numbers as strings or true in commands; in missions a float32 overflow, '1_0' and a frame that is none."""
+    codes = [target.api.post("/api/vehicles/1/commands", content=body.encode(),
+                             headers={"Content-Type": "application/json"}).status_code for body in LAX_BODIES]
+    codes += [target.api.put("/api/vehicles/1/mission", content=f"{HOME_LINE}{line}\n".encode()).status_code
+              for line in LAX_MISSIONS]
+    return all(code == 422 for code in codes), f"answers {sorted(set(codes))}"
+
+
+def tiny_map_resolution(target: Target):
+    """A vehicle whose map claims 1e-30 cells/m (a space of 1e31 m), then a goto 500 km away sent to it."""
+    beat = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                             0, 0, mavlink.MAV_STATE_ACTIVE, 3)
+    sender = udp_sender()
+    for packet in [beat.pack(packer(78))] + snapshot_packets(78, 4078, 10, 10, zlib.compress(bytes(100)), 1e-30):
+        sender.sendto(packet, ("127.0.0.1", target.station_udp))
+    time.sleep(1.0)
+    goto = target.api.post("/api/vehicles/78/commands", json={"action": "goto", "x": 5e5, "y": 0.0}).status_code
+    return goto == 422, f"a goto 500 km away answered {goto}"
+
+
 ATTACKS = [
     ("view socket elsewhere (?websocket=, CSP)", view_socket_elsewhere),
     ("NaN in ATTITUDE (the vehicle's sysid and a foreign one)", nan_attitude),
@@ -463,6 +557,11 @@ ATTACKS = [
     ("28,000 one-packet UDP senders", many_senders),
     ("arm and take-off from a system that is no GCS", non_gcs_commands),
     ("20,000 messages/s of mixed garbage, MAVLink 1 and 2, 10 s", garbage_flood),
+    ("a pipe and a 200 MB recording in the record folder", beside_a_stuck_recording),
+    ("a vehicle at system 0 (the broadcast address), and a kill to it", broadcast_system),
+    ("ten sockets claiming one viewer id at once", viewer_id_pileup),
+    ("numbers as strings or true; missions with 1e39, '1_0', frame 200", lax_numbers),
+    ("a map at 1e-30 cells/m, then a goto 500 km away", tiny_map_resolution),
 ]
 
 

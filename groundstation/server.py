@@ -182,7 +182,7 @@ class GroundStation:
 
     def _index(self, path: Path, version: tuple) -> None:
         try:
-            duration = round(index_tlog(path).duration, 1)
+            duration = round(index_tlog(path, columns=False).duration, 1)
         except (ReplayError, OSError):
             duration = None
         self._durations[path] = (version, duration)  # a file that changed meanwhile is indexed again

@@ -202,10 +202,10 @@ def test_listing_recordings_reads_none_of_them_and_lists_only_files(flight, monk
     held, released = threading.Event(), threading.Event()
     real = index_tlog
 
-    def slow_index(path):
+    def slow_index(path, columns=True):
         held.set()
         released.wait(30)
-        return real(path)
+        return real(path, columns)
 
     monkeypatch.setattr("groundstation.server.index_tlog", slow_index)
     copy, pipe, folder = (flight.record_dir / name for name in ("held-copy.tlog", "pipe.tlog", "folder.tlog"))
@@ -889,6 +889,8 @@ def test_a_truncated_log_replays_up_to_the_cut(tmp_path, where):
     index = index_tlog(cut)
     assert "truncated" in index.warning and "cut.tlog" in index.warning
     assert len(index) == keep
+    span = index_tlog(cut, columns=False)  # as the recordings list reads it
+    assert (span.start, span.duration, span.warning) == (index.start, index.duration, index.warning)
     assert np.array_equal(index.offsets, full.offsets[:keep])
     replay = Replay.open(cut, Fleet())
     assert replay.status()["warning"] == index.warning
@@ -926,6 +928,8 @@ def test_a_partly_corrupt_log_replays_up_to_the_damage(tmp_path):
     index = index_tlog(corrupt)
     assert "damaged" in index.warning and str(damage_at) in index.warning
     assert len(index) == 3000
+    span = index_tlog(corrupt, columns=False)  # as the recordings list reads it
+    assert (span.start, span.duration, span.warning) == (index.start, index.duration, index.warning)
     assert np.array_equal(index.offsets, full.offsets[:3000])
     replay = Replay.open(corrupt, Fleet())
     assert replay.duration == pytest.approx(float(full.times[2999] - full.times[0]))
