@@ -145,6 +145,7 @@ def create_app(station: GroundStation) -> FastAPI:
         return response
 
     @app.get("/api/health", tags=["status"])
+    @app.head("/api/health", include_in_schema=False)  # what uptime monitors send
     def health():
         scene = station.scene
         link = station.link.health() if station.link is not None else None

@@ -220,6 +220,8 @@ def test_health(station, api, flyer):
     assert health["vehicles"] >= 1
     assert health["links"] == [station.url]
     assert health["version"]
+    head = api.head("/api/health")  # as uptime monitors ask
+    assert head.status_code == 200 and head.content == b""
 
 
 def test_vehicles_lists_a_flying_vehicle(api, flyer):
