@@ -410,6 +410,16 @@ def test_a_target_refused_because_an_operator_just_switched_mode_pauses_for_the_
         assert len(fake.sent(mavlink.MAV_CMD_REQUEST_MESSAGE)) == asked  # nothing to ask
 
 
+def test_an_answer_to_another_ground_stations_command_is_not_the_agents():
+    """The autopilot's refusal of a command another station sent (addressed to it, 255/0) came before the
+    answer to the agent's own: taken for the agent's, it paused the agent for a refusal it never got."""
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.link.mav.command_ack_send(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_RESULT_DENIED, 0, 0, 255, 0)
+        assert fc.arm() == mavlink.MAV_RESULT_ACCEPTED
+        assert fc.took_over() is None and fc.problems == 0
+
+
 def test_a_command_never_answered_is_tried_three_times_then_reported():
     with controller() as (fc, fake):
         fc.connect(10)

@@ -171,6 +171,15 @@ def test_unknown_command_is_unsupported_not_silent(fly):
     assert gcs.command(31010) == mavlink.MAV_RESULT_UNSUPPORTED
 
 
+def test_a_command_the_onboard_agent_does_not_take_is_unsupported_not_silent(fly):
+    gcs, _ = fly()
+    for command in (mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 31010):
+        gcs.heartbeat()
+        gcs.conn.mav.command_long_send(1, 191, command, 0, 1, 0, 0, 0, 0, 0, 0)
+        ack = gcs.wait("COMMAND_ACK", lambda m, c=command: m.command == c, component=191)
+        assert ack.result == mavlink.MAV_RESULT_UNSUPPORTED
+
+
 def test_take_off_then_rtl_lands_at_home_and_disarms(fly):
     gcs, _ = fly()
     take_off(gcs)
@@ -352,6 +361,72 @@ def download(gcs):
         items.append(gcs.wait("MISSION_ITEM_INT", lambda m, s=seq: m.seq == s))
     gcs.conn.mav.mission_ack_send(1, 1, mavlink.MAV_MISSION_ACCEPTED, 0)
     return items
+
+
+NAN, INF = math.nan, math.inf
+
+
+def test_commands_with_numbers_no_vehicle_can_use_are_denied_and_leave_it_flying(fly):
+    """Each of these was ACCEPTED: a NaN speed and then any goto killed the process, a NaN yaw spun the copter
+    for good, a NaN arm disarmed it, a NaN interval stopped its heartbeat, a take-off to inf climbed for ever,
+    a goto to latitude 135 flew off."""
+    gcs, sim = fly()
+    take_off(gcs)
+    lat, lon = sim.world.datum.to_global(3.0, 2.0)
+    hostile = [
+        (mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, NAN, -1),
+        (mavlink.MAV_CMD_CONDITION_YAW, NAN),
+        (mavlink.MAV_CMD_CONDITION_YAW, INF, 0, 0, 1),
+        (mavlink.MAV_CMD_COMPONENT_ARM_DISARM, NAN),
+        (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_HEARTBEAT, NAN),
+        (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_HEARTBEAT, -5),
+        (mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, INF),
+        (mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 1e38),
+        (mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, NAN, NAN, NAN, 5),
+        (mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, NAN, 135.0, lon, 5),
+        (mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, NAN, lat, lon, INF),
+        (mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, NAN, lat, lon, 5000),
+    ]
+    for command, *params in hostile:
+        assert gcs.command(command, *params) == mavlink.MAV_RESULT_DENIED, (command, params)
+    assert sim.world.autopilot.armed and sim.world.autopilot.speed == 2.5 and sim.world.autopilot.mode == "GUIDED"
+    gcs.wait("HEARTBEAT")  # still beating
+    assert gcs.command(mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, NAN, lat, lon, 5) == mavlink.MAV_RESULT_ACCEPTED
+    # the process lives on and flies there (the agent took off with it and may hold it short: close is enough)
+    gcs.wait("LOCAL_POSITION_NED", lambda m: math.hypot(m.x - 2, m.y - 3) < 1.0 and abs(m.z + 5) < 0.3, sim_timeout=30)
+
+
+def test_a_global_position_target_is_flown_in_its_frame(fly):
+    """Above sea level in MAV_FRAME_GLOBAL_INT, above home in the relative frames; a frame that is none is no
+    target (590 m above sea level was flown as 590 m above home, frame 99 as relative)."""
+    gcs, sim = fly()
+    take_off(gcs)
+    lat, lon = sim.world.datum.to_global(2.0, 1.0)
+    sea_level = sim.world.datum.alt + sim.world.home[2]
+
+    def target(frame, alt):
+        gcs.heartbeat()
+        gcs.conn.mav.set_position_target_global_int_send(0, 1, 1, frame, 0x0DF8, int(lat * 1e7), int(lon * 1e7), alt,
+                                                         0, 0, 0, 0, 0, 0, 0, 0)
+
+    target(99, 30.0)
+    target(mavlink.MAV_FRAME_GLOBAL_INT, sea_level + 6.0)
+    gcs.wait("LOCAL_POSITION_NED", lambda m: math.hypot(m.x - 1, m.y - 2) < 1.0 and abs(m.z + 6) < 0.3,
+             sim_timeout=30)  # 6 m up, not 30 (frame 99) nor 590 (sea level read as home)
+    target(mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 3.0)
+    gcs.wait("LOCAL_POSITION_NED", lambda m: abs(m.z + 3) < 0.3, sim_timeout=30)
+
+
+def test_a_mission_item_the_autopilot_cannot_fly_ends_the_upload_and_keeps_the_mission(fly):
+    gcs, sim = fly()
+    lat, lon = sim.world.datum.to_global(3.0, 2.0)
+    assert upload(gcs, [(lat, lon, 5.0)]) == mavlink.MAV_MISSION_ACCEPTED
+    for bad, result in (((135.0, lon, 5.0), mavlink.MAV_MISSION_INVALID_PARAM5_X),
+                        ((lat, lon, NAN), mavlink.MAV_MISSION_INVALID_PARAM7),
+                        ((lat, lon, 2e4), mavlink.MAV_MISSION_INVALID_PARAM7)):
+        assert upload(gcs, [(lat, lon, 5.0), bad]) == result, bad
+    kept = download(gcs)
+    assert len(kept) == 2 and kept[1].z == pytest.approx(5.0)
 
 
 def test_mission_upload_download_round_trip_and_auto_flies_it(fly):

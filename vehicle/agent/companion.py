@@ -113,6 +113,9 @@ class Companion:
                                                         message.get_srcComponent()), *self.texts()]
         if kind in PARAM_MESSAGES:
             return self._param(message)
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):  # every command gets its answer, as from an autopilot
+            return [mavlink.MAVLink_command_ack_message(message.command, mavlink.MAV_RESULT_UNSUPPORTED, 0, 0,
+                                                        message.get_srcSystem(), message.get_srcComponent())]
         return None
 
     def go_here(self, message) -> bool:

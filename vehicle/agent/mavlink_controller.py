@@ -277,7 +277,9 @@ class MavlinkController:
                                          state == mavlink.MISSION_STATE_ACTIVE, complete)
 
     def _on_command_ack(self, m) -> None:
-        if getattr(m, "target_component", 0) in (0, COMPONENT):
+        """Ours: addressed to this agent, or to no one (MAVLink 1 carries no address); an answer to another
+        ground station's command is not (taking one for ours paused the agent on a refusal it never got)."""
+        if (getattr(m, "target_system", 0), getattr(m, "target_component", 0)) in ((0, 0), (self.sysid, COMPONENT)):
             self._acks[m.command] = m.result
 
     def _on_distance_sensor(self, m) -> None:

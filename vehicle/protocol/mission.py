@@ -11,6 +11,7 @@ the simulated autopilot (``vehicle.sim.mission_server``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -28,6 +29,7 @@ NAV_LAND = mav.MAV_CMD_NAV_LAND
 NAV_RETURN_TO_LAUNCH = mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
 DO_CHANGE_SPEED = mav.MAV_CMD_DO_CHANGE_SPEED
 SUPPORTED_ITEMS = {NAV_WAYPOINT, NAV_TAKEOFF, NAV_LOITER_UNLIM, NAV_LAND, NAV_RETURN_TO_LAUNCH, DO_CHANGE_SPEED}
+ALTITUDE_LIMIT = 1000.0  # m above home: the most a target may ask (the top of ArduPilot's FENCE_ALT_MAX range)
 
 
 @dataclass
@@ -66,6 +68,23 @@ class MissionProgress:
     count: int  # items, home included
     running: bool
     complete: bool  # flown to its end
+
+
+def item_problem(item: MissionItem) -> int | None:
+    """The MAV_MISSION_RESULT an autopilot refuses a navigation item with, or None if it can fly it: a
+    position that is no number or not on Earth, an altitude beyond ``ALTITUDE_LIMIT``, a hold time that is
+    no number (the item would never end)."""
+    if not item.is_nav:
+        return None
+    if not (math.isfinite(item.lat) and abs(item.lat) <= 90):
+        return mav.MAV_MISSION_INVALID_PARAM5_X
+    if not (math.isfinite(item.lon) and abs(item.lon) <= 180):
+        return mav.MAV_MISSION_INVALID_PARAM6_Y
+    if not (math.isfinite(item.alt) and abs(item.alt) <= ALTITUDE_LIMIT):
+        return mav.MAV_MISSION_INVALID_PARAM7
+    if item.command == NAV_WAYPOINT and not (math.isfinite(item.param1) and item.param1 >= 0):
+        return mav.MAV_MISSION_INVALID_PARAM1
+    return None
 
 
 def home_item(datum: Datum, x: float, y: float) -> MissionItem:

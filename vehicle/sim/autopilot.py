@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
 from vehicle.protocol.mav import mavlink as mav
 from vehicle.protocol.mission import (
+    ALTITUDE_LIMIT,
     DO_CHANGE_SPEED,
     NAV_LAND,
     NAV_LOITER_UNLIM,
@@ -197,7 +198,7 @@ class Autopilot:
     def takeoff(self, altitude: float) -> int:
         if self.kind is not Kind.COPTER or self.mode != "GUIDED" or not self.armed:
             return TEMPORARILY_REJECTED if self.kind is Kind.COPTER else UNSUPPORTED
-        if altitude <= 0:
+        if not 0 < altitude <= ALTITUDE_LIMIT:  # NaN too
             return DENIED
         if self.flying:
             return FAILED
@@ -216,6 +217,9 @@ class Autopilot:
 
     def goto(self, x: float, y: float, altitude: float | None = None) -> int:
         """GUIDED position target in scene metres; altitude above the start's ground (None keeps the current)."""
+        if not (math.isfinite(x) and math.isfinite(y)) or (altitude is not None
+                                                           and not abs(altitude) <= ALTITUDE_LIMIT):  # NaN too
+            return DENIED
         if (refused := self._guided_ready()) is not None:
             return refused
         z = self.body.pose.z if altitude is None or self.kind is Kind.ROVER else self.home[2] + altitude
@@ -233,6 +237,8 @@ class Autopilot:
 
     def set_yaw(self, heading: float, relative: bool = False) -> int:
         """Turn to a compass heading (radians); with ``relative``, by that angle (clockwise positive)."""
+        if not math.isfinite(heading):  # a NaN heading would turn it for ever
+            return DENIED
         if (refused := self._guided_ready()) is not None:
             return refused
         base = self.body.pose.yaw if relative else 0.0
@@ -242,7 +248,7 @@ class Autopilot:
         return ACCEPTED
 
     def set_speed(self, speed: float) -> int:
-        if speed <= 0 or speed > self.body.limits.max_speed:
+        if not 0 < speed <= self.body.limits.max_speed:  # NaN too
             return DENIED
         self.speed = speed
         return ACCEPTED

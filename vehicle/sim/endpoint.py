@@ -281,7 +281,9 @@ class Endpoint:
             return self._set_mode(int(m.param2)) if int(m.param1) & 1 else UNSUPPORTED
         if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             force = int(round(m.param2)) == FORCE_DISARM
-            return pilot.arm(force) if m.param1 >= 0.5 else pilot.disarm(force)
+            if m.param1 not in (0.0, 1.0):  # as ArduPilot: 1 arms, 0 disarms, anything else (NaN) neither
+                return DENIED
+            return pilot.arm(force) if m.param1 == 1.0 else pilot.disarm(force)
         if cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
             return pilot.takeoff(m.param7)
         if cmd == mavlink.MAV_CMD_NAV_LAND:
@@ -302,7 +304,9 @@ class Endpoint:
         if cmd == mavlink.MAV_CMD_DO_SET_SERVO:
             return pilot.set_servo(int(m.param1), int(m.param2))
         if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            interval = None if m.param2 == 0 else (-1.0 if m.param2 < 0 else m.param2 / 1e6)
+            if not (m.param2 in (-1.0, 0.0) or 0 < m.param2 < math.inf):  # -1 stops it, 0 is its default rate
+                return DENIED
+            interval = {-1.0: -1.0, 0.0: None}.get(m.param2, m.param2 / 1e6)
             return ACCEPTED if self.telemetry.set_interval(int(m.param1), interval) else UNSUPPORTED
         if cmd == mavlink.MAV_CMD_REQUEST_MESSAGE:
             return self._request_message(int(m.param1), replies)
@@ -329,6 +333,8 @@ class Endpoint:
 
     def _reposition(self, m: _Command) -> int:
         lat, lon = m.latitude, m.longitude
+        if not (abs(lat) <= 90 and abs(lon) <= 180):  # not on Earth, or not a number
+            return DENIED
         if int(m.param2) & mavlink.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE and self.autopilot.mode != "GUIDED":
             self._set_mode_named("GUIDED")
         x, y = self.world.datum.to_local(lat, lon)
@@ -365,9 +371,20 @@ class Endpoint:
     def _position_target_global(self, m) -> None:
         if m.target_system != self.sysid:
             return
-        x, y = self.world.datum.to_local(m.lat_int * 1e-7, m.lon_int * 1e-7)
+        lat, lon = m.lat_int * 1e-7, m.lon_int * 1e-7
+        if m.coordinate_frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT):
+            altitude = m.alt
+        elif m.coordinate_frame in (mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL):  # above sea level
+            altitude = m.alt - (self.world.datum.alt + self.world.home[2])
+        else:
+            self.stats["unsupported frames"] += 1
+            return
+        if not (abs(lat) <= 90 and abs(lon) <= 180):
+            self.stats["non-finite targets"] += 1
+            return
+        x, y = self.world.datum.to_local(lat, lon)
         self._override(m, "set a guided target")
-        self._apply_target(m.type_mask, x, y, m.alt, m.vx, m.vy, m.vz, m.yaw)
+        self._apply_target(m.type_mask, x, y, altitude, m.vx, m.vy, m.vz, m.yaw)
 
     def _apply_target(self, mask: int, x: float, y: float, altitude: float, vn: float, ve: float,
                       vd: float, yaw: float) -> None:

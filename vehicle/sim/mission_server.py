@@ -13,7 +13,7 @@ empty list.
 from __future__ import annotations
 
 from vehicle.protocol.mav import mavlink
-from vehicle.protocol.mission import MISSION, MissionItem, item_from, item_message
+from vehicle.protocol.mission import MISSION, MissionItem, item_from, item_message, item_problem
 from vehicle.sim.autopilot import Autopilot
 
 RETRY = 1.0  # s before an item is requested again
@@ -95,7 +95,12 @@ class MissionServer:
         seq = message.seq
         if not 0 <= seq < len(self._upload) or (seq > 0 and self._upload[seq - 1] is None):
             return [self._ack(peer, mavlink.MAV_MISSION_INVALID_SEQUENCE, MISSION)]
-        self._upload[seq] = item_from(message)
+        item = item_from(message)
+        problem = item_problem(item) if seq > 0 else None  # item 0 is home: the autopilot keeps its own
+        if problem is not None:  # as ArduPilot: the upload ends, the mission on board stays as it was
+            self._upload = None
+            return [self._ack(peer, problem, MISSION)]
+        self._upload[seq] = item
         self._asks = 0
         if None in self._upload:
             return self._request_next(now)
