@@ -525,8 +525,8 @@ def test_a_mission_mavlink_cannot_carry_is_422_naming_no_path(api, vehicle, text
 
 def test_a_mission_with_comments_blank_lines_and_nan_params_is_taken(api, vehicle):
     """What planners write and MAVLink allows still goes: comment and blank lines, signs and exponents, and
-    NaN in a parameter (MAVLink's "leave unchanged")."""
-    text = (HOME + "# a comment\n\n1\t0\t3\t16\tnan\t+0\t.5\t-0.0\t-3.536E1\t149.16\t10\t1\n")
+    NaN in a parameter where it means "leave unchanged" (QGroundControl writes a waypoint's yaw, param4, so)."""
+    text = (HOME + "# a comment\n\n1\t0\t3\t16\t0\t+0\t.5\tnan\t-3.536E1\t149.16\t10\t1\n")
     response = api.put("/api/vehicles/1/mission", content=text.encode(), headers=api.operator)
     assert response.status_code == 200 and response.json() == {"result": "accepted", "items": 2}
 
