@@ -371,7 +371,9 @@ def test_commands_with_numbers_no_vehicle_can_use_are_denied_and_leave_it_flying
     for good, a NaN arm disarmed it, a NaN interval stopped its heartbeat, a take-off to inf climbed for ever,
     a goto to latitude 135 flew off."""
     gcs, sim = fly()
-    take_off(gcs)
+    take_off(gcs)  # the agent starts its mission; a turn the operator orders pauses it, once
+    assert gcs.command(mavlink.MAV_CMD_CONDITION_YAW, 90) == mavlink.MAV_RESULT_ACCEPTED
+    gcs.wait_text("Agent: paused, operator turned the vehicle")
     lat, lon = sim.world.datum.to_global(3.0, 2.0)
     hostile = [
         (mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, NAN, -1),
@@ -391,6 +393,7 @@ def test_commands_with_numbers_no_vehicle_can_use_are_denied_and_leave_it_flying
         assert gcs.command(command, *params) == mavlink.MAV_RESULT_DENIED, (command, params)
     assert sim.world.autopilot.armed and sim.world.autopilot.speed == 2.5 and sim.world.autopilot.mode == "GUIDED"
     gcs.wait("HEARTBEAT")  # still beating
+    assert len([t for t in gcs.texts if "Agent: paused" in t]) == 1  # a refused command took nothing over
     assert gcs.command(mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, NAN, lat, lon, 5) == mavlink.MAV_RESULT_ACCEPTED
     # the process lives on and flies there (the agent took off with it and may hold it short: close is enough)
     gcs.wait("LOCAL_POSITION_NED", lambda m: math.hypot(m.x - 2, m.y - 3) < 1.0 and abs(m.z + 5) < 0.3, sim_timeout=30)

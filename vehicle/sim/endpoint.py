@@ -269,9 +269,12 @@ class Endpoint:
                                                   message.get_srcComponent())
         return [ack, *replies]
 
-    def _override(self, message, what: str) -> None:
-        if (message.get_srcSystem(), message.get_srcComponent()) != (self.sysid, COMPANION):
+    def _override(self, message, what: str, result: int = ACCEPTED) -> int:
+        """A station (not the onboard agent) steered the vehicle directly, if ``result`` says it was obeyed:
+        a refused target steers nothing, so it takes nothing over."""
+        if result == ACCEPTED and (message.get_srcSystem(), message.get_srcComponent()) != (self.sysid, COMPANION):
             self.autopilot.overridden(what)
+        return result
 
     def _run_command(self, message, replies: list) -> int:
         m = _Command(message)
@@ -295,12 +298,11 @@ class Endpoint:
         if cmd == mavlink.MAV_CMD_DO_CHANGE_SPEED:
             return pilot.set_speed(m.param2)
         if cmd == mavlink.MAV_CMD_DO_REPOSITION:
-            self._override(message, "repositioned the vehicle")
-            return self._reposition(m)
+            return self._override(message, "repositioned the vehicle", self._reposition(m))
         if cmd == mavlink.MAV_CMD_CONDITION_YAW:
-            self._override(message, "turned the vehicle")
             direction = -1.0 if m.param3 < 0 else 1.0
-            return pilot.set_yaw(math.radians(m.param1) * (direction if m.param4 else 1.0), relative=bool(m.param4))
+            turn = math.radians(m.param1) * (direction if m.param4 else 1.0)
+            return self._override(message, "turned the vehicle", pilot.set_yaw(turn, relative=bool(m.param4)))
         if cmd == mavlink.MAV_CMD_DO_SET_SERVO:
             return pilot.set_servo(int(m.param1), int(m.param2))
         if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
@@ -365,8 +367,7 @@ class Endpoint:
         else:
             self.stats["unsupported frames"] += 1
             return
-        self._override(m, "set a guided target")
-        self._apply_target(m.type_mask, x, y, altitude, m.vx, m.vy, m.vz, m.yaw)
+        self._apply_target(m, x, y, altitude)
 
     def _position_target_global(self, m) -> None:
         if m.target_system != self.sysid:
@@ -383,17 +384,16 @@ class Endpoint:
             self.stats["non-finite targets"] += 1
             return
         x, y = self.world.datum.to_local(lat, lon)
-        self._override(m, "set a guided target")
-        self._apply_target(m.type_mask, x, y, altitude, m.vx, m.vy, m.vz, m.yaw)
+        self._apply_target(m, x, y, altitude)
 
-    def _apply_target(self, mask: int, x: float, y: float, altitude: float, vn: float, ve: float,
-                      vd: float, yaw: float) -> None:
+    def _apply_target(self, m, x: float, y: float, altitude: float) -> None:
         """A position target, else a velocity target, each with a heading if one is given; or a heading alone
         (what ArduPilot's Rover takes for turning in place). Non-finite numbers are no target."""
-        values = (x, y, altitude, vn, ve, vd, yaw)
-        if not all(math.isfinite(v) for v in values):
+        mask, vn, ve, vd, yaw = m.type_mask, m.vx, m.vy, m.vz, m.yaw
+        if not all(math.isfinite(v) for v in (x, y, altitude, vn, ve, vd, yaw)):
             self.stats["non-finite targets"] += 1
             return
+        self._override(m, "set a guided target")
         if not mask & POSITION_IGNORED:
             self.autopilot.goto(x, y, altitude if not mask & mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE else None)
         elif not mask & VELOCITY_IGNORED:
