@@ -142,6 +142,36 @@ def test_takeoff_to_zero_altitude_denied_and_again_in_the_air_failed(flat_scene)
     assert world.autopilot.takeoff(ALTITUDE) == FAILED
 
 
+def test_a_takeoff_that_would_not_leave_the_ground_fails_and_says_why(flat_scene):
+    """A copter resting with its centre 0.35 m up counts as flying 5 cm above that, and its take-off is done within
+    0.1 m of its height: a take-off to 0.2 m was accepted and never ended, on the ground (the agent waited in
+    silence for ever). As ArduPilot refuses a take-off downwards, it now fails; 0.5 m is the lowest that flies."""
+    world = Simulation(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.arm()
+    for low in (0.2, 0.4, 0.49):
+        assert autopilot.takeoff(low) == FAILED
+        assert not autopilot.taking_off
+    assert texts(world)[-1] == "Takeoff: 0.49 m would not leave the ground; at least 0.50 m"
+    assert autopilot.takeoff(0.5) == ACCEPTED
+    step_until(world, lambda: not autopilot.taking_off, limit=5.0)
+    assert autopilot.flying and world.pose.z == pytest.approx(0.5, abs=0.1)
+
+
+def test_a_mission_takeoff_too_low_to_leave_the_ground_climbs_to_the_lowest_that_does(flat_scene):
+    """An AUTO take-off item to 0.1 m held the copter on the ground for ever, the mission stuck on it."""
+    world = Simulation(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.set_mission([MissionItem(NAV_WAYPOINT), MissionItem(NAV_TAKEOFF, alt=0.1),
+                           position_item(world, NAV_WAYPOINT, 3.0, 0.0, alt=2.0)])
+    autopilot.arm()
+    autopilot.set_mode("AUTO")
+    autopilot.start_mission()
+    step_until(world, lambda: reached(world) == [1], limit=5.0)
+    assert autopilot.flying and world.pose.z == pytest.approx(0.5, abs=0.1)
+    step_until(world, lambda: reached(world) == [1, 2], limit=20.0)
+
+
 def test_rover_takeoff_unsupported(flat_scene):
     world = armed_rover(flat_scene)
     assert world.autopilot.takeoff(ALTITUDE) == UNSUPPORTED
@@ -956,7 +986,7 @@ def test_a_copter_landing_at_the_end_of_its_mission_disarms_with_the_mission_ove
 
 # ---- against the surviving mutants of the autopilot modes ------------------------------------------------
 def test_takeoff_to_one_metre_is_accepted_and_flown(flat_scene):
-    """Only a take-off altitude of zero or less is refused: a low take-off to 1 m is flown."""
+    """A low take-off to 1 m is flown."""
     world = Simulation(flat_scene, Kind.COPTER)
     world.autopilot.arm()
     assert world.autopilot.takeoff(1.0) == ACCEPTED

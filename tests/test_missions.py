@@ -18,11 +18,12 @@ from vehicle.agent.missions.base import Context, Mission
 from vehicle.agent.missions.square import square_corners
 from vehicle.agent.monitor import Monitor
 from vehicle.agent.settings import Settings
-from vehicle.lab.experiment import Experiment, run_experiment
+from vehicle.lab.experiment import Experiment, _fly, run_experiment
 from vehicle.lab.stepper import simulate
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.mapping.planner import UNSEEN_EXTENT
 from vehicle.sim.onboard import SimController
+from vehicle.sim.physics import Limits
 from vehicle.sim.simulation import Simulation
 
 GROUND = (0, 0, -0.05, 80, 80, 0.1)
@@ -257,6 +258,32 @@ def test_a_new_go_here_drops_the_path_to_the_last_one_at_once(scene_of):
     assert flight.agent.go_to((-8.0, 0.0)) is None
     assert flight.agent.ctx.planned_path == []
     assert flight.run(30, until=lambda: flight.agent.ctx.planned_path[-1:] == [(-8.0, 0.0)])
+
+
+def test_a_take_off_the_autopilot_refuses_pauses_the_agent_and_a_resume_asks_again(scene_of):
+    """A copter bigger than the default rests higher, and its autopilot refuses a take-off to 0.5 m, which would
+    not leave the ground. The agent waited for ever in silence; it now pauses, saying why, and asks again when
+    resumed: once the operator has raised the altitude (as PARAM_SET SCN_ALTITUDE does), it takes off."""
+    settings = Settings(**{**SMALL, "altitude": 0.5})
+    stepper = simulate(scene_of(), "browse", "copter", settings, limits=Limits(radius=0.6))
+    agent = stepper.agent
+    assert stepper.run(5, until=lambda: agent.paused)
+    assert agent.pause_reason == "flight controller: nav_takeoff failed"
+    assert "Agent: paused, flight controller: nav_takeoff failed" in agent.messages
+    assert agent.resume()
+    assert stepper.run(5, until=lambda: agent.paused)  # refused again: paused again, not waiting in silence
+    agent.settings.altitude = 1.5
+    assert agent.resume()
+    assert stepper.run(10, until=lambda: agent.phase is Phase.MISSION)
+    assert stepper.simulation.autopilot.flying and not agent.paused
+
+
+def test_a_headless_run_that_times_out_paused_says_why_it_paused(scene_of):
+    """Nobody resumes an agent in a headless run: its outcome names the pause, not only the phase."""
+    settings = Settings(**{**SMALL, "altitude": 0.5, "time_limit": 20})
+    stepper = simulate(scene_of(), "browse", "copter", settings, limits=Limits(radius=0.6))
+    assert _fly(stepper, None) == ("timeout", "time limit of 20 s reached in phase takeoff, the agent paused "
+                                              "(flight controller: nav_takeoff failed)")
 
 
 def test_resume_hands_control_back_to_the_agent(scene_of):

@@ -14,17 +14,18 @@ from vehicle.world.scene import parse_scene
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def readme_table() -> dict[str, tuple[str, float]]:
-    """name -> (unit, default) from the mission-parameter table of the README."""
+def readme_table() -> dict[str, tuple[str, float, tuple[float, float]]]:
+    """name -> (unit, default, (lowest, highest)) from the mission-parameter table of the README."""
     text = (ROOT / "README.md").read_text(encoding="utf-8")
-    rows = re.findall(r"^\| `(\w+)` \| ([^|]+) \| ([^|]+) \|", text, flags=re.MULTILINE)
+    rows = re.findall(r"^\| `(\w+)` \| ([^|]+) \| ([^|]+) \| ([-\d.e]+) to ([-\d.e]+) \|", text,
+                      flags=re.MULTILINE)
     assert rows, "no parameter table in README.md"
-    return {name: (unit.strip(), float(default)) for name, unit, default in rows}
+    return {name: (unit.strip(), float(default), (float(lo), float(hi))) for name, unit, default, lo, hi in rows}
 
 
-def test_defaults_match_the_readme_table():
+def test_defaults_and_ranges_match_the_readme_table():
     table = readme_table()
-    described = {name: (unit, default) for name, default, unit, _, _ in Settings.describe()}
+    described = {name: (unit, default, bounds) for name, default, unit, _, _, bounds in Settings.describe()}
     assert described == table
 
 
@@ -65,6 +66,15 @@ def test_a_later_set_wins():
     ("speed=0", "speed"),  # must be positive
     ("monitor_period=0.01", "monitor_period"),
     ("padding=-1", "padding"),
+    # floors below which a mission cannot work: a copter that never leaves the ground, a vehicle too slow to
+    # get anywhere, a waypoint never reached, a scan of 3.6e32 steps, a map of one cell
+    ("altitude=0.2", "altitude"),
+    ("speed=1e-30", "speed"),
+    ("closeness=1e-6", "closeness"),
+    ("yaw_step=1e-6", "yaw_step"),
+    ("space_size=0.001", "space_size"),
+    ("farness=1e-6", "farness"),
+    ("time_limit=1e-30", "time_limit"),
 ])
 def test_bad_values_are_refused_with_the_setting_named(assignment, message):
     with pytest.raises(SettingsError, match=message):

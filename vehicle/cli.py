@@ -55,7 +55,8 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--altitude", type=float, help="operating altitude above the start's ground, m")
     parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="NAME=VALUE",
                         help="set a mission parameter: " + ", ".join(
-                            f"{n} ({u}, default {d:g}): {h}" for n, d, u, h, _ in Settings.describe()))
+                            f"{n} ({u}, default {d:g}, {lo:g} to {hi:g}): {h}"
+                            for n, d, u, h, _, (lo, hi) in Settings.describe()))
     parser.add_argument("--config", help="TOML file of mission parameters")
     parser.add_argument("--waypoints", help="QGC WPL 110 file of waypoints (square, pathfind)")
     parser.add_argument("--seed", type=int, default=0, help="seed for sensor noise and random choices")

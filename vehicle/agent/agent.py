@@ -225,7 +225,10 @@ class Agent:
         self.phase = Phase.TAKEOFF
 
     def _takeoff(self, now: float) -> None:
-        if not (self.fc.flying and not self.fc.taking_off):
+        if not self.fc.flying and not self.fc.taking_off:
+            self.phase = Phase.PREFLIGHT  # the climb was refused or cut short on the ground: ask again
+            return
+        if self.fc.taking_off:
             return
         relaunched, self._relaunch = self._relaunch, None
         if relaunched is None:

@@ -27,7 +27,7 @@ from collections.abc import Callable
 from vehicle.protocol import mission as mission_protocol
 from vehicle.protocol.frames import Navigation, Pose
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
-from vehicle.protocol.mav import RESULT_WORDS, mavlink, mavutil
+from vehicle.protocol.mav import COMMAND_NAMES, RESULT_WORDS, mavlink, mavutil
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import Kind
 from vehicle.protocol.rangefinder import Reading, Servo, reading_from, readings_from_obstacles
@@ -55,8 +55,6 @@ FACING = math.radians(12)  # a vehicle at rest not yet facing its target is stil
 BLOCKED_SPEED = 0.1  # m/s: slower than this, short of its target and not turning, the vehicle is held back
 IGNORE_ALL_BUT_VELOCITY = 0x0DC7  # type masks ArduPilot documents for GUIDED targets
 IGNORE_ALL_BUT_YAW = 0x09FF
-NAMES = {v: k.removeprefix("MAV_CMD_").lower() for k, v in vars(mavlink).items() if k.startswith("MAV_CMD_")
-         and isinstance(v, int)}
 RESULTS = {**RESULT_WORDS, NO_ANSWER: "no answer"}
 
 
@@ -424,7 +422,7 @@ class MavlinkController:
             if result != NO_ANSWER:
                 break
         if report and result not in (ACCEPTED, UNSUPPORTED) and not self._refused_for_a_new_mode(result):
-            self._problem(f"flight controller: {NAMES.get(command, command)} {RESULTS.get(result, result)}")
+            self._problem(f"flight controller: {COMMAND_NAMES.get(command, command)} {RESULTS.get(result, result)}")
         return result
 
     def _refused_for_a_new_mode(self, result: int) -> bool:

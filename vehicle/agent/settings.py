@@ -1,7 +1,9 @@
 """Mission parameters: one validated model, set from defaults, a TOML file, ``--set`` and MAVLink.
 
-Each setting has a unit, a default, a help text and the short MAVLink parameter
-id (at most 16 characters) under which standard parameter editors see it.
+Each setting has a unit, a default, a help text, the short MAVLink parameter
+id (at most 16 characters) under which standard parameter editors see it, and
+a range. The floors keep missions possible (a copter asked to fly at 1e-30 m
+never left the ground, and said nothing); the ceilings keep them sane.
 """
 
 from __future__ import annotations
@@ -22,22 +24,22 @@ class Settings(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
     altitude: float = _setting(4.0, "m", "operating height above the start's ground (copter)", "SCN_ALTITUDE",
-                               gt=0, le=120)
-    speed: float = _setting(2.5, "m/s", "cruise speed", "SCN_SPEED", gt=0, le=20)
+                               ge=0.5, le=120)
+    speed: float = _setting(2.5, "m/s", "cruise speed", "SCN_SPEED", ge=0.1, le=20)
     space_size: float = _setting(100.0, "m", "half-width of the memory map and of the allowed space around home",
-                                 "SCN_SPACE_SIZE", gt=0, le=MAX_SPACE)
+                                 "SCN_SPACE_SIZE", ge=1, le=MAX_SPACE)
     resolution: float = _setting(10.0, "cells/m", "memory-map resolution", "SCN_RESOLUTION",
                                  ge=MIN_RESOLUTION, le=MAX_RESOLUTION)
     padding: float = _setting(0.5, "m", "clearance kept between the vehicle body and obstacles when planning",
                               "SCN_PADDING", ge=0, le=20)
     closeness: float = _setting(2.0, "m", "distance at which a waypoint counts as reached and an obstacle as "
-                                "too close", "SCN_CLOSENESS", gt=0, le=50)
-    farness: float = _setting(100.0, "m", "readings beyond this are ignored", "SCN_FARNESS", gt=0, le=1000)
-    yaw_step: float = _setting(10.0, "deg", "yaw increment while scanning", "SCN_YAW_STEP", gt=0, le=180)
+                                "too close", "SCN_CLOSENESS", ge=0.1, le=50)
+    farness: float = _setting(100.0, "m", "readings beyond this are ignored", "SCN_FARNESS", ge=0.1, le=1000)
+    yaw_step: float = _setting(10.0, "deg", "yaw increment while scanning", "SCN_YAW_STEP", ge=1, le=180)
     monitor_period: float = _setting(0.25, "s", "how often the monitor and the mission step", "SCN_MON_PERIOD",
                                      ge=0.05, le=5)
     time_limit: float = _setting(600.0, "s", "simulated time limit of a headless run", "SCN_TIME_LIMIT",
-                                 gt=0, le=86400)
+                                 ge=1, le=86400)
 
     @model_validator(mode="after")
     def _map_fits_the_stream(self) -> Settings:
@@ -50,18 +52,20 @@ class Settings(BaseModel):
         return self
 
     @classmethod
-    def describe(cls) -> list[tuple[str, float, str, str, str]]:
-        """(name, default, unit, help, param_id) for every setting, in declaration order."""
+    def describe(cls) -> list[tuple[str, float, str, str, str, tuple[float, float]]]:
+        """(name, default, unit, help, param_id, (lowest, highest)) for every setting, in declaration order."""
         rows = []
         for name, info in cls.model_fields.items():
             extra = info.json_schema_extra or {}
-            rows.append((name, info.default, extra["unit"], info.description, extra["param_id"]))
+            lowest = next(bound.ge for bound in info.metadata if hasattr(bound, "ge"))
+            highest = next(bound.le for bound in info.metadata if hasattr(bound, "le"))
+            rows.append((name, info.default, extra["unit"], info.description, extra["param_id"], (lowest, highest)))
         return rows
 
     @classmethod
     def param_ids(cls) -> dict[str, str]:
         """MAVLink parameter id -> setting name."""
-        return {param_id: name for name, _, _, _, param_id in cls.describe()}
+        return {param_id: name for name, _, _, _, param_id, _ in cls.describe()}
 
     def updated(self, values: dict[str, object]) -> Settings:
         """A copy with some settings changed; unknown names or bad values raise SettingsError."""

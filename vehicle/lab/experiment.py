@@ -140,7 +140,8 @@ def _fly(stepper: Stepper, on_step) -> tuple[str, str]:
         if stepper.monitor_due and agent.done:
             return agent.outcome, agent.reason
         if simulation.time >= limit:
-            return "timeout", f"time limit of {limit:g} s reached in phase {agent.phase.value}"
+            paused = f", the agent paused ({agent.pause_reason})" if agent.paused else ""
+            return "timeout", f"time limit of {limit:g} s reached in phase {agent.phase.value}{paused}"
 
 
 WARM_UP_SCENE = """#VRML V2.0 utf8

@@ -28,6 +28,8 @@ RESULT_WORDS = {  # a COMMAND_ACK's result as the operator reads it (every MAV_R
     mavlink.MAV_RESULT_COMMAND_LONG_ONLY: "COMMAND_LONG only", mavlink.MAV_RESULT_COMMAND_INT_ONLY: "COMMAND_INT only",
     MAV_RESULT_COMMAND_UNSUPPORTED_MAV_FRAME: "unsupported frame",
 }
+COMMAND_NAMES = {value: name.removeprefix("MAV_CMD_").lower() for name, value in vars(mavlink).items()
+                 if name.startswith("MAV_CMD_") and isinstance(value, int)}  # 22: "nav_takeoff"
 
 
 def __getattr__(name: str):
@@ -52,4 +54,4 @@ def pack(message, packer) -> bytes:
     return packet
 
 
-__all__ = ["RESULT_WORDS", "mavlink", "pack"]  # and mavutil, on first use
+__all__ = ["COMMAND_NAMES", "RESULT_WORDS", "mavlink", "pack"]  # and mavutil, on first use

@@ -44,6 +44,8 @@ ARRIVED = 0.15  # m: a position target closer than this is reached
 VELOCITY_TIMEOUT = 3.0  # s: GUIDED velocity commands expire, as in ArduPilot
 LANDING_SPEED = 0.7  # m/s
 RTL_ALTITUDE = 15.0  # m above home a copter climbs to before flying home (ArduPilot's RTL_ALT default, 1500 cm)
+AIRBORNE = 0.05  # m above its resting height from which a copter counts as flying
+TAKEOFF_REACHED = 0.1  # m: a GUIDED take-off this close to its height is done
 STOPPED_FOR = 1.0  # s held back by an obstacle before the autopilot says so
 
 
@@ -103,7 +105,7 @@ class Autopilot:
     # ---- state -------------------------------------------------------------------------------
     @property
     def flying(self) -> bool:
-        return self.kind is Kind.COPTER and self.body.pose.z > self.body.rest_height(self.ground_now) + 0.05
+        return self.kind is Kind.COPTER and self.body.pose.z > self.body.rest_height(self.ground_now) + AIRBORNE
 
     @property
     def taking_off(self) -> bool:
@@ -202,11 +204,20 @@ class Autopilot:
             return DENIED
         if self.flying:
             return FAILED
+        lowest = self._lowest_takeoff()
+        if altitude < lowest:  # it would be done before it left the ground (ArduPilot: no take-off downwards)
+            self.say(f"Takeoff: {altitude:.2f} m would not leave the ground; at least {lowest:.2f} m")
+            return FAILED
         self._altitude_goal = self.home[2] + altitude
         pose = self.body.pose
         self._hold = (pose.x, pose.y, self._altitude_goal)
         self.say(f"Takeoff to {altitude:.1f} m")
         return ACCEPTED
+
+    def _lowest_takeoff(self) -> float:
+        """The lowest take-off height above home that ends in the air: the climb is done within TAKEOFF_REACHED
+        of its height, and a copter counts as flying only AIRBORNE above where it rests."""
+        return self.body.rest_height(self.ground_now) + AIRBORNE + TAKEOFF_REACHED - self.home[2]
 
     def _guided_ready(self) -> int | None:
         if self.mode != "GUIDED":
@@ -348,7 +359,7 @@ class Autopilot:
 
     def _navigate(self, dt: float) -> tuple[float, float, float, float | None]:
         if self._altitude_goal is not None:  # GUIDED take-off: climb straight up first
-            if abs(self.body.pose.z - self._altitude_goal) < 0.1:
+            if abs(self.body.pose.z - self._altitude_goal) < TAKEOFF_REACHED and self.flying:
                 self._altitude_goal = None
             else:
                 return self._fly_to(self._hold[0], self._hold[1], self._altitude_goal, dt)[:4]
@@ -489,8 +500,8 @@ class Autopilot:
             return self._hold_position(dt)
         item = self.mission[self.current]
         pose = self.body.pose
-        if item.command == NAV_TAKEOFF:
-            return self._fly_to(pose.x, pose.y, self.home[2] + item.alt, dt)[:4]
+        if item.command == NAV_TAKEOFF:  # at least off the ground, or the item would never end
+            return self._fly_to(pose.x, pose.y, self.home[2] + max(item.alt, self._lowest_takeoff()), dt)[:4]
         if item.command == NAV_RETURN_TO_LAUNCH:
             result = self._return_home(dt)
             if self._rtl_done and self.kind is Kind.ROVER:

@@ -4,7 +4,8 @@
 (``vehicle.agent.controller``) over a ``Simulation``, with calls instead of
 MAVLink, so experiments and sweeps run at full speed. It behaves as the MAVLink
 implementation does: requests answer with the autopilot's MAV_RESULT, and
-someone else's mode change or GUIDED target is reported by ``took_over``.
+someone else's mode change or GUIDED target, or a request the autopilot
+refused, is reported by ``took_over``.
 The readings the simulation takes reach it through ``collect``.
 """
 
@@ -14,7 +15,7 @@ import math
 
 from vehicle.protocol.frames import Navigation, Pose
 from vehicle.protocol.geodesy import heading_of
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import COMMAND_NAMES, RESULT_WORDS, mavlink
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.rangefinder import Reading
 from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
@@ -38,6 +39,7 @@ class SimController:
         self._readings: list[Reading] = []
         self._mode_changes = pilot.mode_changes
         self._overrides = pilot.overrides
+        self._refused: str | None = None  # the latest request the autopilot refused, in words
 
     def collect(self, readings: list[Reading]) -> None:
         """Readings the simulation took this step (the stepper hands them over)."""
@@ -108,31 +110,38 @@ class SimController:
         if pilot.overrides != self._overrides:
             self._overrides = pilot.overrides
             what = what or f"operator {pilot.override}"
+        what, self._refused = what or self._refused, None
         return what
+
+    def _answer(self, command: int, result: int) -> int:
+        """Pass the autopilot's answer on; a refusal is news, as over MAVLink (where unsupported is not)."""
+        if result not in (mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_UNSUPPORTED):
+            self._refused = f"flight controller: {COMMAND_NAMES[command]} {RESULT_WORDS.get(result, result)}"
+        return result
 
     # ---- act --------------------------------------------------------------------------------------
     def arm(self) -> int:
-        return self.autopilot.arm()
+        return self._answer(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, self.autopilot.arm())
 
     def takeoff(self, altitude: float) -> int:
-        return self.autopilot.takeoff(altitude)
+        return self._answer(mavlink.MAV_CMD_NAV_TAKEOFF, self.autopilot.takeoff(altitude))
 
     def set_mode(self, name: str) -> int:
         result = self.autopilot.set_mode(name, source=SOURCE)
         self._mode_changes = self.autopilot.mode_changes
-        return result
+        return self._answer(mavlink.MAV_CMD_DO_SET_MODE, result)
 
     def goto(self, x: float, y: float, altitude: float | None = None) -> int:
-        return self.autopilot.goto(x, y, altitude)
+        return self._answer(mavlink.MAV_CMD_DO_REPOSITION, self.autopilot.goto(x, y, altitude))
 
     def set_yaw(self, heading: float, relative: bool = False) -> int:
-        return self.autopilot.set_yaw(heading, relative)
+        return self._answer(mavlink.MAV_CMD_CONDITION_YAW, self.autopilot.set_yaw(heading, relative))
 
     def set_speed(self, speed: float) -> int:
-        return self.autopilot.set_speed(speed)
+        return self._answer(mavlink.MAV_CMD_DO_CHANGE_SPEED, self.autopilot.set_speed(speed))
 
     def set_servo(self, channel: int, pwm: int) -> int:
-        return self.autopilot.set_servo(channel, pwm)
+        return self._answer(mavlink.MAV_CMD_DO_SET_SERVO, self.autopilot.set_servo(channel, pwm))
 
     def hold(self) -> int:
         if self.autopilot.mode != "GUIDED" or not self.autopilot.armed:
@@ -155,4 +164,4 @@ class SimController:
         return list(self.autopilot.mission)
 
     def start_mission(self) -> int:
-        return self.autopilot.start_mission()
+        return self._answer(mavlink.MAV_CMD_MISSION_START, self.autopilot.start_mission())
