@@ -12,12 +12,13 @@ import sys
 import tempfile
 from pathlib import Path
 
-from vehicle import __version__
+from vehicle import __version__, options
 from vehicle.protocol.geodesy import datum_option
 from vehicle.world.bundled import default_scene
 
 DEFAULT_SCENE = default_scene()
 DEFAULT_LINK = "udpin:127.0.0.1:14550"
+DEMO_SPOTS = [(0.0, 0.0), (-4.0, -4.0), (4.0, -3.0), (-3.0, 4.0), (6.0, 6.0), (-7.0, 1.0), (1.0, -7.0), (8.0, -1.0)]
 
 
 def _signing_key(value: str) -> bytes:
@@ -37,7 +38,7 @@ def _signing_options(parser: argparse.ArgumentParser) -> None:
 
 def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="address to serve on (default %(default)s)")
-    parser.add_argument("--port", type=int, default=8000, help="port of the web app (default %(default)s)")
+    parser.add_argument("--port", type=options.port, default=8000, help="port of the web app (default %(default)s)")
     parser.add_argument("--token", help="operator token (default: a new random one, printed at start)")
     parser.add_argument("--record-dir", default="recordings", help="where session recordings go (default "
                         "%(default)s; '' to not record)")
@@ -84,8 +85,7 @@ def _serve(station, args) -> None:
 
 def demo_starts(count: int) -> list[tuple[float, float]]:
     """Start positions a few metres apart in the default scene's open middle."""
-    spots = [(0.0, 0.0), (-4.0, -4.0), (4.0, -3.0), (-3.0, 4.0), (6.0, 6.0), (-7.0, 1.0), (1.0, -7.0), (8.0, -1.0)]
-    return [spots[i % len(spots)] for i in range(count)]
+    return DEMO_SPOTS[:count]
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -203,10 +203,11 @@ def main(argv: list[str] | None = None) -> int:
     demo = commands.add_parser("demo", help="the ground station and simulated vehicles flying a mission")
     demo.add_argument("--scene", default=str(DEFAULT_SCENE), help="VRML scene (default: the demo scene)")
     demo.add_argument("--mission", default="search", help="mission the vehicles fly (default %(default)s)")
-    demo.add_argument("--vehicles", type=int, default=1, help="how many (default %(default)s)")
+    demo.add_argument("--vehicles", type=options.whole(1, len(DEMO_SPOTS)), default=1,
+                      help=f"how many, 1 to {len(DEMO_SPOTS)} (default %(default)s)")
     demo.add_argument("--vehicle", default="copter", choices=["copter", "rover"])
-    demo.add_argument("--speedup", type=float, default=1.0, help="simulation speed-up (default %(default)s)")
-    demo.add_argument("--mavlink-port", type=int, default=14550, help="UDP port the vehicles send to")
+    demo.add_argument("--speedup", type=options.positive, default=1.0, help="simulation speed-up (default %(default)s)")
+    demo.add_argument("--mavlink-port", type=options.port, default=14550, help="UDP port the vehicles send to")
     demo.add_argument("--quiet", action="store_true", help="hide the vehicles' own output")
     _server_options(demo)
     _signing_options(demo)

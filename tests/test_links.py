@@ -155,7 +155,8 @@ def test_one_call_reads_a_bounded_number_of_datagrams(listening, monkeypatch):
     assert [m.text for m in got] == [f"number {i}" for i in range(1, 25)]  # in order, none lost
 
 
-@pytest.mark.parametrize("url", ["udpin:127.0.0.1", "udpout::14550", "udp:host:port"])
+@pytest.mark.parametrize("url", ["udpin:127.0.0.1", "udpout::14550", "udp:host:port",
+                                 "udpin:127.0.0.1:70000", "udpout:127.0.0.1:0"])  # a socket's OverflowError before
 def test_a_udp_url_without_host_and_port_is_refused(url):
     with pytest.raises(ValueError, match="HOST:PORT"):
         links.connect(url)

@@ -8,7 +8,7 @@ import math
 import sys
 from pathlib import Path
 
-from vehicle import __version__
+from vehicle import __version__, options
 from vehicle.agent.missions import MISSIONS
 from vehicle.protocol.geodesy import datum_option
 from vehicle.world.bundled import default_scene
@@ -51,15 +51,15 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--start", type=_point, metavar="X,Y[,Z]",
                         help="start in scene metres (default: the scene's Start); with Z, on the highest surface "
                              "below Z (a floor under a roof)")
-    parser.add_argument("--heading", type=float, help="start heading, compass degrees (0 = north)")
-    parser.add_argument("--altitude", type=float, help="operating altitude above the start's ground, m")
+    parser.add_argument("--heading", type=options.finite, help="start heading, compass degrees (0 = north)")
+    parser.add_argument("--altitude", type=options.finite, help="operating altitude above the start's ground, m")
     parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="NAME=VALUE",
                         help="set a mission parameter: " + ", ".join(
                             f"{n} ({u}, default {d:g}, {lo:g} to {hi:g}): {h}"
                             for n, d, u, h, _, (lo, hi) in Settings.describe()))
     parser.add_argument("--config", help="TOML file of mission parameters")
     parser.add_argument("--waypoints", help="QGC WPL 110 file of waypoints (square, pathfind)")
-    parser.add_argument("--seed", type=int, default=0, help="seed for sensor noise and random choices")
+    parser.add_argument("--seed", type=options.whole(0), default=0, help="seed for sensor noise and random choices")
     parser.add_argument("--sensors", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
                         help="; ".join(f"{name}: {text}" for name, text in SENSOR_SUITES.items())
                         + " (default %(default)s)")
@@ -257,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
 
     experiment = commands.add_parser("experiment", help="run one headless mission on simulated time")
     add_run_options(experiment)
-    experiment.add_argument("--time-limit", type=float, help="simulated seconds (default 600)")
+    experiment.add_argument("--time-limit", type=options.finite, help="simulated seconds (default 600)")
     experiment.add_argument("--json", action="store_true", help="print the result as one JSON object")
     experiment.add_argument("--map-out", metavar="DIR", help="write the final memory map (.npy and .png)")
     experiment.add_argument("--log", metavar="FILE.tlog", help="write the run as a MAVLink telemetry log")
@@ -270,13 +270,14 @@ def main(argv: list[str] | None = None) -> int:
                           "ArduPilot-like flight controller, for `vehicle agent` to fly")
     sim.add_argument("--mavlink", action="append", metavar="URL",
                      help=f"pymavlink connection string, repeatable (default {DEFAULT_SIM_LINK})")
-    sim.add_argument("--sysid", type=int, default=1, help="MAVLink system id (default 1)")
-    sim.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    sim.add_argument("--sysid", type=options.system_id, default=1, help="MAVLink system id, 1 to 255 (default 1)")
+    sim.add_argument("--speedup", type=options.positive, default=1.0,
+                     help="simulated seconds per wall second (default 1)")
     sim.add_argument("--autostart", action="store_true", help="arm and start the mission without a GCS")
-    sim.add_argument("--failsafe-timeout", type=float, default=5.0,
+    sim.add_argument("--failsafe-timeout", type=options.positive, default=5.0,
                      help="wall seconds without a GCS heartbeat before the GCS failsafe (default 5)")
     sim.add_argument("--log", metavar="FILE.tlog", help="record the vehicle's own MAVLink traffic")
-    sim.add_argument("--duration", type=float, help="stop after this many wall seconds")
+    sim.add_argument("--duration", type=options.positive, help="stop after this many wall seconds")
     sim.add_argument("--signing-key", type=_signing_key, metavar="FILE|PASSPHRASE", help=SIGNING_HELP)
     sim.set_defaults(run=cmd_sim)
 
@@ -295,7 +296,7 @@ def main(argv: list[str] | None = None) -> int:
                             "cast in --scene at the pose the autopilot reports, fed to it as DISTANCE_SENSOR")
     agent.add_argument("--suite", default=DEFAULT_SUITE, choices=list(SENSOR_SUITES),
                        help="the sonars cast with --sensors scene (default %(default)s)")
-    agent.add_argument("--altitude", type=float, help="operating altitude above home, m")
+    agent.add_argument("--altitude", type=options.finite, help="operating altitude above home, m")
     agent.add_argument("--set", dest="assignments", action="append", default=[], metavar="NAME=VALUE",
                        help="set a mission parameter (as for vehicle experiment)")
     agent.add_argument("--config", help="TOML file of mission parameters")
@@ -311,9 +312,9 @@ def main(argv: list[str] | None = None) -> int:
     agent.add_argument("--stay", action="store_true",
                        help="after the mission, stay on (as a companion computer does: MISSION_START flies it again); "
                             "without it the agent prints its result and exits")
-    agent.add_argument("--connect-timeout", type=float, default=60.0,
+    agent.add_argument("--connect-timeout", type=options.positive, default=60.0,
                        help="wall seconds to wait for the autopilot's heartbeat, home and position (default 60)")
-    agent.add_argument("--duration", type=float, help="stop after this many wall seconds")
+    agent.add_argument("--duration", type=options.positive, help="stop after this many wall seconds")
     agent.add_argument("--json", action="store_true", help="print the result as one JSON object")
     agent.add_argument("--signing-key", type=_signing_key, metavar="FILE|PASSPHRASE", help=SIGNING_HELP)
     agent.set_defaults(run=cmd_agent)
@@ -328,9 +329,9 @@ def main(argv: list[str] | None = None) -> int:
                        help="a scene, with an optional start (repeatable; default: the preset's)")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2",
                        help="values of a setting to sweep (repeatable; added to the preset's)")
-    sweep.add_argument("--seeds", type=int, default=1, help="seeds per combination (default 1)")
+    sweep.add_argument("--seeds", type=options.whole(1), default=1, help="seeds per combination (default 1)")
     sweep.add_argument("--vehicle", default="copter", choices=["rover", "copter"])
-    sweep.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    sweep.add_argument("--workers", type=options.whole(1), help="local worker processes (default: one per core)")
     sweep.add_argument("--dask", metavar="tcp://HOST:PORT", help="run on this Dask scheduler instead")
     sweep.add_argument("--out", default="sweep-results", help="output folder (default: %(default)s)")
     sweep.set_defaults(run=cmd_sweep)

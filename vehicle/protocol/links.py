@@ -50,8 +50,8 @@ def connect(url: str, source_system: int = 255, source_component: int = 0, key: 
     kind, _, rest = url.partition(":")
     if kind in ("udpin", "udp", "udpout"):
         host, _, port = rest.rpartition(":")
-        if not host or not port.isdigit():
-            raise ValueError(f"a UDP link is {kind}:HOST:PORT, not {url!r}")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise ValueError(f"a UDP link is {kind}:HOST:PORT with a port from 1 to 65535, not {url!r}")
         link = UdpLink(url, host, int(port), listen=kind != "udpout", source_system=source_system,
                        source_component=source_component)
     else:
