@@ -197,7 +197,7 @@ def test_a_snapshot_with_a_geometry_that_is_no_number_is_refused():
 
 
 def test_the_widest_and_the_coarsest_maps_the_settings_allow_are_received():
-    for space, resolution in ((MAX_SPACE, MAX_SIDE / (2 * MAX_SPACE)), (MAX_SPACE, MIN_RESOLUTION), (0.1, 50.0)):
+    for space, resolution in ((MAX_SPACE, MAX_SIDE / (2 * MAX_SPACE)), (MAX_SPACE, MIN_RESOLUTION), (1.0, 50.0)):
         memory_map = MemoryMap((0.0, 0.0), Settings(space_size=space, resolution=resolution).space_size, resolution)
         receiver = MapReceiver()
         feed_all(receiver, MapStreamer(memory_map, (0.0, 0.0)).snapshot())
