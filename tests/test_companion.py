@@ -274,7 +274,7 @@ def test_an_agent_with_the_wrong_key_hears_no_autopilot(tmp_path):
             timeout=60,
         )
     assert done.returncode == 1
-    assert result_of(done)["reason"] == "no a heartbeat from an autopilot within the time allowed"
+    assert result_of(done)["reason"] == "no heartbeat from an autopilot within the time allowed"
 
 
 # ---- a flight controller that misbehaves ---------------------------------------------------------------------

@@ -166,16 +166,20 @@ def test_a_stream_that_is_not_up_yet_reports_itself_down_then_comes_up(monkeypat
     monkeypatch.setattr(links, "RETRY", (0.05, 0.2))
     port = free_tcp_port()
     link = links.connect(f"tcp:127.0.0.1:{port}")
+    watch = links.LinkWatch([link])
     server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     try:
         assert not link.up and link.error and link.failures == 1
+        assert watch.changes() == [f"link tcp:127.0.0.1:{port} down ({link.error}); retrying"]
         assert link.recv_msg() is None
+        assert watch.changes() == []  # said once
         link.write(b"dropped while down")  # no exception either
         server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         server.bind(("127.0.0.1", port))
         server.listen(1)
         wait_wall(lambda: link.recv_msg() is None and link.up, 5, "the stream up")
         assert link.error == "" and link.failures == 0
+        assert watch.changes() == [f"link tcp:127.0.0.1:{port} up again"]
         peer, _ = server.accept()
         with peer:
             mav = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
@@ -185,6 +189,41 @@ def test_a_stream_that_is_not_up_yet_reports_itself_down_then_comes_up(monkeypat
     finally:
         link.close()
         server.close()
+
+
+def test_a_serial_port_carries_mavlink_both_ways():
+    """A telemetry radio or a USB autopilot is a serial port: here a pseudo-terminal, the same to pyserial (the
+    link crashed with ModuleNotFoundError while pyserial was not a dependency)."""
+    import os
+    import termios
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    termios.tcflush(slave, termios.TCIOFLUSH)
+    os.set_blocking(master, False)
+    link = links.connect(f"{os.ttyname(slave)},57600", source_system=9, source_component=1)
+    try:
+        assert link.up, link.error
+        link.mav.statustext_send(6, b"out of the port")
+        parser = mavlink.MAVLink(None)
+
+        def arrived():
+            try:
+                return parser.parse_buffer(os.read(master, 4096))
+            except BlockingIOError:
+                return None
+
+        got = wait_wall(arrived, 5, "bytes on the other end")
+        assert got[0].text == "out of the port" and got[0].get_srcSystem() == 9
+        peer = mavlink.MAVLink(None, srcSystem=3, srcComponent=1)
+        os.write(master, peer.statustext_encode(6, b"into the port").pack(peer))
+        assert receive(link, 1)[0].text == "into the port"
+    finally:
+        link.close()
+        os.close(master)
+        os.close(slave)
 
 
 # ---- against the surviving mutants of issue 14 ------------------------------------------------------------

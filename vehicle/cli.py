@@ -167,16 +167,17 @@ def cmd_sim(args: argparse.Namespace) -> int:
     world = stepper.simulation
     if items:
         world.autopilot.set_mission(items)
-    options = SimOptions(args.mavlink or [DEFAULT_SIM_LINK], args.sysid, args.speedup,
-                         args.failsafe_timeout, args.log, sim_clock=autopilot, signing_key=args.signing_key)
-    sim = SimVehicle(stepper, options)
+    sim_options = SimOptions(args.mavlink or [DEFAULT_SIM_LINK], args.sysid, args.speedup,
+                             args.failsafe_timeout, args.log, sim_clock=autopilot, signing_key=args.signing_key)
+    sim = SimVehicle(stepper, sim_options, say=lambda text: print(f"vehicle {args.sysid}: {text}", file=sys.stderr,
+                                                                   flush=True))
     if autopilot:
         start = "a plain autopilot: an onboard agent flies it over MAVLink"
     else:
         start = f"mission {args.mission}, " + ("starting now" if args.autostart else
                                                 "waiting for arm + AUTO/MISSION_START or GUIDED takeoff")
     print(f"vehicle {args.sysid}: {args.vehicle} in {Path(args.scene).name} at {world.home[0]:.1f}, "
-          f"{world.home[1]:.1f}, x{args.speedup:g}, on {', '.join(options.urls)}; {start}", flush=True)
+          f"{world.home[1]:.1f}, x{args.speedup:g}, on {', '.join(sim_options.urls)}; {start}", flush=True)
     try:
         sim.run(args.duration)
     except KeyboardInterrupt:
@@ -205,10 +206,10 @@ def cmd_agent(args: argparse.Namespace) -> int:
     datum = Datum.of_scene(hints, args.datum)
     waypoints = load_positions(args.waypoints, datum) if args.waypoints else (
         parse_points(hints["waypoints"]) if "waypoints" in hints else None)
-    options = AgentOptions(args.connect, args.mission, args.vehicle, settings, waypoints, scene, args.sensors,
-                           args.suite, args.gcs, datum, args.log, args.wait, args.stay, args.connect_timeout,
-                           args.signing_key)
-    result = run_agent(options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
+    agent_options = AgentOptions(args.connect, args.mission, args.vehicle, settings, waypoints, scene, args.sensors,
+                                 args.suite, args.gcs, datum, args.log, args.wait, args.stay, args.connect_timeout,
+                                 args.signing_key)
+    result = run_agent(agent_options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps(result))
     else:

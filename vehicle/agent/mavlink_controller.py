@@ -121,7 +121,7 @@ class MavlinkController:
         first position. Raises FlightControllerError if any of that does not come within ``timeout`` s."""
         deadline = time.monotonic() + timeout
         beat = self._wait(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcComponent() == AUTOPILOT
-                          and m.autopilot != mavlink.MAV_AUTOPILOT_INVALID, deadline, "a heartbeat from an autopilot")
+                          and m.autopilot != mavlink.MAV_AUTOPILOT_INVALID, deadline, "heartbeat from an autopilot")
         kind = {mavlink.MAV_TYPE_GROUND_ROVER: Kind.ROVER, mavlink.MAV_TYPE_SURFACE_BOAT: Kind.ROVER}.get(
             beat.type, Kind.COPTER if beat.type in COPTER_TYPES else None)
         if kind is not self.kind:
@@ -165,7 +165,8 @@ class MavlinkController:
                 repeat()
                 last = time.monotonic()
             time.sleep(0.005)
-        raise FlightControllerError(f"no {what} within the time allowed")
+        down = "" if getattr(self.conn, "up", True) else f" (the link is down: {self.conn.error})"
+        raise FlightControllerError(f"no {what} within the time allowed{down}")
 
     # ---- receiving ----------------------------------------------------------------------------------
     def pump(self) -> list:

@@ -112,11 +112,14 @@ class OnboardAgent:
         begun = fc.time
         next_step = next_reading = fc.time
         waiting_since = time.monotonic()
+        watch = links.LinkWatch([fc.conn, *fc.extra_links])
         outcome = reason = None
         period = options.settings.monitor_period
         while outcome is None:
             now = time.time()
             came = fc.pump()
+            for line in watch.changes():
+                say(f"agent: {line}")
             self._record(came, now)
             if self.sonars is not None and fc.time >= next_reading:
                 next_reading = fc.time + 1.0 / SONAR_RATE

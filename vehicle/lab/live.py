@@ -17,13 +17,16 @@ in simulated time.
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from vehicle.agent.companion import COMPONENT, Companion
 from vehicle.lab.experiment import warm_up
 from vehicle.lab.stepper import Stepper
+from vehicle.protocol.links import LinkWatch
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.sim.endpoint import Endpoint
@@ -44,8 +47,13 @@ class SimOptions:
     signing_key: bytes | None = None  # MAVLink 2 signing: sign everything, refuse what is not signed
 
 
+def _to_stderr(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
 class SimVehicle:
-    def __init__(self, stepper: Stepper, options: SimOptions):
+    def __init__(self, stepper: Stepper, options: SimOptions, say: Callable[[str], None] = _to_stderr):
+        """``say`` tells the user what goes wrong on the way (a link down)."""
         self.stepper = stepper
         self.world = stepper.simulation
         self.agent = stepper.agent
@@ -57,6 +65,8 @@ class SimVehicle:
         self.log = TlogWriter(options.log) if options.log else None
         self.endpoint = Endpoint(options.urls, self.world, self.telemetry, options.sysid, options.failsafe_timeout,
                                  self.log, onboard=self.companion, signing_key=options.signing_key)
+        self.links = LinkWatch(self.endpoint.links)
+        self.say = say
         self.stop_event = threading.Event()
         self.lagging = 0.0  # simulated seconds dropped because the machine could not keep up
         self._crash_reported = False
@@ -74,6 +84,8 @@ class SimVehicle:
                     break
                 now = time.time()
                 self.endpoint.poll(now)
+                for line in self.links.changes():
+                    self.say(line)
                 target = sim_start + (wall - started) * self.options.speedup - self.lagging
                 outgoing = self._advance(target, now, deadline=wall + MAX_LAG)
                 if self.world.time < target - MAX_LAG * self.options.speedup:

@@ -62,6 +62,26 @@ def connect(url: str, source_system: int = 255, source_component: int = 0, key: 
     return link
 
 
+class LinkWatch:
+    """Says when a link goes down or comes back (a serial port unplugged, a TCP peer gone). A link retries in
+    silence, so a program that did not say so would look to its user as if all were well."""
+
+    def __init__(self, links: list):
+        self.links = links
+        self._down: dict[str, str] = {}  # url -> why, for the links down when last looked at
+
+    def changes(self) -> list[str]:
+        """A line for each link that went down or came back since the last call (a link down from the start
+        counts as going down)."""
+        lines = []
+        for link in self.links:
+            why = "" if getattr(link, "up", True) else link.error
+            if why != self._down.get(link.url, ""):
+                lines.append(f"link {link.url} down ({why}); retrying" if why else f"link {link.url} up again")
+                self._down[link.url] = why
+        return lines
+
+
 class _Signed:
     """What both kinds of link do with a signing key: check each message received, drop what may not pass."""
 
