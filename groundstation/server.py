@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import secrets
+import socket
 import stat as file_mode
 import sys
 import threading
@@ -363,6 +364,7 @@ def serve(station: GroundStation, host: str = "127.0.0.1", port: int = 8000, tls
               + "; host names other than IP addresses and localhost need --allowed-host.", file=sys.stderr,
               flush=True)
     server = uvicorn.Server(config)
+    listening = _listening_socket(host, port)  # before anything starts or is announced: a port in use is an error
     station.start()
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
     if ":" in shown:
@@ -372,7 +374,21 @@ def serve(station: GroundStation, host: str = "127.0.0.1", port: int = 8000, tls
              f"listening to {links}"
              + (f"; recording to {station.recorder.path}" if station.recorder else "") + ")")
     try:
-        server.run()
+        server.run(sockets=[listening])
     finally:
         station.close()
     time.sleep(0)
+
+
+def _listening_socket(host: str, port: int) -> socket.socket:
+    """The web app's socket, bound now, so that a port in use is a clear error before the page's address is
+    announced (uvicorn binds later, after the announcement, and only logs the failure)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    listening = socket.socket(family, socket.SOCK_STREAM)
+    listening.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # TCP: rebinding past TIME_WAIT only
+    try:
+        listening.bind((host, port))
+    except OSError as error:
+        listening.close()
+        raise OSError(error.errno, f"cannot serve on {host}:{port}: {error.strerror}") from None
+    return listening

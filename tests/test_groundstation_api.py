@@ -755,12 +755,13 @@ def _health(port: int, token: str | None = None) -> dict | None:
     ("::", False, True, "http://127.0.0.1:8123/"), ("2001:db8::7", True, False, "https://[2001:db8::7]:8123/"),
 ])
 def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, host, tls, warned, url):
-    """serve() itself, with uvicorn's run replaced: the warning depends on the host and TLS alone."""
+    """serve() itself, with its binding and uvicorn's run replaced: the warning depends on the host and TLS alone."""
     import uvicorn
 
     from groundstation import server
 
     ran = []
+    monkeypatch.setattr(server, "_listening_socket", lambda host, port: None)
     monkeypatch.setattr(uvicorn.Server, "run", lambda self, *a, **k: ran.append(self.config))
     station = server.GroundStation([], None, TOKEN, record_dir=None)
     lines = []
@@ -770,6 +771,24 @@ def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, host, tl
     assert ("without TLS" in err) is warned
     assert len(ran) == 1 and ran[0].host == host
     assert lines and f"{url}" in lines[0] and f"#token={TOKEN}" in lines[0], lines
+
+
+def test_a_web_port_in_use_is_an_error_before_the_address_is_announced():
+    """uvicorn binds after the station announced its address (another server's) and only logged the failure."""
+    from groundstation import server
+
+    taken = socket.socket()
+    taken.bind(("127.0.0.1", 0))
+    taken.listen()
+    station = server.GroundStation([], None, TOKEN, record_dir=None)
+    lines = []
+    try:
+        with pytest.raises(OSError, match=f"cannot serve on 127.0.0.1:{taken.getsockname()[1]}"):
+            server.serve(station, "127.0.0.1", taken.getsockname()[1], announce=lines.append)
+        assert lines == []
+    finally:
+        station.close()
+        taken.close()
 
 
 def test_serve_refuses_half_a_tls_setup():

@@ -191,6 +191,22 @@ def test_a_stream_that_is_not_up_yet_reports_itself_down_then_comes_up(monkeypat
         server.close()
 
 
+def test_a_second_listener_on_a_udp_port_is_refused_and_the_first_keeps_hearing():
+    """With SO_REUSEADDR (pymavlink's habit) a second station on udpin:14550 bound too, and took every datagram
+    from the first, which went on showing its vehicles as lost."""
+    port = free_udp_port()
+    first = links.connect(f"udpin:127.0.0.1:{port}")
+    sender = links.connect(f"udpout:127.0.0.1:{port}", source_system=4, source_component=1)
+    try:
+        with pytest.raises(OSError, match=f"cannot listen on udpin:127.0.0.1:{port}"):
+            links.connect(f"udpin:127.0.0.1:{port}")
+        sender.mav.statustext_send(6, b"still here")
+        assert receive(first, 1)[0].text == "still here"
+    finally:
+        first.close()
+        sender.close()
+
+
 def test_a_serial_port_carries_mavlink_both_ways():
     """A telemetry radio or a USB autopilot is a serial port: here a pseudo-terminal, the same to pyserial (the
     link crashed with ModuleNotFoundError while pyserial was not a dependency)."""

@@ -132,9 +132,12 @@ class UdpLink(_Signed):
         self.url = url
         self.listen = listen
         self.port = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.port.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        if listen:
-            self.port.bind((host, port))
+        if listen:  # alone on its port: with SO_REUSEADDR (pymavlink's habit) a second program took the traffic
+            try:
+                self.port.bind((host, port))
+            except OSError as error:
+                self.port.close()
+                raise OSError(error.errno, f"cannot listen on {url}: {error.strerror}") from None
             self.destination = None
         else:
             self.port.bind((_interface_towards(host, port), 0))
