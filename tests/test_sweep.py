@@ -79,9 +79,12 @@ def test_parse_grid_rejects_unknown_names_and_malformed_items(item):
         parse_grid([item])
 
 
-def test_parse_grid_rejects_values_that_are_not_numbers():
-    with pytest.raises(ValueError):
-        parse_grid(["padding=a,b"])
+@pytest.mark.parametrize("item", ["padding=a,b", "padding=1,x", "padding=", "padding=,"])
+def test_parse_grid_rejects_values_that_are_not_numbers_or_none(item):
+    """``padding=`` was an internal error (zip() argument 2 is shorter than argument 1), ``1,x`` a bare
+    'could not convert string to float'."""
+    with pytest.raises(ValueError, match=f"--grid wants SETTING=V1,V2,... with numbers, not '{item}'"):
+        parse_grid([item])
 
 
 # ---- a tiny sweep on local workers ----------------------------------------------------------------
@@ -175,9 +178,22 @@ def test_cli_sweep_prints_the_table_and_writes_the_results(scene_path, tmp_path,
     assert (out / "results.csv").exists()
 
 
-@pytest.mark.parametrize("args, message", [(["--missions", "hover"], "unknown mission 'hover'"),
-                                           (["--grid", "bogus=1"], "--grid")])
-def test_cli_sweep_refuses_unknown_names(scene_path, tmp_path, capsys, args, message):
+@pytest.mark.parametrize("args, message", [
+    (["--missions", "hover"], "unknown mission 'hover'"),
+    (["--grid", "bogus=1"], "--grid"),
+    # found only once the runs had started, in a worker (the others' results were lost)
+    (["--grid", "speed=2,0.01"], "--grid: speed: Input should be greater than or equal to 0.1 (got 0.01)"),
+    (["--grid", "space_size=1000", "--grid", "resolution=5"], "--grid: space_size 1000 m at resolution 5"),
+])
+def test_cli_sweep_refuses_unknown_names_and_bad_values_before_any_run(scene_path, tmp_path, capsys, args,
+                                                                        message):
     code = main(["sweep", "--scene", scene_path, "--workers", "1", "--out", str(tmp_path), *args])
     assert code == 2
     assert message in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())  # nothing ran
+
+
+@pytest.mark.parametrize("spec", ["x.wrl@a,b", "x.wrl@1", "x.wrl@1,nan", "x.wrl@"])
+def test_a_scene_start_that_is_no_point_is_refused_before_any_run(spec):
+    with pytest.raises(ValueError, match="--scene wants FILE or FILE@X,Y"):
+        SweepSpec(["browse"], [spec])

@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import functools
 import itertools
+import math
 import os
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
@@ -20,7 +21,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from vehicle.agent.settings import Settings, load_settings
+from vehicle.agent.settings import Settings, SettingsError, load_settings
 from vehicle.lab.experiment import Experiment, run_experiment
 from vehicle.lab.presets import THESIS_TABLE
 from vehicle.world.scene import Scene, load_scene
@@ -42,8 +43,7 @@ class Job:
     def start(self) -> tuple[float, float] | None:
         if "@" not in self.scene:
             return None
-        x, y = (float(v) for v in self.scene.split("@", 1)[1].split(","))
-        return x, y
+        return scene_start(self.scene)
 
 
 @dataclass
@@ -54,12 +54,35 @@ class SweepSpec:
     seeds: int = 1
     vehicle: str = "copter"
 
+    def __post_init__(self):
+        """Every run's inputs checked before any run starts, so a typo is not found in a worker, minutes in."""
+        for scene in self.scenes:
+            if "@" in scene:
+                scene_start(scene)
+        names = list(self.grid)
+        for values in itertools.product(*(self.grid[n] for n in names)):
+            try:
+                Settings().updated(dict(zip(names, values, strict=True)))
+            except SettingsError as error:
+                raise SettingsError(f"--grid: {error}") from None
+
     def jobs(self) -> list[Job]:
         names = list(self.grid)
         combos = list(itertools.product(*(self.grid[n] for n in names))) or [()]
         return [Job(scene, mission, tuple(zip(names, values, strict=True)), seed, self.vehicle)
                 for scene in self.scenes for mission in self.missions for values in combos
                 for seed in range(self.seeds)]
+
+
+def scene_start(spec: str) -> tuple[float, float]:
+    """The start of a ``PATH@X,Y`` scene spec."""
+    try:
+        x, y = (float(v) for v in spec.split("@", 1)[1].split(","))
+    except ValueError:
+        x = y = math.nan
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"--scene wants FILE or FILE@X,Y with X and Y in scene metres, not {spec!r}")
+    return x, y
 
 
 def parse_grid(items: Iterable[str]) -> dict[str, list[float]]:
@@ -70,7 +93,12 @@ def parse_grid(items: Iterable[str]) -> dict[str, list[float]]:
         name = name.strip()
         if not sep or name not in Settings.model_fields:
             raise ValueError(f"--grid wants SETTING=V1,V2,... with a known setting, not {item!r}")
-        grid[name] = [float(v) for v in values.split(",") if v.strip()]
+        try:
+            grid[name] = [float(v) for v in values.split(",") if v.strip()]
+        except ValueError:
+            grid[name] = []
+        if not grid[name]:
+            raise ValueError(f"--grid wants SETTING=V1,V2,... with numbers, not {item!r}")
     return grid
 
 
