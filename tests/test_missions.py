@@ -278,6 +278,19 @@ def test_a_take_off_the_autopilot_refuses_pauses_the_agent_and_a_resume_asks_aga
     assert stepper.simulation.autopilot.flying and not agent.paused
 
 
+def test_resumed_after_an_operator_stopped_its_climb_the_agent_takes_over_in_guided(scene_of):
+    """A BRAKE mid-climb paused the agent in its take-off; the resume left the mode as it was, and the mission
+    began in BRAKE, every target of it refused."""
+    flight = Flight(scene_of(), "browse")
+    assert flight.run(10, until=lambda: flight.world.pose.z > 2.0 and flight.agent.phase is Phase.TAKEOFF)
+    flight.world.autopilot.set_mode("BRAKE", source="gcs")
+    assert flight.run(2, until=lambda: flight.agent.paused)
+    assert flight.agent.resume()
+    assert flight.run(10, until=lambda: flight.agent.phase is Phase.MISSION)
+    flight.run(3)
+    assert flight.world.autopilot.mode == "GUIDED" and not flight.agent.paused
+
+
 def test_a_headless_run_that_times_out_paused_says_why_it_paused(scene_of):
     """Nobody resumes an agent in a headless run: its outcome names the pause, not only the phase."""
     settings = Settings(**{**SMALL, "altitude": 0.5, "time_limit": 20})

@@ -107,6 +107,9 @@ class Agent:
             self._relaunch = self.phase
             self.phase = Phase.PREFLIGHT
             return True
+        if self.phase is Phase.TAKEOFF:  # the take-off was refused or cut short: from the start (GUIDED, arm, climb)
+            self.phase = Phase.PREFLIGHT
+            return True
         if self.phase is Phase.HOMING or (self.phase is Phase.MISSION and self.mission.mode == "GUIDED"):
             self._set_mode("GUIDED")
         if self.phase is Phase.MISSION:
@@ -225,10 +228,7 @@ class Agent:
         self.phase = Phase.TAKEOFF
 
     def _takeoff(self, now: float) -> None:
-        if not self.fc.flying and not self.fc.taking_off:
-            self.phase = Phase.PREFLIGHT  # the climb was refused or cut short on the ground: ask again
-            return
-        if self.fc.taking_off:
+        if not (self.fc.flying and not self.fc.taking_off):
             return
         relaunched, self._relaunch = self._relaunch, None
         if relaunched is None:
