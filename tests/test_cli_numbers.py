@@ -15,43 +15,34 @@ from vehicle import options
 from vehicle.cli import main as vehicle
 
 
-@pytest.mark.parametrize("args, option", [
-    (["sim", "--mission", "browse", "--speedup", "nan"], "--speedup"),
-    (["sim", "--mission", "browse", "--speedup", "0"], "--speedup"),
-    (["sim", "--mission", "browse", "--speedup", "-1"], "--speedup"),
-    (["sim", "--mission", "browse", "--speedup", "inf"], "--speedup"),
-    (["sim", "--mission", "browse", "--sysid", "0"], "--sysid"),
-    (["sim", "--mission", "browse", "--sysid", "256"], "--sysid"),
-    (["sim", "--mission", "browse", "--sysid", "1.5"], "--sysid"),
-    (["sim", "--mission", "browse", "--failsafe-timeout", "nan"], "--failsafe-timeout"),
-    (["sim", "--mission", "browse", "--duration", "-1"], "--duration"),
-    (["experiment", "--mission", "browse", "--heading", "nan"], "--heading"),
-    (["experiment", "--mission", "browse", "--altitude", "inf"], "--altitude"),
-    (["experiment", "--mission", "browse", "--time-limit", "nan"], "--time-limit"),
-    (["experiment", "--mission", "browse", "--seed", "-1"], "--seed"),
-    (["agent", "--mission", "browse", "--connect", "udpin:127.0.0.1:14550", "--connect-timeout", "0"],
+@pytest.mark.parametrize("main, args, option", [
+    (vehicle, ["sim", "--mission", "browse", "--speedup", "nan"], "--speedup"),
+    (vehicle, ["sim", "--mission", "browse", "--speedup", "0"], "--speedup"),
+    (vehicle, ["sim", "--mission", "browse", "--speedup", "-1"], "--speedup"),
+    (vehicle, ["sim", "--mission", "browse", "--speedup", "inf"], "--speedup"),
+    (vehicle, ["sim", "--mission", "browse", "--sysid", "0"], "--sysid"),
+    (vehicle, ["sim", "--mission", "browse", "--sysid", "256"], "--sysid"),
+    (vehicle, ["sim", "--mission", "browse", "--sysid", "1.5"], "--sysid"),
+    (vehicle, ["sim", "--mission", "browse", "--failsafe-timeout", "nan"], "--failsafe-timeout"),
+    (vehicle, ["sim", "--mission", "browse", "--duration", "-1"], "--duration"),
+    (vehicle, ["experiment", "--mission", "browse", "--heading", "nan"], "--heading"),
+    (vehicle, ["experiment", "--mission", "browse", "--altitude", "inf"], "--altitude"),
+    (vehicle, ["experiment", "--mission", "browse", "--time-limit", "nan"], "--time-limit"),
+    (vehicle, ["experiment", "--mission", "browse", "--seed", "-1"], "--seed"),
+    (vehicle, ["agent", "--mission", "browse", "--connect", "udpin:127.0.0.1:14550", "--connect-timeout", "0"],
      "--connect-timeout"),
-    (["sweep", "--seeds", "0"], "--seeds"),
-    (["sweep", "--workers", "0"], "--workers"),
+    (vehicle, ["sweep", "--seeds", "0"], "--seeds"),
+    (vehicle, ["sweep", "--workers", "0"], "--workers"),
+    (groundstation, ["demo", "--vehicles", "0"], "--vehicles"),
+    (groundstation, ["demo", "--vehicles", "9"], "--vehicles"),  # eight spots in the demo scene: a ninth on the first
+    (groundstation, ["demo", "--speedup", "nan"], "--speedup"),
+    (groundstation, ["demo", "--port", "99999"], "--port"),
+    (groundstation, ["demo", "--mavlink-port", "70000"], "--mavlink-port"),
+    (groundstation, ["serve", "--port", "-1"], "--port"),
 ])
-def test_a_bad_number_for_a_vehicle_is_a_usage_error_naming_the_option(args, option, capsys):
+def test_a_bad_number_is_a_usage_error_naming_the_option(main, args, option, capsys):
     with pytest.raises(SystemExit) as exit_:
-        vehicle(args)
-    assert exit_.value.code == 2
-    assert f"argument {option}: expected" in capsys.readouterr().err
-
-
-@pytest.mark.parametrize("args, option", [
-    (["demo", "--vehicles", "0"], "--vehicles"),
-    (["demo", "--vehicles", "9"], "--vehicles"),  # eight spots in the demo scene; a ninth stood on the first
-    (["demo", "--speedup", "nan"], "--speedup"),
-    (["demo", "--port", "99999"], "--port"),
-    (["demo", "--mavlink-port", "70000"], "--mavlink-port"),
-    (["serve", "--port", "-1"], "--port"),
-])
-def test_a_bad_number_for_the_station_is_a_usage_error_naming_the_option(args, option, capsys):
-    with pytest.raises(SystemExit) as exit_:
-        groundstation(args)
+        main(args)
     assert exit_.value.code == 2
     assert f"argument {option}: expected" in capsys.readouterr().err
 
