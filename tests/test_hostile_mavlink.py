@@ -54,15 +54,8 @@ from vehicle.agent.settings import Settings
 from vehicle.cli import DEFAULT_SIM_LINK
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol import links, signing
-from vehicle.protocol.mapstream import (
-    MAP_DELTA,
-    MAX_SIDE,
-    MAX_SPACE,
-    MIN_RESOLUTION,
-    MapReceiver,
-    MapStreamer,
-    snapshot_chunks,
-)
+from vehicle.protocol.map_bounds import MAX_SIDE, MAX_SPACE, MIN_RESOLUTION
+from vehicle.protocol.mapstream import MAP_DELTA, MapReceiver, MapStreamer, snapshot_chunks
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.statustext import Reassembler, statustexts
 from vehicle.protocol.tlog import TlogWriter

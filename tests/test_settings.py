@@ -8,7 +8,7 @@ from pydantic import ValidationError
 
 from vehicle.agent.settings import Settings, SettingsError, load_settings, scene_defaults
 from vehicle.lab.presets import PRESETS
-from vehicle.protocol.mapstream import MAX_SIDE
+from vehicle.protocol.map_bounds import MAX_SIDE
 from vehicle.world.scene import parse_scene
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from vehicle.protocol.mapstream import MAX_RESOLUTION, MAX_SIDE, MAX_SPACE, MIN_RESOLUTION
+from vehicle.protocol.map_bounds import MAX_RESOLUTION, MAX_SIDE, MAX_SPACE, MIN_RESOLUTION
 
 
 def _setting(default: float, unit: str, help: str, param_id: str, **bounds) -> float:

@@ -27,8 +27,8 @@ the next snapshot and then applies the deltas numbered after it, so its copy
 equals the onboard map cell for cell. Snapshots go out every few seconds, less
 often when they are big, so that they use at most a set share of the link.
 
-A receiver believes nothing a stream claims beyond what a vehicle can send: a
-map is at most ``MAX_SIDE`` cells a side, at a resolution and over an extent
+A receiver believes nothing a stream claims beyond what a vehicle can send
+(``map_bounds``): a map is at most ``MAX_SIDE`` cells a side, at a resolution and over an extent
 the mission settings allow (they refuse others, so both ends agree), a
 snapshot's part is inflated no further than the claimed geometry holds (a zlib
 bomb stops there), and a delta that names more cells than its map has, or a
@@ -45,6 +45,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from vehicle.protocol.map_bounds import MAX_REACH, MAX_RESOLUTION, MAX_SIDE, MIN_RESOLUTION
+
 MAP_SNAPSHOT = 32800
 MAP_DELTA = 32801
 PATH = 32802
@@ -58,10 +60,6 @@ _POINT = struct.Struct("<ff")
 DELTA_ROOM = PAYLOAD - _DELTA.size
 POINTS_PER_CHUNK = (PAYLOAD - PATH_CHUNK.size) // _POINT.size
 FORMAT_VERSION = 1
-MAX_SIDE = 4000  # cells a side: 16 M cells (16 MB of int8 on each end), twice the default map's 2000
-MAX_SPACE = 1000.0  # m: the widest half-width of a vehicle's space (its settings' space_size)
-MIN_RESOLUTION, MAX_RESOLUTION = 0.01, 50.0  # cells/m of a vehicle's map (its settings' resolution)
-MAX_REACH = 2 * MAX_SPACE + 1 / MIN_RESOLUTION  # m: the widest map a vehicle makes (its side rounds up a cell)
 VARINT_MAX = 5  # bytes of one LEB128 gap (gaps stay below 2**35)
 
 
