@@ -92,7 +92,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """The station and, per vehicle, the two processes a user deploys: a flight controller (our simulator as a
     plain autopilot, in the scene) and the onboard agent beside it, speaking MAVLink as a companion computer."""
 
-    port = args.mavlink_port
+    port = args.mavlink_port or _demo_port()
     station = _station(args, [f"udpin:127.0.0.1:{port}"], args.scene)
     vehicle = [sys.executable, "-m", "vehicle.cli"]
     datum = [f"--datum={args.datum.lat},{args.datum.lon},{args.datum.alt}"] if args.datum is not None else []
@@ -141,6 +141,19 @@ def _key_for_children(key: bytes | None) -> list[str]:
         file.write(key.hex() + "\n")
     atexit.register(lambda: Path(path).unlink(missing_ok=True))
     return ["--signing-key", path]
+
+
+def _demo_port() -> int:
+    """MAVLink's ground-station port, 14550, unless another program listens there (QGroundControl, say): then
+    any free one, since only this station listens to the demo's vehicles."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.bind(("127.0.0.1", 14550))
+        return 14550
+    except OSError:
+        port = _free_udp_port()
+        print(f"demo: UDP port 14550 is taken (another ground station?); the vehicles send to {port}", flush=True)
+        return port
 
 
 def _free_udp_port() -> int:
@@ -207,7 +220,8 @@ def main(argv: list[str] | None = None) -> int:
                       help=f"how many, 1 to {len(DEMO_SPOTS)} (default %(default)s)")
     demo.add_argument("--vehicle", default="copter", choices=["copter", "rover"])
     demo.add_argument("--speedup", type=options.positive, default=1.0, help="simulation speed-up (default %(default)s)")
-    demo.add_argument("--mavlink-port", type=options.port, default=14550, help="UDP port the vehicles send to")
+    demo.add_argument("--mavlink-port", type=options.port,
+                      help="UDP port the vehicles send to (default 14550, or a free one if that is taken)")
     demo.add_argument("--quiet", action="store_true", help="hide the vehicles' own output")
     _server_options(demo)
     _signing_options(demo)

@@ -88,3 +88,24 @@ def test_the_demo_flies_a_vehicle_and_stops_with_it_on_sigterm(demo):
     while processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}") and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"), "a vehicle outlived the demo"
+
+
+def test_the_demo_sends_to_a_free_port_when_another_ground_station_holds_14550(capsys):
+    """QGroundControl listens on 14550: the demo's station cannot (it no longer shares a UDP port), and only it
+    listens to the demo's vehicles, so any free port will do, and it says which."""
+    from groundstation.cli import _demo_port
+
+    holder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        holder.bind(("127.0.0.1", 14550))
+    except OSError:
+        pass  # another program holds it already: the very case
+    try:
+        port = _demo_port()
+        assert port != 14550
+        assert f"UDP port 14550 is taken (another ground station?); the vehicles send to {port}" in \
+            capsys.readouterr().out
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.bind(("127.0.0.1", port))  # free
+    finally:
+        holder.close()
