@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 from vehicle import __version__, options
@@ -98,7 +99,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     datum = [f"--datum={args.datum.lat},{args.datum.lon},{args.datum.alt}"] if args.datum is not None else []
     common = [*datum, *_key_for_children(args.signing_key)]  # what both vehicle processes are told
     output = subprocess.DEVNULL if args.quiet else None
-    processes = []
+    processes, roles = [], []
     for index, (x, y) in enumerate(demo_starts(args.vehicles)):
         agent_port = _free_udp_port()
         sysid = str(index + 1)
@@ -109,8 +110,24 @@ def cmd_demo(args: argparse.Namespace) -> int:
         processes.append(_child([*vehicle, "agent", "--connect", f"udpin:127.0.0.1:{agent_port}", "--mission",
                                  args.mission, "--vehicle", args.vehicle, "--scene", args.scene, "--stay", *common],
                                 output))
+        roles += [f"vehicle {sysid}'s flight controller", f"vehicle {sysid}'s onboard agent"]
+    stopping = threading.Event()
+    died: list[str] = []
+
+    def watch(process: subprocess.Popen, role: str) -> None:
+        """A vehicle process that ends while the demo runs ends the demo, saying so: a station showing a vehicle
+        without its agent (a bad --mission), or no vehicle at all, would look like a demo that works."""
+        code = process.wait()
+        if not stopping.is_set():
+            died.append(role)
+            print(f"demo: {role} exited with code {code}; stopping", file=sys.stderr, flush=True)
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    for process, role in zip(processes, roles, strict=True):
+        threading.Thread(target=watch, args=(process, role), daemon=True).start()
 
     def stop_vehicles() -> None:
+        stopping.set()
         for process in processes:
             process.terminate()
         for process in processes:
@@ -126,9 +143,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
           f"and an onboard agent flying '{args.mission}'", flush=True)
     try:
         _serve(station, args)
+    except SystemExit:
+        if not died:
+            raise
     finally:
         stop_vehicles()
-    return 0
+    return 1 if died else 0
 
 
 def _key_for_children(key: bytes | None) -> list[str]:

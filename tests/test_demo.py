@@ -109,3 +109,16 @@ def test_the_demo_sends_to_a_free_port_when_another_ground_station_holds_14550(c
             probe.bind(("127.0.0.1", port))  # free
     finally:
         holder.close()
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to find the vehicle processes")
+def test_a_vehicle_process_that_exits_stops_the_demo_saying_which(tmp_path):
+    """A bad --mission is the agent's usage error: the demo went on serving a vehicle without its agent."""
+    port, mavlink_port = free_port(socket.SOCK_STREAM), free_port(socket.SOCK_DGRAM)
+    done = subprocess.run([sys.executable, "-m", "groundstation.cli", "demo", "--port", str(port), "--mavlink-port",
+                           str(mavlink_port), "--record-dir", "", "--mission", "hover", "--quiet"],
+                          capture_output=True, text=True, timeout=WAIT)
+    assert done.returncode == 1
+    assert "demo: vehicle 1's onboard agent exited with code 2; stopping" in done.stderr
+    assert "invalid choice: 'hover'" in done.stderr
+    assert processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}") == []  # its flight controller went too
