@@ -184,8 +184,9 @@ def _free_udp_port() -> int:
 
 def _child(command: list[str], output) -> subprocess.Popen:
     """A process that dies with the station, even when the station is killed outright (Linux's parent-death
-    signal; elsewhere the station's exit handlers stop it)."""
-    return subprocess.Popen(command, stdout=output, preexec_fn=_die_with_parent)
+    signal; elsewhere the station's exit handlers stop it). In its own session: a terminal's Ctrl-C reaches the
+    station alone, which stops its vehicles itself (else they died beside it, as if they had failed)."""
+    return subprocess.Popen(command, stdout=output, preexec_fn=_die_with_parent, start_new_session=True)
 
 
 def _die_with_parent() -> None:

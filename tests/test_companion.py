@@ -171,6 +171,35 @@ def test_an_agent_told_the_wrong_vehicle_refuses_to_fly_it(tmp_path):
     assert result["reason"] == "the flight controller is a quadrotor, not a rover (--vehicle)"
 
 
+def test_ctrl_c_stops_an_agent_with_a_line_not_a_traceback(tmp_path):
+    import signal
+    import socket
+
+    scene = tmp_path / "yard.wrl"
+    scene.write_text(SCENE_TEXT)
+    port = free_udp_port()
+    agent = subprocess.Popen(agent_command(port, "browse", scene), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+
+    def listening() -> bool:  # then it waits for an autopilot's heartbeat
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(("127.0.0.1", port))
+            except OSError:
+                return True
+            return False
+
+    try:
+        wait_wall(listening, 60, "the agent listening")
+        agent.send_signal(signal.SIGINT)
+        out, err = agent.communicate(timeout=30)
+    finally:
+        if agent.poll() is None:
+            agent.kill()
+    assert agent.returncode == 130
+    assert "Traceback" not in err and "vehicle agent: interrupted; browse (copter over udpin:127.0.0.1:" in err
+
+
 # ---- taking over ----------------------------------------------------------------------------------------------
 def test_an_operators_rtl_pauses_the_agent_and_resume_hands_control_back(tmp_path):
     """The station hears the autopilot and, routed through it, the agent (component 191): one vehicle."""

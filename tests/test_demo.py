@@ -122,3 +122,35 @@ def test_a_vehicle_process_that_exits_stops_the_demo_saying_which(tmp_path):
     assert "demo: vehicle 1's onboard agent exited with code 2; stopping" in done.stderr
     assert "invalid choice: 'hover'" in done.stderr
     assert processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}") == []  # its flight controller went too
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to find the vehicle processes")
+def test_ctrl_c_stops_the_demo_and_its_vehicles_quietly(tmp_path):
+    """A terminal's Ctrl-C goes to the whole foreground group: the vehicles died beside the station, the
+    onboard agent with a KeyboardInterrupt traceback. They now run in their own sessions; the station stops
+    them, and no vehicle counts as having failed."""
+    port, mavlink_port = free_port(socket.SOCK_STREAM), free_port(socket.SOCK_DGRAM)
+    process = subprocess.Popen([sys.executable, "-m", "groundstation.cli", "demo", "--port", str(port),
+                                "--mavlink-port", str(mavlink_port), "--record-dir", "", "--speedup", "4"],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + WAIT
+        while time.monotonic() < deadline and process.poll() is None:
+            try:
+                if any(v["agent"] for v in vehicles(port)):
+                    break
+            except OSError:
+                pass
+            time.sleep(0.5)
+        assert process.poll() is None and processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}")
+        os.killpg(process.pid, signal.SIGINT)
+        assert process.wait(timeout=30) == 0
+        output = process.stdout.read()
+        assert "Traceback" not in output and "exited with code" not in output, output
+        deadline = time.monotonic() + 10
+        while processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}") and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"), "a vehicle outlived the demo"
+    finally:
+        if process.poll() is None:
+            process.kill()

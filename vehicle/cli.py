@@ -209,7 +209,12 @@ def cmd_agent(args: argparse.Namespace) -> int:
     agent_options = AgentOptions(args.connect, args.mission, args.vehicle, settings, waypoints, scene, args.sensors,
                                  args.suite, args.gcs, datum, args.log, args.wait, args.stay, args.connect_timeout,
                                  args.signing_key)
-    result = run_agent(agent_options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
+    try:
+        result = run_agent(agent_options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
+    except KeyboardInterrupt:
+        print(f"vehicle agent: interrupted; {args.mission} ({args.vehicle} over {args.connect}) left as it was",
+              file=sys.stderr)
+        return 130
     if args.json:
         print(json.dumps(result))
     else:
