@@ -197,7 +197,7 @@ def test_ctrl_c_stops_an_agent_with_a_line_not_a_traceback(tmp_path):
         if agent.poll() is None:
             agent.kill()
     assert agent.returncode == 130
-    assert "Traceback" not in err and "vehicle agent: interrupted; browse (copter over udpin:127.0.0.1:" in err
+    assert "Traceback" not in err and err.strip().endswith("vehicle agent: interrupted")
 
 
 # ---- taking over ----------------------------------------------------------------------------------------------

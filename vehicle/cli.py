@@ -209,12 +209,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
     agent_options = AgentOptions(args.connect, args.mission, args.vehicle, settings, waypoints, scene, args.sensors,
                                  args.suite, args.gcs, datum, args.log, args.wait, args.stay, args.connect_timeout,
                                  args.signing_key)
-    try:
-        result = run_agent(agent_options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
-    except KeyboardInterrupt:
-        print(f"vehicle agent: interrupted; {args.mission} ({args.vehicle} over {args.connect}) left as it was",
-              file=sys.stderr)
-        return 130
+    result = run_agent(agent_options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps(result))
     else:
@@ -353,6 +348,9 @@ def main(argv: list[str] | None = None) -> int:
     except (SceneError, SettingsError, WaypointError, PlacementError, OSError, ValueError) as error:
         print(f"vehicle {args.command}: {error}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C: one line, not a traceback
+        print(f"vehicle {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
