@@ -1,4 +1,5 @@
-"""Numbers on both command lines (vehicle.options): a bad one is a usage error naming its option.
+"""Numbers on both command lines (vehicle.options): a bad one is a usage error naming its option; and
+options that exclude each other.
 
 Each case below started something before: a socket's OverflowError (port 70000), a vehicle no station shows
 (system id 0, MAVLink's broadcast address) or a struct error (300), a simulation standing still (speed-up 0
@@ -45,6 +46,14 @@ def test_a_bad_number_is_a_usage_error_naming_the_option(main, args, option, cap
         main(args)
     assert exit_.value.code == 2
     assert f"argument {option}: expected" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [["sim"], ["sim", "--role", "autopilot", "--mission", "browse"]])
+def test_a_simulated_vehicle_is_either_one_with_a_mission_or_a_plain_autopilot(args, capsys):
+    """With both, --mission was ignored in silence: the plain autopilot flew nothing."""
+    assert vehicle(args) == 2
+    assert "vehicle sim: --mission NAME (a vehicle with its onboard agent) or --role autopilot" in \
+        capsys.readouterr().err
 
 
 def test_the_checks_keep_what_is_good_and_say_what_they_wanted():

@@ -148,6 +148,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from vehicle.world.scene import load_scene
     from vehicle.world.suites import sensor_suite
 
+    autopilot = args.role == "autopilot"
+    if autopilot == bool(args.mission):  # checked first: loading the scene and the loops takes a while
+        raise ValueError("--mission NAME (a vehicle with its onboard agent) or --role autopilot (for an onboard "
+                         "agent in another process), one of them")
     scene = load_scene(args.scene)
     settings = settings_from(args, scene)
     warmed = warm_up()  # before any link opens: compiling the loops on a fresh install takes a few seconds
@@ -158,9 +162,6 @@ def cmd_sim(args: argparse.Namespace) -> int:
     items = load_mission(args.waypoints) if args.waypoints else None
     waypoints = positions(items, datum) if items else (
         parse_points(scene.hints["waypoints"]) if "waypoints" in scene.hints else None)
-    autopilot = args.role == "autopilot"
-    if not autopilot and not args.mission:
-        raise ValueError("--mission is needed (or --role autopilot, for an onboard agent in another process)")
     stepper = simulate(scene, None if autopilot else args.mission, args.vehicle, settings, args.start, args.heading,
                        waypoints, autostart=args.autostart, seed=args.seed, sensors=sensor_suite(args.sensors),
                        datum=datum)
