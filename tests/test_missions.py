@@ -216,6 +216,15 @@ def test_search_with_a_short_time_limit_heads_home_in_time(scene_of):
 
 
 # ---- operator takeover --------------------------------------------------------------------------
+@pytest.mark.parametrize("vehicle", ["copter", "rover"])
+def test_a_vehicle_that_leaves_its_space_flies_back_home(scene_of, vehicle):
+    """Just past its space a vehicle stands off its own memory map, where it had "no known path" home: it held
+    position out there for good. It now comes straight back onto the map and home."""
+    result = fly(scene_of(), "square", vehicle, waypoints=[(30.0, 0.0)])
+    assert (result["outcome"], result["reason"]) == ("stopped", "left the allowed space around home")
+    assert home_distance(result) < 1.0
+
+
 class Flight:
     """A simulated vehicle and its agent on the one stepper, for tests that intervene mid-flight."""
 

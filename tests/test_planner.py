@@ -178,3 +178,29 @@ def test_the_escape_goes_whichever_way_the_only_gap_is(dr, dc):
         inflated[target] = False
         walk = planning._escape(blocked, inflated, centre)
         assert tuple(walk[-1]) == target and not blocked[walk[:, 0], walk[:, 1]].any()
+
+
+@pytest.mark.parametrize("outside", [(14.0, 5.0), (-9.0, -2.0), (3.0, -14.0), (15.0, 11.0), (-30.0, 30.0)])
+def test_from_off_the_map_the_path_comes_straight_back_onto_it_first(outside):
+    """A vehicle that just left its space stands off its own map: it had "no known path" home, and hovered there
+    for good. The path now starts where the straight line to the goal comes onto the map, then goes round."""
+    m = MemoryMap((3.0, -2.0), space_size=10.0, resolution=5.0)  # x -7 to 13, y -12 to 8
+    m.grid[35:65, 60:62] = MemoryMap.OCCUPIED_AT  # a wall 6 m long at x = 5, between the edge and home
+    planner = MapPlanner(m, RADIUS)
+    path, _ = planner.plan(outside, (3.0, -2.0), padding=0.2)
+    assert path is not None and path[-1] == (3.0, -2.0)
+    entry = path[0]
+    assert m.cell_of(*entry) is not None and m.cell_of(*outside) is None
+    on_edge = [abs(entry[0] - (-7.0)), abs(entry[0] - 13.0), abs(entry[1] - (-12.0)), abs(entry[1] - 8.0)]
+    assert min(on_edge) <= 0.1 / 5.0 + 1e-9  # a tenth of a cell in from an edge
+    across = (entry[0] - outside[0]) * (-2.0 - outside[1]) - (entry[1] - outside[1]) * (3.0 - outside[0])
+    assert abs(across) < 1e-6  # on the straight line from where it stands to the goal
+    for a, b in zip(path, path[1:], strict=False):  # and round the wall (x 5 to 5.4, y -5 to 1) from there
+        for t in np.linspace(0.0, 1.0, 200):
+            x, y = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])
+            assert math.hypot(max(5.0 - x, 0.0, x - 5.4), max(-5.0 - y, 0.0, y - 1.0)) > RADIUS
+
+
+def test_a_goal_off_the_map_has_no_path():
+    m = MemoryMap((0.0, 0.0), space_size=10.0, resolution=5.0)
+    assert MapPlanner(m, RADIUS).plan((0.0, 0.0), (30.0, 0.0), padding=0.2) == (None, 0)

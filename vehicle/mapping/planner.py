@@ -44,8 +44,12 @@ class MapPlanner:
         """
         start_cell = self.map.cell_of(*start)
         goal_cell = self.map.cell_of(*goal)
-        if start_cell is None or goal_cell is None:
+        if goal_cell is None:
             return None, level
+        if start_cell is None:  # off the map (a vehicle that just left its space): straight back onto it first
+            entry = self._entry(start, goal)
+            path, level = self.plan(entry, goal, padding, relax, level)
+            return (None if path is None else [entry, *path]), level
         if level == 0 and self.path_clear(start, [goal], horizon=math.inf, padding=padding):
             return [goal], level  # in the open: no search needed
         attempts = [(padding, True), (0.0, True)] + ([(0.0, False)] if relax else [])
@@ -66,6 +70,18 @@ class MapPlanner:
                 if not relax:
                     return None, level  # less padding would only squeeze through gaps never seen
         return None, level
+
+    def _entry(self, outside: Point, inside: Point) -> Point:
+        """Where the line from a point off the map to one on it comes onto the map, a tenth of a cell in."""
+        inset, extent = 0.1 / self.map.resolution, self.map.size / self.map.resolution
+        t = 0.0  # how far along the line it comes in: past the last edge it crosses inwards
+        for axis in (0, 1):
+            low, high = self.map.origin[axis] + inset, self.map.origin[axis] + extent - inset
+            step = inside[axis] - outside[axis]
+            if outside[axis] < low < inside[axis] or outside[axis] > high > inside[axis]:
+                edge = low if outside[axis] < low else high
+                t = max(t, (edge - outside[axis]) / step)
+        return outside[0] + t * (inside[0] - outside[0]), outside[1] + t * (inside[1] - outside[1])
 
     def margin_cells(self, padding: float) -> float:
         """How far paths keep from obstacles, in cells: the body radius plus padding, and at least twice the
