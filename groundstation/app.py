@@ -153,6 +153,7 @@ def create_app(station: GroundStation) -> FastAPI:
                                          or not all(port["up"] for port in link["links"]))
         return {"status": "degraded" if troubled else "ok", "version": __version__, "mode": station.mode,
                 "vehicles": len(station.fleet.ids()), "links": station.link_urls, "link": link,
+                "far_from_scene": station.far_from_scene(),
                 "recording": None if station.recorder is None else {
                     "file": station.recorder.path.name, "error": link["recording_error"] if link else None},
                 "scene": None if scene is None else {"name": scene.path.name if scene.path else None,

@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import asyncio
+import math
 import secrets
 import socket
 import stat as file_mode
@@ -43,6 +44,7 @@ from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
 
 RECORDINGS_STREAMED = 200  # the newest recordings the status stream lists
+FAR_FROM_SCENE = 1000.0  # m outside the scene's edges: a vehicle there flies nowhere the scene shows
 
 
 class GroundStation:
@@ -55,6 +57,7 @@ class GroundStation:
         self.token = token or secrets.token_urlsafe(16)
         self.access = Access(self.token)  # serving beyond loopback makes it stricter (see app_config)
         self.scene = scene
+        self._scene_box: tuple = (None, None)  # (scene, its x, y box): far_from_scene looks each time
         self.scene_dirs = [Path(folder) for folder in scene_dirs]
         scene_file = scene.path if scene is not None and scene.path is not None and scene.path.is_file() else None
         self.scene_digest = scene_digest(scene_file) if scene_file else None  # recordings name the scene by it
@@ -119,6 +122,27 @@ class GroundStation:
             chosen = [fleet.vehicles[sysid]] if sysid in fleet.vehicles else [] if sysid is not None else \
                 [v for _, v in sorted(fleet.vehicles.items())]
             return [fleet.describe(v, now) for v in chosen]
+
+    def far_from_scene(self) -> list[dict]:
+        """The vehicles more than FAR_FROM_SCENE outside the scene shown, and how far (km). The usual cause is a
+        datum (the station's ``--datum``, or the scene's) that is not where the vehicles fly: each is then drawn
+        thousands of kilometres away, and the 3D view shows the scene alone, as if nothing were wrong."""
+        scene = self.view.scene
+        if scene is None or not len(scene.faces):
+            return []
+        if self._scene_box[0] is not scene:
+            self._scene_box = (scene, scene.bounds[:, :2])
+        (x0, y0), (x1, y1) = self._scene_box[1]
+        replay = self.replay
+        fleet = self.live if replay is None else replay.fleet
+        with fleet.lock:
+            places = [(v.sysid, v.x, v.y) for _, v in sorted(fleet.vehicles.items()) if v.x is not None]
+        far = []
+        for sysid, x, y in places:
+            gap = math.hypot(max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1))
+            if gap > FAR_FROM_SCENE:
+                far.append({"sysid": sysid, "km": round(gap / 1000.0, 1)})
+        return far
 
     def start(self) -> None:
         if self.link is not None:

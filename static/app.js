@@ -683,12 +683,17 @@ function render(msg) {
 
 // ---------------------------------------------------------------------------------------------
 // The station's own health: a link down, a stalled link thread, a recording that fails, vehicles turned
-// away. Said at the top of the panel, since every number below may be stale or incomplete because of it.
+// away, a vehicle far from the scene. Said at the top of the panel, since every number below may be stale,
+// incomplete or drawn in the wrong place because of it.
 
 const HEALTH_PERIOD_MS = 5000;
 
 function healthProblems(health) {
   const problems = [];
+  for (const far of (health && health.far_from_scene) || []) {
+    problems.push(`vehicle ${far.sysid} is ${far.km.toLocaleString("en")} km from the scene: ` +
+                  "is the station's datum where it flies? (--datum, or the scene's)");
+  }
   const link = health && health.link;
   if (!link) return problems;
   for (const port of link.links || []) {

@@ -758,6 +758,37 @@ def test_the_page_says_when_a_link_is_down(browser):
 
 @chromium_needed
 @pytest.mark.browser
+def test_the_page_says_when_a_vehicle_flies_far_from_the_scene(browser):
+    """A vehicle in Zurich, placed by a datum in Canberra, was drawn 15,700 km away: the 3D view showed the scene
+    alone and nothing said why. A vehicle in the scene is no such case."""
+    from mavlink_peer import Peer, position, vehicle_heartbeat
+    from playwright.sync_api import expect
+
+    with RunningStation(small_scene(), None) as running:
+        with Peer(("127.0.0.1", running.mavlink_port), sysid=7) as zurich, \
+                Peer(("127.0.0.1", running.mavlink_port), sysid=8) as here:
+
+            def far():
+                zurich.send(vehicle_heartbeat(), position(47.3769, 8.5417))
+                here.send(vehicle_heartbeat(), position())  # at the datum: the scene's origin
+                health = running.http.get("/api/health").json()
+                return health["vehicles"] == 2 and health["far_from_scene"]
+
+            listed = wait_wall(far, 10, "the far vehicle listed")
+            assert [v["sysid"] for v in listed] == [7] and 15_000 < listed[0]["km"] < 17_000
+            page = browser.new_page()
+            try:
+                page.goto(running.base + "/")
+                banner = page.locator("#health-banner")
+                expect(banner).to_be_visible(timeout=15_000)
+                expect(banner.locator("li").first).to_have_text(re.compile(
+                    r"^vehicle 7 is 15,\d{3}\.\d km from the scene: is the station's datum where it flies\?"))
+            finally:
+                page.close()
+
+
+@chromium_needed
+@pytest.mark.browser
 def test_a_healthy_station_shows_no_health_banner(station, browser):
     from playwright.sync_api import expect
 
