@@ -405,8 +405,9 @@ def serve(station: GroundStation, host: str = "127.0.0.1", port: int = 8000, tls
 
 
 def _listening_socket(host: str, port: int) -> socket.socket:
-    """The web app's socket, bound now, so that a port in use is a clear error before the page's address is
-    announced (uvicorn binds later, after the announcement, and only logs the failure)."""
+    """The web app's socket, bound and listening now, so that a port in use is a clear error before the page's
+    address is announced (uvicorn binds later, after the announcement, and only logs the failure), and so that
+    the address works from the moment it shows."""
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     listening = socket.socket(family, socket.SOCK_STREAM)
     listening.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # TCP: rebinding past TIME_WAIT only
@@ -415,4 +416,5 @@ def _listening_socket(host: str, port: int) -> socket.socket:
     except OSError as error:
         listening.close()
         raise OSError(error.errno, f"cannot serve on {host}:{port}: {error.strerror}") from None
+    listening.listen(2048)  # uvicorn's backlog: a page opened as soon as the address shows waits, not refused
     return listening

@@ -791,6 +791,18 @@ def test_a_web_port_in_use_is_an_error_before_the_address_is_announced():
         taken.close()
 
 
+def test_the_web_port_listens_before_the_address_is_announced():
+    """A page opened the moment the address showed was refused: uvicorn listened only once it had started."""
+    from groundstation import server
+
+    listening = server._listening_socket("127.0.0.1", 0)
+    try:
+        with socket.create_connection(listening.getsockname(), timeout=2):
+            pass  # queued until the server takes it
+    finally:
+        listening.close()
+
+
 def test_serve_refuses_half_a_tls_setup():
     from groundstation import server
 
