@@ -79,7 +79,7 @@ class Link:
         if signing_key is not None:
             signing.sign_outgoing(self.packer, signing_key)
         # keyed by the 8-bit system id (so at most 255 entries), and pruned after FORGET_AFTER of silence:
-        self.route: dict[int, tuple] = {}  # sysid -> (the port it was last heard on, its address there, when)
+        self.route: dict[int, tuple] = {}  # sysid -> (the port its heartbeat came on, its address there, when)
         self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
         self._pruned = 0.0
         self._waiters: list[_Waiter] = []
@@ -167,10 +167,10 @@ class Link:
         self.stats["received"] += 1
         self._record(message.get_msgbuf(), now)
         sysid = message.get_srcSystem()
-        self.route[sysid] = (port, getattr(message, "_peer", None), now)
+        beat = message.get_type() == "HEARTBEAT" and message.get_srcComponent() == AUTOPILOT
+        self._learn_route(sysid, port, getattr(message, "_peer", None), now, beat)
         self.fleet.apply(message, now)
-        if message.get_type() == "HEARTBEAT" and message.get_srcComponent() == AUTOPILOT and sysid in \
-                self.fleet.vehicles:  # a vehicle the fleet holds (a refused one gets no answer, so no flood of them)
+        if beat and sysid in self.fleet.vehicles:  # a vehicle the fleet holds (a refused one gets no answer)
             self._ask_for_telemetry(sysid, now)
         if hasattr(message, "time_boot_ms") and sysid in self._asked:
             heard, boot = self._asked[sysid]
@@ -183,6 +183,14 @@ class Link:
         for waiter in waiters:
             if waiter.sysid == sysid and waiter.accepts(message):
                 waiter.replies.put(message)
+
+    def _learn_route(self, sysid: int, port, peer, now: float, beat: bool) -> None:
+        """Where orders to a system go: where it was first heard, then where its autopilot's heartbeat last came
+        from. Any other message only keeps its route fresh: a flood of another kind of message in its name (a
+        map snapshot, say) from elsewhere took its route, and its orders went to the flood's sender, unanswered."""
+        route = self.route.get(sysid)
+        if route is None or beat or route[:2] == (port, peer):
+            self.route[sysid] = (port, peer, now)
 
     def _prune(self, now: float) -> None:
         """Once a second: forget the routes to systems not heard for FORGET_AFTER (as the fleet forgets them)."""

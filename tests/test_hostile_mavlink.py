@@ -292,6 +292,30 @@ def test_a_replayed_log_forgets_no_vehicle_however_long_it_was_silent(tmp_path):
     assert replay.fleet.ids() == [9, 10]
 
 
+def test_a_flood_in_a_vehicles_name_from_elsewhere_does_not_take_its_orders():
+    """A map snapshot in vehicle 1's name, 8,555 chunks from an attacker's address, took vehicle 1's route: the
+    operator's commands went to the attacker for as long as the flood lasted, and came back unanswered."""
+    port = free_udp_port()
+    link = Link([f"udpin:127.0.0.1:{port}"], Fleet()).start()
+    try:
+        with Peer(("127.0.0.1", port), sysid=1) as vehicle, Peer(("127.0.0.1", port), sysid=1) as attacker:
+            vehicle.send(vehicle_heartbeat())
+            wait_wall(lambda: 1 in link.route, 5, "the vehicle heard")
+            for _ in range(50):
+                attacker.send(tunnel(32801, b"\0" * 100), position())
+            wait_wall(lambda: link.stats["received"] >= 101, 5, "the flood heard")
+            vehicle.receive(0.3), attacker.receive(0.3)  # what the station said before: its telemetry requests
+
+            def orders(peer):
+                return [m for m in peer.receive() if m.get_type() == "COMMAND_LONG"
+                        and m.command == mavlink.MAV_CMD_DO_SET_MODE]
+
+            link.send(command(mavlink.MAV_CMD_DO_SET_MODE, 1, 4), 1)
+            assert len(orders(vehicle)) == 1 and orders(attacker) == []
+    finally:
+        link.close()
+
+
 def test_the_links_routes_and_unfinished_texts_stay_bounded():
     link = Link([], Fleet())
     for sysid in range(1, 256):
