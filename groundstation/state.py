@@ -41,7 +41,7 @@ from groundstation.history import History
 from vehicle.mapping.memory_map import OCCUPIED_AT, MemoryMap
 from vehicle.protocol import agent_status
 from vehicle.protocol.frames import Pose
-from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.geodesy import Datum, on_earth
 from vehicle.protocol.mapstream import MapReceiver
 from vehicle.protocol.mav import RESULT_WORDS, mavlink, mavutil
 from vehicle.protocol.modes import FORCE_DISARM
@@ -387,7 +387,7 @@ class Fleet:
 
     def _global_position_int(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)
-        if m.lat == 0 and m.lon == 0 or not _on_earth(m.lat, m.lon):
+        if m.lat == 0 and m.lon == 0 or not on_earth(m.lat * 1e-7, m.lon * 1e-7):
             return  # no fix, or no place on Earth
         lat, lon = m.lat * 1e-7, m.lon * 1e-7
         datum = self._ensure_datum(lat, lon)
@@ -440,7 +440,7 @@ class Fleet:
         vehicle.remaining = m.battery_remaining if m.battery_remaining >= 0 else None
 
     def _home_position(self, vehicle, m, now) -> None:
-        if not _on_earth(m.latitude, m.longitude):
+        if not on_earth(m.latitude * 1e-7, m.longitude * 1e-7):
             return
         lat, lon = m.latitude * 1e-7, m.longitude * 1e-7
         datum = self._ensure_datum(lat, lon)
@@ -592,6 +592,3 @@ def _finite(*values: float) -> bool:
     return all(math.isfinite(v) for v in values)
 
 
-def _on_earth(lat_e7: int, lon_e7: int) -> bool:
-    """Latitude and longitude (degrees * 1e7) that name a place: a peer may send any 32-bit number."""
-    return abs(lat_e7) <= 900_000_000 and abs(lon_e7) <= 1_800_000_000

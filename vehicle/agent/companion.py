@@ -14,11 +14,10 @@ packed as component 191; the clock is the caller's (the wall clock live).
 
 from __future__ import annotations
 
-import math
-
 from vehicle.agent.agent import Agent
 from vehicle.agent.params import Parameters
 from vehicle.protocol import agent_status
+from vehicle.protocol.geodesy import on_earth
 from vehicle.protocol.mapstream import PAYLOAD, MapStreamer
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.statustext import statustexts
@@ -125,7 +124,7 @@ class Companion:
             lat, lon = message.x * 1e-7, message.y * 1e-7
         else:
             lat, lon = message.param5, message.param6
-        if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
+        if not on_earth(lat, lon):
             self.agent.say("Go here: the target is not a position", mavlink.MAV_SEVERITY_WARNING)
             return False
         refused = self.agent.go_to(self.agent.fc.datum.to_local(lat, lon))

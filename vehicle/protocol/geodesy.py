@@ -15,6 +15,11 @@ from dataclasses import dataclass
 METRES_PER_DEGE7 = 0.011131884502145034
 
 
+def on_earth(lat: float, lon: float) -> bool:
+    """Latitude and longitude (degrees) that name a place: a peer may send any number, NaN included."""
+    return abs(lat) <= 90 and abs(lon) <= 180
+
+
 @dataclass(frozen=True)
 class Datum:
     """The geodetic position of the scene origin (defaults: ArduPilot's simulator home)."""
@@ -48,7 +53,7 @@ class Datum:
             parts = []
         if len(parts) not in (2, 3) or not all(map(math.isfinite, parts)):
             raise ValueError(f"a datum is LAT,LON[,ALT] in degrees and metres, not {text!r}")
-        if not (-90 <= parts[0] <= 90 and -180 <= parts[1] <= 180):
+        if not on_earth(parts[0], parts[1]):
             raise ValueError(f"latitude must be within +-90 and longitude within +-180 degrees, not {text!r}")
         return cls(*parts)
 

@@ -36,6 +36,7 @@ from collections import Counter
 from typing import Protocol
 
 from vehicle.protocol import links, signing
+from vehicle.protocol.geodesy import on_earth
 from vehicle.protocol.mav import mavlink, pack
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, Kind, mode_name
 from vehicle.protocol.tlog import TlogWriter
@@ -335,7 +336,7 @@ class Endpoint:
 
     def _reposition(self, m: _Command) -> int:
         lat, lon = m.latitude, m.longitude
-        if not (abs(lat) <= 90 and abs(lon) <= 180):  # not on Earth, or not a number
+        if not on_earth(lat, lon):
             return DENIED
         if int(m.param2) & mavlink.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE and self.autopilot.mode != "GUIDED":
             self._set_mode_named("GUIDED")
@@ -380,7 +381,7 @@ class Endpoint:
         else:
             self.stats["unsupported frames"] += 1
             return
-        if not (abs(lat) <= 90 and abs(lon) <= 180):
+        if not on_earth(lat, lon):
             self.stats["non-finite targets"] += 1
             return
         x, y = self.world.datum.to_local(lat, lon)
