@@ -57,7 +57,6 @@ class GroundStation:
         self.token = token or secrets.token_urlsafe(16)
         self.access = Access(self.token)  # serving beyond loopback makes it stricter (see app_config)
         self.scene = scene
-        self._scene_box: tuple = (None, None)  # (scene, its x, y box): far_from_scene looks each time
         self.scene_dirs = [Path(folder) for folder in scene_dirs]
         scene_file = scene.path if scene is not None and scene.path is not None and scene.path.is_file() else None
         self.scene_digest = scene_digest(scene_file) if scene_file else None  # recordings name the scene by it
@@ -130,9 +129,7 @@ class GroundStation:
         scene = self.view.scene
         if scene is None or not len(scene.faces):
             return []
-        if self._scene_box[0] is not scene:
-            self._scene_box = (scene, scene.bounds[:, :2])
-        (x0, y0), (x1, y1) = self._scene_box[1]
+        (x0, y0, _), (x1, y1, _) = scene.bounds
         replay = self.replay
         fleet = self.live if replay is None else replay.fleet
         with fleet.lock:

@@ -78,13 +78,17 @@ class Scene:
         norm[valid] **= -1
         return np.where(valid[:, None], crosses * norm.reshape((-1, 1)), 0.0)
 
-    @property
+    @functools.cached_property
     def bounds(self) -> np.ndarray:
-        """(2, 3) lowest and highest corner of the triangles; zeros for an empty scene."""
+        """(2, 3) lowest and highest corner of the triangles; zeros for an empty scene. Kept (read-only): the
+        3D view's every frame and the station's health ask for it."""
         if not len(self.faces):
-            return np.zeros((2, 3))
-        corners = self.triangles.reshape(-1, 3)
-        return np.array([corners.min(axis=0), corners.max(axis=0)])
+            box = np.zeros((2, 3))
+        else:
+            corners = self.triangles.reshape(-1, 3)
+            box = np.array([corners.min(axis=0), corners.max(axis=0)])
+        box.flags.writeable = False
+        return box
 
     @functools.cached_property
     def mesh(self):
