@@ -75,7 +75,7 @@ class LinkWatch:
         counts as going down)."""
         lines = []
         for link in self.links:
-            why = "" if getattr(link, "up", True) else link.error
+            why = "" if link.up else link.error
             if why != self._down.get(link.url, ""):
                 lines.append(f"link {link.url} down ({why}); retrying" if why else f"link {link.url} up again")
                 self._down[link.url] = why
