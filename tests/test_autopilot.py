@@ -30,7 +30,7 @@ from vehicle.sim.autopilot import (
     VELOCITY_TIMEOUT,
     Autopilot,
 )
-from vehicle.sim.avoidance import MARGIN, ObstacleDatabase
+from vehicle.sim.avoidance import GRAZE, MARGIN, ObstacleDatabase
 from vehicle.sim.physics import Body, Limits
 from vehicle.sim.simulation import Simulation
 from vehicle.world.sonar import Sonar
@@ -593,6 +593,20 @@ def test_a_stop_before_an_obstacle_is_told_once_with_where(wall_scene):
     assert 0.3 < distance < 2.5 and abs(y - 9.9) < 0.3 and abs(x) < 1.0
 
 
+def test_a_stop_is_told_again_for_a_new_goal_or_after_leaving_it(wall_scene):
+    """Told once per stop: creeping on a few millimetres is the same stop (see above), but held back on the way
+    somewhere else, or again after going away, is a new one."""
+    world = armed_copter(wall_scene)
+    world.autopilot.goto(0.0, 20.0)
+    world.run_for(30.0)
+    world.autopilot.goto(0.5, 20.0)  # behind the same wall, from the same spot
+    world.run_for(5.0)
+    world.body.pose.y -= 1.0  # a gust pushes it a metre back; it flies up to the wall again
+    world.run_for(10.0)
+    told = [text.split("stopped short of ")[-1] for text in texts(world) if text.startswith("GUIDED:")]
+    assert told == ["(0.0, 20.0)", "(0.5, 20.0)", "(0.5, 20.0)"], texts(world)
+
+
 def test_rtl_held_back_by_a_tall_wall_says_so(make_scene, box):
     ground = box(0, 0, -0.5, 200, 200, 1)
     tower = box(0, 10.5, 15, 20, 1, 30)  # 30 m high: above RTL_ALT
@@ -633,6 +647,33 @@ def test_remembered_echoes_hold_back_only_within_a_metre_of_the_vehicles_height(
     for height in (2.99, 5.01, 15.0):
         assert database.speed_limit(0.0, 0.0, height, 0.0, 2.0, now=1.0) == math.inf, height
         assert database.obstacle_ahead(0.0, 0.0, height, 0.0, 2.0, now=1.0) is None, height
+
+
+def test_an_echo_within_the_margin_beside_the_vehicle_holds_back_only_moving_towards_it():
+    """A vehicle stopped with an echo right beside it, inside its margin (a rover by a kerb), may move past it
+    or away; only moving towards it is held back. It used to be held back in every direction with the least
+    bit of "ahead" in it, and stood there for good."""
+    database = ObstacleDatabase(margin=MARGIN, accel=2.5)
+    database.add(0.35, 0.02, 0.0, time=0.0)  # 0.35 m east, inside body radius + margin (0.4 m), a little north
+    for vx, vy in ((0.0, 2.0), (-2.0, 0.0), (-1.0, 1.0), (0.0, -2.0)):  # past it to the north or south, away
+        assert database.speed_limit(0.0, 0.0, 0.0, vx, vy, now=1.0) == math.inf, (vx, vy)
+        assert database.obstacle_ahead(0.0, 0.0, 0.0, vx, vy, now=1.0) is None, (vx, vy)
+    for vx, vy in ((2.0, 0.0), (1.0, 1.0), (1.0, -1.0)):  # towards it
+        assert database.speed_limit(0.0, 0.0, 0.0, vx, vy, now=1.0) == 0.0, (vx, vy)
+        assert database.obstacle_ahead(0.0, 0.0, 0.0, vx, vy, now=1.0)[1:] == (0.35, 0.02), (vx, vy)
+
+
+def test_an_echo_the_corridor_only_grazes_holds_nothing_back():
+    """Passing an echo that comes no more than GRAZE inside the margin is free; one further inside caps the
+    speed so the vehicle stops a margin short of it."""
+    corridor = 0.3 + MARGIN
+    database = ObstacleDatabase(margin=MARGIN, accel=2.5, body_radius=0.3)
+    database.add(corridor - GRAZE + 0.005, 1.5, 0.0, time=0.0)
+    assert database.speed_limit(0.0, 0.0, 0.0, 0.0, 2.0, now=1.0) == math.inf
+    database.add(corridor - GRAZE - 0.005, 1.5, 0.0, time=0.0)
+    capped = math.sqrt(2 * 2.5 * (1.5 - corridor))
+    assert database.speed_limit(0.0, 0.0, 0.0, 0.0, 2.0, now=1.0) == pytest.approx(capped)
+    assert database.obstacle_ahead(0.0, 0.0, 0.0, 0.0, 2.0, now=1.0)[1] == corridor - GRAZE - 0.005
 
 
 def test_rtl_rover_returns_home_and_holds(flat_scene):

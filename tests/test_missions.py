@@ -207,6 +207,17 @@ def test_search_moves_away_detects_more_than_browse_and_gets_home(scene_of):
     assert home_distance(search) < 0.5
 
 
+def test_a_rover_stopped_within_the_margin_of_an_echo_gets_home(castle_path):
+    """In the castle (from (-40, 0), three sonars) Search ends with the rover stopped right beside something
+    low, within the autopilot's avoidance margin of its echoes. Home lies the other way, yet avoidance held it
+    back (an echo lay a hair ahead of its side) and the agent gave up "blocked", holding position."""
+    result = run_experiment(Experiment(str(castle_path), "search", "rover", (-40.0, 0.0), None, Settings(),
+                                       sensors="triple"))
+    assert result["outcome"] == "finished", result["reason"]
+    assert not [text for text in result["messages"] if text.startswith("Homing:")], result["messages"]
+    assert math.dist(result["final_position"][:2], (-40.0, 0.0)) < 1.0, result["final_position"]
+
+
 def test_search_with_a_short_time_limit_heads_home_in_time(scene_of):
     result = fly(scene_of(*SEARCH_SCENE), "search", time_limit=80)
     assert result["outcome"] == "finished", result["reason"]

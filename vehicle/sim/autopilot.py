@@ -47,6 +47,7 @@ RTL_ALTITUDE = 15.0  # m above home a copter climbs to before flying home (ArduP
 AIRBORNE = 0.05  # m above its resting height from which a copter counts as flying
 TAKEOFF_REACHED = 0.1  # m: a GUIDED take-off this close to its height is done
 STOPPED_FOR = 1.0  # s held back by an obstacle before the autopilot says so
+SAME_STOP = 0.5  # m: held back again this close to a stop already told, on the way to the same place, is that stop
 
 
 @dataclass
@@ -95,7 +96,7 @@ class Autopilot:
         self._rtl_height: float | None = None  # the height RTL climbs to, set as RTL begins
         self._descending = False
         self._blocked_since: float | None = None
-        self._told_blocked = False  # this stop has been reported
+        self._told_stop: tuple[float, float, tuple[float, float]] | None = None  # the last stop told: x, y, its goal
         self.wanted = (0.0, 0.0)  # horizontal velocity navigation asked for, before avoidance
         self.destination: tuple[float, float] | None = None  # where navigation is taking the vehicle now
         self.blocked = False  # avoidance holds the vehicle back from an obstacle
@@ -329,16 +330,21 @@ class Autopilot:
             self._touchdown()
 
     def _tell_if_stopped(self) -> None:
-        """Say once, after STOPPED_FOR, that an obstacle holds the vehicle back from where it is going."""
+        """Say once, after STOPPED_FOR, that an obstacle holds the vehicle back from where it is going. A vehicle
+        that creeps a few millimetres on and stops again (a remembered echo overwritten by a newer one a hair
+        further) is still at the stop it told."""
+        pose = self.body.pose
+        told = self._told_stop
+        if told is not None and (told[2] != self.destination or math.dist(told[:2], (pose.x, pose.y)) >= SAME_STOP):
+            self._told_stop = told = None  # it left that stop, or is going elsewhere
         if not self.blocked or self.destination is None:
-            self._blocked_since, self._told_blocked = None, False
+            self._blocked_since = None
             return
         if self._blocked_since is None:
             self._blocked_since = self.time
-        if self._told_blocked or self.time - self._blocked_since < STOPPED_FOR:
+        if told is not None or self.time - self._blocked_since < STOPPED_FOR:
             return
-        self._told_blocked = True
-        pose = self.body.pose
+        self._told_stop = (pose.x, pose.y, self.destination)
         wanted_x, wanted_y = self.wanted
         found = self.avoidance.obstacle_ahead(pose.x, pose.y, pose.z, wanted_x, wanted_y, self.time)
         where = "" if found is None else f"obstacle {found[0]:.1f} m ahead at ({found[1]:.1f}, {found[2]:.1f}); "

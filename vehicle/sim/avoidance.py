@@ -8,6 +8,14 @@ the body may go there. Each echo keeps its height, as the database's points
 do: only those within ``BAND`` of the vehicle's height hold it back, so a
 copter that climbed (RTL climbs to its return height) flies over the walls it
 saw below.
+
+An echo holds the vehicle back when the line it wants to move along would bring
+the echo within the margin, and nearer than it is now, by more than ``GRAZE``.
+A vehicle that already stands within the margin of an echo (a rover stopped
+beside a kerb) may so move away from it or past it, as ArduPilot's avoidance
+lets a vehicle slide along what it is too close to; only moving towards it is
+held back. Without that, an echo right beside the body held back every
+direction with a little of "ahead" in it, and the vehicle stood there for good.
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ import numba
 import numpy as np
 
 MARGIN = 0.1  # m kept between the body and any remembered echo (planning keeps at least twice that)
+GRAZE = 0.05  # m: a move that brings an echo no nearer than this beyond the margin, or than it is now, is free
 BAND = 1.0  # m: echoes further above or below the vehicle are no obstacle to it (the ground, a roof, a wall far below)
 
 
@@ -73,7 +82,8 @@ class ObstacleDatabase:
         live = (self._times > now - self.lifetime) & (np.abs(self._points[:, 2] - z) <= BAND)
         dx, dy = self._points[live, 0] - x, self._points[live, 1] - y
         ahead = dx * ux + dy * uy
-        inside = (ahead > 0) & (np.abs(dx * uy - dy * ux) < self.body_radius + self.margin)
+        corridor = self.body_radius + self.margin
+        inside = (ahead > 0) & _in_the_way.py_func(np.abs(dx * uy - dy * ux), np.hypot(dx, dy), corridor)
         if not inside.any():
             return None
         k = np.flatnonzero(inside)[np.argmin(ahead[inside])]
@@ -97,6 +107,14 @@ def _nearest_and_ahead(points, times, oldest, x, y, z, ux, uy, reach, corridor):
         if distance >= reach or abs(points[k, 2] - z) > BAND:
             continue
         ahead = dx * ux + dy * uy
-        if ahead > 0 and abs(dx * uy - dy * ux) < corridor:
+        if ahead > 0 and _in_the_way(abs(dx * uy - dy * ux), distance, corridor):
             gap = min(gap, ahead - corridor)
     return nearest, gap
+
+
+@numba.njit(cache=True)
+def _in_the_way(passing, distance, corridor):
+    """Whether an echo now ``distance`` away, which the line passes ``passing`` from, holds the vehicle back:
+    the line brings it within the corridor (body radius plus margin) and nearer than it is now, each by more
+    than ``GRAZE``. Arrays too, as ``_in_the_way.py_func``."""
+    return passing < np.minimum(corridor, distance) - GRAZE
