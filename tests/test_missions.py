@@ -10,11 +10,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20.ardupilotmega import MAV_SEVERITY_WARNING
 
 import vehicle.agent.missions as missions_package
 from vehicle.agent.agent import Phase
 from vehicle.agent.missions import MISSIONS, mission_class
-from vehicle.agent.missions.base import Context, Mission
+from vehicle.agent.missions.base import Context, Mission, Status
 from vehicle.agent.missions.square import square_corners
 from vehicle.agent.monitor import Monitor
 from vehicle.agent.settings import Settings
@@ -216,6 +217,36 @@ def test_a_rover_stopped_within_the_margin_of_an_echo_gets_home(castle_path):
     assert result["outcome"] == "finished", result["reason"]
     assert not [text for text in result["messages"] if text.startswith("Homing:")], result["messages"]
     assert math.dist(result["final_position"][:2], (-40.0, 0.0)) < 1.0, result["final_position"]
+
+
+@pytest.mark.parametrize("vehicle", ["copter", "rover"])
+def test_a_vehicle_that_cannot_get_home_holds_where_it_is_and_warns(scene_of, vehicle):
+    """When the way home gives up (blocked, no known path), the operator must bring the vehicle home: the agent
+    holds it where it is and says so as a warning (it was mere information)."""
+    flight = Flight(scene_of(), "pathfind", vehicle, waypoints=[(0.0, 8.0)])
+    travel = None
+
+    def on_the_way_home():
+        nonlocal travel
+        travel = flight.agent._travel if flight.agent.phase is Phase.HOMING else None
+        return travel is not None and travel.path and flight.world.body.speed > 1.0
+
+    assert flight.run(60.0, until=on_the_way_home)
+
+    def give_up():
+        travel.reason = "blocked at the test's say-so"
+        return Status.STOPPED
+
+    travel.step = give_up
+    flight.run(1.0)
+    stopped_at = flight.xy
+    assert flight.agent.done and flight.agent.outcome == "stopped"
+    assert "could not get home: blocked at the test's say-so" in flight.agent.reason
+    flight.run(15.0)
+    assert math.dist(flight.xy, stopped_at) < 1.0 and math.dist(flight.xy, (0.0, 0.0)) > 3.0, flight.xy
+    assert flight.world.autopilot.mode == "GUIDED" and flight.world.autopilot.armed
+    told = [(severity, text) for severity, text in flight.agent.outbox if text.startswith("Homing:")]
+    assert told == [(MAV_SEVERITY_WARNING, "Homing: blocked at the test's say-so; holding position")]
 
 
 def test_search_with_a_short_time_limit_heads_home_in_time(scene_of):

@@ -283,8 +283,8 @@ class Agent:
         status = travel.too_close() if self.ctx.observation.too_close else travel.step()
         if status is Status.RUNNING:
             return
-        if status is Status.STOPPED:
-            self.say(f"Homing: {travel.reason}; holding position")
+        if status is Status.STOPPED:  # the operator must bring it home now: a warning, not news
+            self.say(f"Homing: {travel.reason}; holding position", mavlink.MAV_SEVERITY_WARNING)
             self.outcome = "stopped"
             self.reason = f"{self.reason}; could not get home: {travel.reason}"
             self.mission.stop()
