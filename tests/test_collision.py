@@ -390,6 +390,15 @@ def test_world_refuses_a_rover_start_overlapping_a_box(make_scene, box):
         Simulation(scene, Kind.ROVER, start=(0.0, 0.0))
 
 
+@pytest.mark.parametrize("start", [(1e9, 0.0), (0.0, -100_001.0), (0.0, 0.0, 1e6), (math.nan, 0.0)])
+def test_world_refuses_a_start_far_from_the_scene(wall_scene, start):
+    """A scene is local metres: a start a million kilometres out made a vehicle whose telemetry overflowed
+    MAVLink's integer positions (a struct.error traceback from ``vehicle sim --start 1e9,0``)."""
+    with pytest.raises(PlacementError, match="more than 100 km from the scene's origin"):
+        Simulation(wall_scene, Kind.COPTER, start=start)
+    Simulation(wall_scene, Kind.COPTER, start=(-99_000.0, 99_000.0))  # far, and still a place
+
+
 def test_world_accepts_a_start_just_clear_of_a_wall(wall_scene):
     Simulation(wall_scene, Kind.COPTER, start=(0.0, WALL_FACE_Y - RADIUS - 0.05))
 

@@ -197,3 +197,9 @@ def test_cli_sweep_refuses_unknown_names_and_bad_values_before_any_run(scene_pat
 def test_a_scene_start_that_is_no_point_is_refused_before_any_run(spec):
     with pytest.raises(ValueError, match="--scene wants FILE or FILE@X,Y"):
         SweepSpec(["browse"], [spec])
+
+
+def test_a_scene_start_far_from_the_scene_is_refused_before_any_run():
+    with pytest.raises(ValueError, match="more than 100 km from the scene's origin"):
+        SweepSpec(["browse"], ["x.wrl@1e9,0"])
+    SweepSpec(["browse"], ["x.wrl@-99000,99000"])  # far, and still a place

@@ -24,6 +24,7 @@ from tqdm import tqdm
 from vehicle.agent.settings import Settings, SettingsError, load_settings
 from vehicle.lab.experiment import Experiment, run_experiment
 from vehicle.lab.presets import THESIS_TABLE
+from vehicle.sim.simulation import FARTHEST_START
 from vehicle.world.scene import Scene, load_scene
 
 
@@ -82,6 +83,9 @@ def scene_start(spec: str) -> tuple[float, float]:
         x = y = math.nan
     if not (math.isfinite(x) and math.isfinite(y)):
         raise ValueError(f"--scene wants FILE or FILE@X,Y with X and Y in scene metres, not {spec!r}")
+    if max(abs(x), abs(y)) > FARTHEST_START:
+        raise ValueError(f"--scene {spec!r}: the start lies more than {FARTHEST_START / 1000:g} km from the "
+                         "scene's origin")
     return x, y
 
 

@@ -32,6 +32,7 @@ from vehicle.world.suites import DEFAULT_SUITE, sensor_suite
 DEFAULT_STEP = 0.05  # s
 SONAR_RATE = 10.0  # Hz: readings per second, as long-range ultrasonic sensors manage
 STEP_HEIGHT = 0.5  # m: a rover climbs onto surfaces at most this far above its wheels
+FARTHEST_START = 100_000.0  # m from the scene's origin: a scene is local metres, and telemetry's positions overflow
 
 
 class PlacementError(ValueError):
@@ -56,6 +57,9 @@ class Simulation:
         self.caster = scene.prepared(("caster", backend), lambda: RayCaster(scene, backend))
         self.limits = limits or Limits()
         x, y, *height = start if start is not None else (scene.start or (0.0, 0.0))
+        if not all(abs(v) <= FARTHEST_START for v in (x, y, *height)):  # NaN too
+            raise PlacementError(f"the start {', '.join(f'{v:g}' for v in (x, y, *height))} lies more than "
+                                 f"{FARTHEST_START / 1000:g} km from the scene's origin")
         heading = heading if heading is not None else (scene.start_heading or 0.0)
         ground = self.caster.ground_height(x, y)
         if height and ground > height[0]:  # a roof above the start height: stand on what is below it
