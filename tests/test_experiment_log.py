@@ -8,10 +8,15 @@ component.
 """
 
 import hashlib
+import os
+import signal
+import subprocess
+import sys
 from collections import defaultdict
 
 import numpy as np
 import pytest
+from harness import wait_wall
 
 from vehicle.cli import main
 from vehicle.protocol import agent_status
@@ -263,3 +268,27 @@ def test_the_log_names_its_scene_at_its_start(logged, messages):
     digest = hashlib.sha256((logged / "yard.wrl").read_bytes()).hexdigest()[:16]
     assert notes and all(m.text == f"scene yard.wrl sha256 {digest}" for _, m in notes)
     assert notes[0][0] == pytest.approx(LOG_EPOCH, abs=0.1)  # before anything else that happened
+
+
+def test_ctrl_c_ends_a_logged_run_with_one_line_and_a_whole_log(tmp_path):
+    """A terminal's Ctrl-C reaches the whole process group, the log's forked writer too: it printed a
+    traceback, and the run 'Connection reset by peer' with exit code 2 and a log cut anywhere. Now the writer
+    leaves Ctrl-C to the run, which closes the log: what was flown so far is in it, every message whole."""
+    log = tmp_path / "run.tlog"
+    run = subprocess.Popen([sys.executable, "-m", "vehicle.cli", "experiment", "--mission", "pathfind",
+                            "--set", "speed=0.1", "--set", "time_limit=86400", "--log", str(log)],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:  # a slow flight of a day's simulated time: the writer has written for a while when Ctrl-C comes
+        wait_wall(lambda: log.exists() and log.stat().st_size > 1_000_000, 120, "the log growing")
+        os.killpg(run.pid, signal.SIGINT)
+        out, err = run.communicate(timeout=60)
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+    assert run.returncode == 130, err
+    assert err.strip() == "vehicle experiment: interrupted"
+    connection = mavutil.mavlink_connection(str(log))
+    kinds = defaultdict(int)
+    while (message := connection.recv_match()) is not None:
+        kinds[message.get_type()] += 1
+    assert kinds["GLOBAL_POSITION_INT"] > 100 and kinds["DISTANCE_SENSOR"] > 100 and not kinds["BAD_DATA"], kinds

@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import queue
+import signal
 import struct
 import threading
 import zlib
@@ -438,6 +439,10 @@ class _Forked:
 
 
 def _serve(setup: tuple, connection) -> None:
+    """The writer's loop. A terminal's Ctrl-C reaches the whole process group: the writer leaves it to the run,
+    which closes the log, so that what was sent is written and the log ends whole (interrupted, the writer
+    printed a traceback and the run a 'connection reset')."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     writer = _Writer(*setup)
     while (batch := connection.recv()) is not None:
         writer.write(batch)
