@@ -15,7 +15,7 @@ from contextlib import contextmanager
 
 import numpy as np
 import pytest
-from harness import RunningSim, free_udp_port, wait_wall
+from harness import RunningSim, free_tcp_port, free_udp_port, wait_wall
 from mavlink_gcs import COMPANION, Gcs
 
 from vehicle.agent.settings import Settings
@@ -579,6 +579,21 @@ def endpoint_alone(scene, log: TlogWriter | None = None):
     finally:
         gcs.close()
         endpoint.close()
+
+
+def test_messages_made_while_the_only_link_is_down_count_as_unsent(scene):
+    """A vehicle whose one link (a TCP station not listening) is down said at the end that it had sent
+    everything it made."""
+    world = Simulation(scene, Kind.COPTER)
+    endpoint = Endpoint([f"tcp:127.0.0.1:{free_tcp_port()}"], world, Telemetry(world))
+    try:
+        endpoint.send([endpoint.telemetry.heartbeat(0.0)] * 3, now=0.0)
+        assert endpoint.stats == {"unsent (no link up)": 3}
+    finally:
+        endpoint.close()
+    with endpoint_alone(scene) as (endpoint, _, _gcs):  # a UDP listener is up from the start
+        endpoint.send([endpoint.telemetry.heartbeat(0.0)] * 2, now=0.0)
+        assert endpoint.stats == {"sent": 2}
 
 
 def gcs_heard(endpoint, gcs, now: float) -> None:

@@ -127,7 +127,8 @@ class Endpoint:
 
     # ---- sending -------------------------------------------------------------------------------
     def send(self, messages: list, now: float, component: int = AUTOPILOT) -> None:
-        """Send as the autopilot, or as the onboard computer (its ``component``)."""
+        """Send as the autopilot, or as the onboard computer (its ``component``). Counted as sent only while a
+        link is up: a vehicle whose only link is down sends nothing, and its summary should not say otherwise."""
         packer = self.packers[component]
         for message in messages:
             packet = pack(message, packer)
@@ -138,7 +139,7 @@ class Endpoint:
                     self.stats["send errors"] += 1
             if self.log is not None:
                 self.log.write(packet, now)
-        self.stats["sent"] += len(messages)
+        self.stats["sent" if any(link.up for link in self.links) else "unsent (no link up)"] += len(messages)
 
     # ---- receiving -----------------------------------------------------------------------------
     def poll(self, now: float) -> None:
