@@ -751,6 +751,35 @@ def test_forced_disarm_in_the_air_makes_a_copter_fall_to_the_ground(flat_scene):
     assert not world.autopilot.flying
 
 
+def test_a_copter_killed_on_its_way_and_armed_again_stays_on_the_ground_until_a_take_off(flat_scene):
+    """Armed again after a kill, the copter took off by itself and flew on to the target it had been given
+    before (the operator pressed Arm, and it left). Arming drops old targets, and as in ArduCopter's GUIDED a
+    copter on the ground leaves it only by a take-off."""
+    world = armed_copter(flat_scene)
+    assert world.autopilot.goto(20.0, 0.0, ALTITUDE) == ACCEPTED
+    world.run_for(2.0)
+    world.autopilot.disarm(force=True)
+    world.run_for(3.0)  # it fell
+    fallen = world.pose.xyz()
+    assert world.autopilot.arm() == ACCEPTED
+    world.run_for(5.0)
+    assert world.pose.xyz() == pytest.approx(fallen, abs=1e-3) and not world.autopilot.flying
+    assert world.autopilot.takeoff(ALTITUDE) == ACCEPTED
+    world.run_for(ALTITUDE / world.limits.climb_rate + 3.0)
+    assert world.pose.z == pytest.approx(ALTITUDE, abs=0.15) and world.pose.x == pytest.approx(fallen[0])
+
+
+def test_a_guided_target_does_not_lift_a_copter_off_the_ground(flat_scene):
+    """As in ArduCopter: a position or velocity target given on the ground waits for a take-off."""
+    world = Simulation(flat_scene, Kind.COPTER)
+    assert world.autopilot.arm() == ACCEPTED
+    assert world.autopilot.goto(5.0, 5.0, ALTITUDE) == ACCEPTED
+    world.run_for(5.0)
+    assert world.autopilot.set_velocity(1.0, 0.0, 1.0) == ACCEPTED
+    world.run_for(1.0)
+    assert world.pose.xyz() == pytest.approx((0.0, 0.0, REST_Z), abs=1e-3) and not world.autopilot.flying
+
+
 # ---- ground following, determinism, avoidance ----------------------------------------------------
 
 

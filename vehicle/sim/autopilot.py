@@ -148,6 +148,7 @@ class Autopilot:
             return FAILED
         self.armed = True
         self._altitude_goal = None
+        self.clear_targets()  # a target from before a disarm (a kill in the air) is no order to fly now
         self.hold_here()
         self.say("Arming motors")
         return ACCEPTED
@@ -400,6 +401,8 @@ class Autopilot:
         return max(-climb, min(climb, 2.0 * (z - self.body.pose.z)))
 
     def _guided(self, dt):
+        if self.kind is Kind.COPTER and not self.flying:  # as ArduCopter: on the ground only a take-off lifts it
+            return 0.0, 0.0, 0.0, None
         if self._velocity is not None:
             vx, vy, vz, expiry = self._velocity
             if self.time > expiry:
