@@ -28,6 +28,7 @@ from vehicle.lab.experiment import Experiment, run_experiment
 from vehicle.protocol import links
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import mavlink
+from vehicle.protocol.modes import DISARMED
 from vehicle.protocol.signing import load_key
 from vehicle.world.scene import load_scene
 
@@ -320,6 +321,7 @@ class ScriptedAutopilot:
         self.late_acks: list[tuple[int, int]] = []
         self.attitude = (0.0, 0.0, 0.5)
         self.mode = 4  # copter GUIDED, as its heartbeat says
+        self.base_mode = 217  # armed (MAV_MODE_FLAG_SAFETY_ARMED), custom mode, guided, stabilized
         self.beating = True
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -340,7 +342,7 @@ class ScriptedAutopilot:
             ms = int((time.monotonic() - started) * 1000)
             mav = self.link.mav
             if self.beating:
-                mav.heartbeat_send(self.mav_type, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 217, self.mode,
+                mav.heartbeat_send(self.mav_type, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, self.base_mode, self.mode,
                                    mavlink.MAV_STATE_ACTIVE)
                 mav.global_position_int_send(ms, int(lat * 1e7), int(lon * 1e7), 584000, 4000, 0, 0, 0, 0)
                 mav.attitude_send(ms, *self.attitude, 0, 0, 0)
@@ -351,7 +353,7 @@ class ScriptedAutopilot:
                 self.received.append(message)
                 if message.get_type() == "COMMAND_LONG" and message.command == mavlink.MAV_CMD_REQUEST_MESSAGE \
                         and message.param1 == mavlink.MAVLINK_MSG_ID_HEARTBEAT:  # as ArduPilot: one now, beating or not
-                    mav.heartbeat_send(self.mav_type, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 217, self.mode,
+                    mav.heartbeat_send(self.mav_type, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, self.base_mode, self.mode,
                                        mavlink.MAV_STATE_ACTIVE)
                 if message.get_type() == "COMMAND_LONG" or message.get_type() == "COMMAND_INT":
                     result = self.answer.get(message.command, mavlink.MAV_RESULT_ACCEPTED)
@@ -417,6 +419,27 @@ def test_a_mode_change_the_autopilot_announced_as_a_failsafe_is_the_failsafes(sa
             wait_wall(lambda: any(m.get_type() == "STATUSTEXT" for m in fc.pump()), 5, "the autopilot's text")
         fake.mode = 6  # RTL
         assert wait_wall(lambda: fc.pump() is not None and fc.took_over(), 5, "the mode change noticed") == reason
+
+
+def test_a_disarm_in_guided_is_a_takeover_and_the_autopilots_own_after_landing_is_not():
+    """The agent never disarms the vehicle in GUIDED: a disarm there is someone else's (an operator's kill).
+    The agent learnt of it only from the refusals of its next targets ("do_reposition temporarily rejected").
+    A disarm after the LAND the agent asked for is the autopilot's own."""
+    disarmed = 217 & ~mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    with controller() as (fc, fake):
+        fc.connect(10)
+        assert fc.set_mode("GUIDED") == mavlink.MAV_RESULT_ACCEPTED
+        wait_wall(lambda: pumped(fc) and fc.armed, 5, "armed")
+        fake.base_mode = disarmed
+        assert wait_wall(lambda: pumped(fc) and fc.took_over(), 5, "the disarm noticed") == DISARMED
+        fake.base_mode = 217
+        wait_wall(lambda: pumped(fc) and fc.armed, 5, "armed again")
+        assert fc.set_mode("LAND") == mavlink.MAV_RESULT_ACCEPTED
+        fake.mode = 9  # LAND
+        wait_wall(lambda: pumped(fc) and fc.mode == "LAND", 5, "in LAND")
+        fake.base_mode = disarmed
+        wait_wall(lambda: pumped(fc) and not fc.armed, 5, "disarmed after landing")
+        assert fc.took_over() is None
 
 
 def test_a_target_refused_because_an_operator_just_switched_mode_pauses_for_the_operator():

@@ -23,6 +23,7 @@ from vehicle.lab.experiment import Experiment, _fly, run_experiment
 from vehicle.lab.stepper import simulate
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.mapping.planner import UNSEEN_EXTENT
+from vehicle.protocol.modes import DISARMED
 from vehicle.sim.onboard import SimController
 from vehicle.sim.physics import Limits
 from vehicle.sim.simulation import Simulation
@@ -247,6 +248,28 @@ def test_a_vehicle_that_cannot_get_home_holds_where_it_is_and_warns(scene_of, ve
     assert flight.world.autopilot.mode == "GUIDED" and flight.world.autopilot.armed
     told = [(severity, text) for severity, text in flight.agent.outbox if text.startswith("Homing:")]
     assert told == [(MAV_SEVERITY_WARNING, "Homing: blocked at the test's say-so; holding position")]
+
+
+def test_a_kill_in_flight_pauses_the_agent_once_saying_so(scene_of):
+    """Disarmed in GUIDED by someone else (an operator's kill), the agent stops commanding and says why, once."""
+    flight = Flight(scene_of(), "pathfind", waypoints=[(0.0, 8.0)])
+    assert flight.run(30.0, until=lambda: flight.world.body.speed > 1.0)
+    assert flight.world.autopilot.disarm(force=True) == 0
+    flight.run(5.0)
+    assert flight.agent.paused and flight.agent.pause_reason == DISARMED
+    assert [text for text in flight.agent.messages if text.startswith("Agent: paused")] == [
+        f"Agent: paused, {DISARMED}"]
+
+
+def test_a_pause_for_the_same_reason_is_said_once(scene_of):
+    """Two targets the agent sent before it paused, both refused for one reason, paused it twice over MAVLink:
+    the operator saw the same warning twice. A new reason is news."""
+    agent = Flight(scene_of(), "browse").agent
+    for reason in ("flight controller: do_reposition temporarily rejected",) * 2 + ("operator switched to RTL",):
+        agent.pause(reason)
+    assert [text for text in agent.messages if text.startswith("Agent: paused")] == [
+        "Agent: paused, flight controller: do_reposition temporarily rejected",
+        "Agent: paused, operator switched to RTL"]
 
 
 def test_search_with_a_short_time_limit_heads_home_in_time(scene_of):

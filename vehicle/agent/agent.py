@@ -123,7 +123,10 @@ class Agent:
                 and not (self.fc.flying and self.fc.armed))
 
     def pause(self, reason: str) -> None:
-        """Stop commanding until resumed: someone took over, or the flight controller refused or went silent."""
+        """Stop commanding until resumed: someone took over, or the flight controller refused or went silent.
+        Said once: several requests sent before the pause may be refused for the same reason."""
+        if self.paused and reason == self.pause_reason:
+            return
         self.paused = True
         self.pause_reason = reason
         self.say(f"Agent: paused, {reason}", mavlink.MAV_SEVERITY_WARNING)

@@ -29,7 +29,7 @@ from vehicle.protocol.frames import Navigation, Pose
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
 from vehicle.protocol.mav import COMMAND_NAMES, RESULT_WORDS, mavlink, mavutil
 from vehicle.protocol.mission import MissionItem, MissionProgress
-from vehicle.protocol.modes import Kind
+from vehicle.protocol.modes import DISARMED, Kind
 from vehicle.protocol.rangefinder import Reading, Servo, reading_from, readings_from_obstacles
 
 COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
@@ -217,8 +217,10 @@ class MavlinkController:
     def _on_heartbeat(self, m) -> None:
         self._heard = time.monotonic()
         self._lost_reported = False
-        self._armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        was_armed, self._armed = self._armed, bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         mode = (mavutil.mode_mapping_bynumber(m.type) or {}).get(m.custom_mode, f"MODE{m.custom_mode}")
+        if was_armed and not self._armed and mode == "GUIDED":  # the agent never disarms: a kill
+            self._events.append(DISARMED)
         if mode == self._mode:
             return
         was, self._mode = self._mode, mode

@@ -43,3 +43,7 @@ def mode_name(kind: Kind, number: int) -> str | None:
         if value == number:
             return name
     return None
+
+# What a flight controller tells its agent when the vehicle was disarmed in GUIDED: the agent never disarms
+# it there, so someone else did (an operator's kill), and the agent stops commanding.
+DISARMED = "the vehicle was disarmed"

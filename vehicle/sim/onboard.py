@@ -17,6 +17,7 @@ from vehicle.protocol.frames import Navigation, Pose
 from vehicle.protocol.geodesy import heading_of
 from vehicle.protocol.mav import COMMAND_NAMES, RESULT_WORDS, mavlink
 from vehicle.protocol.mission import MissionItem, MissionProgress
+from vehicle.protocol.modes import DISARMED
 from vehicle.protocol.rangefinder import Reading
 from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.sim.simulation import Simulation
@@ -40,6 +41,7 @@ class SimController:
         self._mode_changes = pilot.mode_changes
         self._overrides = pilot.overrides
         self._refused: str | None = None  # the latest request the autopilot refused, in words
+        self._armed = pilot.armed  # as last looked at: a disarm in GUIDED is someone else's (a kill)
 
     def collect(self, readings: list[Reading]) -> None:
         """Readings the simulation took this step (the stepper hands them over)."""
@@ -110,6 +112,9 @@ class SimController:
         if pilot.overrides != self._overrides:
             self._overrides = pilot.overrides
             what = what or f"operator {pilot.override}"
+        if self._armed and not pilot.armed and pilot.mode == "GUIDED":
+            what = what or DISARMED
+        self._armed = pilot.armed
         what, self._refused = what or self._refused, None
         return what
 
