@@ -442,6 +442,21 @@ def test_a_disarm_in_guided_is_a_takeover_and_the_autopilots_own_after_landing_i
         assert fc.took_over() is None
 
 
+def test_a_target_refused_because_the_vehicle_was_just_disarmed_pauses_for_the_disarm():
+    """A kill crossing the agent's target: the refusal came before the heartbeat that tells of the disarm,
+    and the agent paused for the refusal ("condition_yaw temporarily rejected") and only then for the disarm,
+    which its state then did not show."""
+    with controller() as (fc, fake):
+        fc.connect(10)
+        assert fc.set_mode("GUIDED") == mavlink.MAV_RESULT_ACCEPTED
+        wait_wall(lambda: pumped(fc) and fc.armed, 5, "armed")
+        fake.answer[mavlink.MAV_CMD_DO_REPOSITION] = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+        fake.beating, fake.base_mode = False, 217 & ~mavlink.MAV_MODE_FLAG_SAFETY_ARMED  # disarmed, not yet told
+        assert fc.goto(6.0, 6.0) == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+        assert fc.took_over() == DISARMED
+        assert fc.took_over() is None and fc.problems == 0
+
+
 def test_a_target_refused_because_an_operator_just_switched_mode_pauses_for_the_operator():
     """The operator's RTL reaches the autopilot as the agent sends a target: the autopilot refuses the target
     (not GUIDED any more) before its next heartbeat says RTL. The agent asks for a heartbeat, and pauses for the

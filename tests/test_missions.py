@@ -261,6 +261,23 @@ def test_a_kill_in_flight_pauses_the_agent_once_saying_so(scene_of):
         f"Agent: paused, {DISARMED}"]
 
 
+def test_a_rover_disarmed_mid_mission_is_armed_again_by_resume_and_carries_on(scene_of):
+    """Resumed after a disarm, the rover's agent sent its targets to a disarmed vehicle, was refused, and paused
+    again at once. Resume now arms it (as it takes a landed copter up again) and the mission carries on where it
+    was, not from its start."""
+    flight = Flight(scene_of(), "pathfind", "rover", waypoints=[(0.0, 8.0), (8.0, 8.0)])
+    assert flight.run(60.0, until=lambda: math.dist(flight.xy, (0.0, 8.0)) < 2.5)
+    assert flight.world.autopilot.disarm() == 0
+    flight.run(2.0)
+    assert flight.agent.paused and flight.agent.pause_reason == DISARMED
+    assert flight.agent.resume()
+    assert flight.run(60.0, until=lambda: flight.agent.done), flight.agent.messages
+    assert flight.agent.outcome == "finished", flight.agent.reason
+    assert [text for text in flight.agent.messages if "pathfind: start" in text] == ["Mission pathfind: start"]
+    assert [text for text in flight.agent.messages if text.startswith("Agent: paused")] == [
+        f"Agent: paused, {DISARMED}"]
+
+
 def test_a_pause_for_the_same_reason_is_said_once(scene_of):
     """Two targets the agent sent before it paused, both refused for one reason, paused it twice over MAVLink:
     the operator saw the same warning twice. A new reason is news."""

@@ -103,7 +103,7 @@ class Agent:
             self.ctx.planned_path = []
         self.fc.took_over()  # the operator's own switch back is the hand-back, not a takeover
         self.say("Agent: resuming mission")
-        if self._landed_meanwhile():  # an operator's RTL or LAND brought it down: up again first
+        if self._down_meanwhile():  # an operator's RTL, LAND or kill brought it down or disarmed it: up again first
             self._relaunch = self.phase
             self.phase = Phase.PREFLIGHT
             return True
@@ -118,9 +118,9 @@ class Agent:
             self._travel.resume()
         return True
 
-    def _landed_meanwhile(self) -> bool:
-        return (self.fc.kind is Kind.COPTER and self.phase in (Phase.MISSION, Phase.HOMING)
-                and not (self.fc.flying and self.fc.armed))
+    def _down_meanwhile(self) -> bool:
+        return (self.phase in (Phase.MISSION, Phase.HOMING)
+                and not (self.fc.armed and (self.fc.kind is Kind.ROVER or self.fc.flying)))
 
     def pause(self, reason: str) -> None:
         """Stop commanding until resumed: someone took over, or the flight controller refused or went silent.
@@ -224,15 +224,19 @@ class Agent:
         self._set_mode("GUIDED")
         fc.arm()
         if fc.kind is Kind.ROVER or (fc.flying and not fc.taking_off):
-            self._start_mission()
+            self._carry_on()
             return
         if not fc.taking_off:
             fc.takeoff(self.settings.altitude)
         self.phase = Phase.TAKEOFF
 
     def _takeoff(self, now: float) -> None:
-        if not (self.fc.flying and not self.fc.taking_off):
-            return
+        if self.fc.flying and not self.fc.taking_off:
+            self._carry_on()
+
+    def _carry_on(self) -> None:
+        """Ready to go (armed, and a copter in the air): start the mission, or go back to where an operator
+        interrupted it."""
         relaunched, self._relaunch = self._relaunch, None
         if relaunched is None:
             self._start_mission()

@@ -424,17 +424,17 @@ class MavlinkController:
                 continue
             if result != NO_ANSWER:
                 break
-        if report and result not in (ACCEPTED, UNSUPPORTED) and not self._refused_for_a_new_mode(result):
+        if report and result not in (ACCEPTED, UNSUPPORTED) and not self._refused_for_a_takeover(result):
             self._problem(f"flight controller: {COMMAND_NAMES.get(command, command)} {RESULTS.get(result, result)}")
         return result
 
-    def _refused_for_a_new_mode(self, result: int) -> bool:
-        """A command "temporarily rejected" may be refused only because an operator changed the mode a moment
-        ago, which the autopilot's next heartbeat (1 Hz) would tell. Ask for one now: then the agent pauses
-        for the operator's takeover, not for the refusal it caused."""
+    def _refused_for_a_takeover(self, result: int) -> bool:
+        """A command "temporarily rejected" may be refused only because an operator changed the mode (or
+        disarmed the vehicle) a moment ago, which the autopilot's next heartbeat (1 Hz) would tell. Ask for one
+        now: then the agent pauses for the operator's takeover, not for the refusal it caused."""
         if result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED or self._wanted_mode is None:
             return False
-        if self._mode != self._wanted_mode:  # the heartbeat that tells came before the refusal
+        if self._mode != self._wanted_mode or DISARMED in self._events:  # the heartbeat that tells came first
             return True
         heard = self._heard
         self.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT, report=False)
@@ -442,7 +442,7 @@ class MavlinkController:
         while self._heard == heard and time.monotonic() < deadline:
             self.pump()
             time.sleep(0.002)
-        return self._mode != self._wanted_mode
+        return self._mode != self._wanted_mode or DISARMED in self._events
 
     def _problem(self, text: str) -> None:
         self.problems += 1
