@@ -278,6 +278,21 @@ def test_a_rover_disarmed_mid_mission_is_armed_again_by_resume_and_carries_on(sc
         f"Agent: paused, {DISARMED}"]
 
 
+def test_an_auto_mission_landed_on_its_way_home_goes_home_when_resumed(scene_of):
+    """Square (an AUTO mission) ended and its copter flew home in GUIDED; an operator landed it on the way. The
+    resume took it up and flew the whole square again, as if the mission had just begun."""
+    flight = Flight(scene_of(), "square")
+    assert flight.run(200.0, until=lambda: flight.agent.phase is Phase.HOMING and flight.world.body.speed > 1.0)
+    assert flight.world.autopilot.set_mode("LAND") == 0
+    assert flight.run(30.0, until=lambda: not flight.world.autopilot.armed)
+    assert flight.agent.paused and flight.agent.resume()
+    assert flight.run(120.0, until=lambda: flight.agent.done), flight.agent.messages
+    assert [text for text in flight.agent.messages if text.startswith("Mission square: finished")] == [
+        "Mission square: finished (mission complete); going home"]
+    assert flight.agent.outcome == "finished" and flight.world.autopilot.mode == "LAND"
+    assert math.dist(flight.xy, flight.world.home[:2]) < 1.0, flight.xy
+
+
 def test_a_pause_for_the_same_reason_is_said_once(scene_of):
     """Two targets the agent sent before it paused, both refused for one reason, paused it twice over MAVLink:
     the operator saw the same warning twice. A new reason is news."""

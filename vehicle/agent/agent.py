@@ -213,7 +213,7 @@ class Agent:
 
     def _preflight(self, now: float) -> None:
         fc = self.fc
-        if self.mission.mode == "AUTO":  # the autopilot takes off by itself, where its mission starts
+        if self.mission.mode == "AUTO" and self._relaunch is not Phase.HOMING:  # the autopilot takes off itself
             self._relaunch = None
             self.mission.begin()
             self._set_mode("AUTO")
