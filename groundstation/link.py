@@ -18,7 +18,9 @@ With a signing key the station signs everything it sends and shows, per
 vehicle, whether its messages carry a valid signature; with
 ``require_signing`` it drops what is not signed with its key (such a vehicle
 is never shown; its system id and the messages dropped are in the health
-report).
+report). Without ``require_signing``, a system once heard signed stays signed: what
+comes unsigned (or wrongly signed) in its name afterwards is refused too, or an
+unsigned heartbeat from anywhere would take its route and its orders.
 """
 
 from __future__ import annotations
@@ -81,6 +83,7 @@ class Link:
         # keyed by the 8-bit system id (so at most 255 entries), and pruned after FORGET_AFTER of silence:
         self.route: dict[int, tuple] = {}  # sysid -> (the port its heartbeat came on, its address there, when)
         self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
+        self._signers: set[int] = set()  # systems heard signed with the key (8-bit ids: at most 255)
         self._pruned = 0.0
         self._waiters: list[_Waiter] = []
         self._lock = threading.Lock()
@@ -164,9 +167,11 @@ class Link:
         if message.get_type() == "BAD_DATA":
             self.stats["bad"] += 1
             return
+        sysid = message.get_srcSystem()
+        if not self._signed_as_before(port, message, sysid):
+            return
         self.stats["received"] += 1
         self._record(message.get_msgbuf(), now)
-        sysid = message.get_srcSystem()
         beat = message.get_type() == "HEARTBEAT" and message.get_srcComponent() == AUTOPILOT
         self._learn_route(sysid, port, getattr(message, "_peer", None), now, beat)
         self.fleet.apply(message, now)
@@ -183,6 +188,17 @@ class Link:
         for waiter in waiters:
             if waiter.sysid == sysid and waiter.accepts(message):
                 waiter.replies.put(message)
+
+    def _signed_as_before(self, port, message, sysid: int) -> bool:
+        """False (and counted with what its link refused) for a message not signed in the name of a system heard
+        signed before."""
+        verified = getattr(message, "_verified", None)  # None: the link has no key
+        if verified:
+            self._signers.add(sysid)
+        elif verified is False and sysid in self._signers and message.get_msgId() not in signing.UNSIGNED_ALLOWED:
+            port.refused[sysid] += 1
+            return False
+        return True
 
     def _learn_route(self, sysid: int, port, peer, now: float, beat: bool) -> None:
         """Where orders to a system go: where it was first heard, then where its autopilot's heartbeat last came

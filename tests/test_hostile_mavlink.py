@@ -316,6 +316,34 @@ def test_a_flood_in_a_vehicles_name_from_elsewhere_does_not_take_its_orders():
         link.close()
 
 
+def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_its_name():
+    """A station with a key that does not require signing let an unsigned heartbeat in a signed vehicle's name, from
+    anywhere, take its route: the operator's orders went to the sender of the heartbeat."""
+    port = free_udp_port()
+    fleet = Fleet()
+    link = Link([f"udpin:127.0.0.1:{port}"], fleet, signing_key=KEY).start()
+    try:
+        with Peer(("127.0.0.1", port), sysid=1, key=KEY) as vehicle, \
+                Peer(("127.0.0.1", port), sysid=1) as attacker, Peer(("127.0.0.1", port), sysid=2) as stranger:
+            vehicle.send(vehicle_heartbeat())
+            wait_wall(lambda: 1 in link.route and fleet.vehicles.get(1) is not None, 5, "the vehicle heard")
+            attacker.send(vehicle_heartbeat(), vehicle_heartbeat(), position())
+            stranger.send(vehicle_heartbeat())  # a vehicle never heard signed is still shown, as unsigned
+            wait_wall(lambda: 2 in link.route, 5, "the unsigned vehicle heard")
+            assert link.health()["signing"]["refused"] == [{"sysid": 1, "messages": 3}]
+            assert fleet.vehicles[1].signed is True and fleet.vehicles[2].signed is False
+            vehicle.receive(0.3), attacker.receive(0.3)  # what the station said before: its telemetry requests
+
+            def orders(peer):
+                return [m for m in peer.receive() if m.get_type() == "COMMAND_LONG"
+                        and m.command == mavlink.MAV_CMD_DO_SET_MODE]
+
+            link.send(command(mavlink.MAV_CMD_DO_SET_MODE, 1, 4), 1)
+            assert len(orders(vehicle)) == 1 and orders(attacker) == []
+    finally:
+        link.close()
+
+
 def test_the_links_routes_and_unfinished_texts_stay_bounded():
     link = Link([], Fleet())
     for sysid in range(1, 256):
