@@ -19,6 +19,7 @@ import io
 import math
 import threading
 import time
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -37,6 +38,10 @@ RATE = 30.0  # frames per second at most (poses); trails, sonar and maps far les
 SLOW_EVERY = 8  # trails, sonar, maps and labels every this many frames
 MAP_PIXELS = 512  # a map image is at most this many pixels a side
 LAYER_NODES = ("trails", "beams", "echoes", "paths", "waypoints")  # a vehicle's node in each of these layers
+
+# A viewer that closes its page is gone before viser tells us (``_gone``): a frame drawn in between updates its
+# handles, and viser drops the update, as it should, but warns on the station's terminal every time.
+warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning)
 
 
 def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:

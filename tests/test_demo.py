@@ -2,7 +2,8 @@
 
 Runs the real command as a user would (a subprocess on free ports) and stops it
 the way a service manager does, with SIGTERM: the vehicles must go down with it,
-or the next demo would meet an orphan flying on its port.
+or the next demo would meet an orphan flying on its port. The station's terminal
+stays quiet while it runs.
 """
 
 from __future__ import annotations
@@ -154,3 +155,25 @@ def test_ctrl_c_stops_the_demo_and_its_vehicles_quietly(tmp_path):
     finally:
         if process.poll() is None:
             process.kill()
+
+
+DRAWN_FOR_A_VIEWER_GONE = """
+import asyncio, sys
+if sys.argv[1] == "station":
+    import groundstation.viz
+from viser import _messages
+from viser.infra._async_message_buffer import AsyncMessageBuffer
+buffer = AsyncMessageBuffer(asyncio.new_event_loop(), persistent_messages=False)
+buffer.set_done()  # the viewer closed its page
+buffer.push(_messages.SetOrientationMessage(name="/x", wxyz=(1.0, 0.0, 0.0, 0.0)))  # a frame drawn meanwhile
+"""
+
+
+@pytest.mark.parametrize(("importer", "warned"), [("viser alone", True), ("station", False)])
+def test_a_frame_drawn_for_a_viewer_that_just_left_warns_nobody_on_the_stations_terminal(importer, warned):
+    """viser warns when a frame is queued for a closed connection: the station draws every viewer's frame, so a
+    viewer closing its page between two frames put a warning on the operator's terminal."""
+    done = subprocess.run([sys.executable, "-c", DRAWN_FOR_A_VIEWER_GONE, importer], capture_output=True, text=True,
+                          timeout=60, cwd=Path(__file__).resolve().parent.parent)
+    assert done.returncode == 0, done.stderr
+    assert ("on a closed connection" in done.stderr) is warned, done.stderr
