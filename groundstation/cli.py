@@ -256,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
     _server_options(replay)
     replay.set_defaults(run=cmd_replay)
 
-    args = parser.parse_args(argv)
+    args = parser.parse_args(options.glue_negative_points(sys.argv[1:] if argv is None else argv))
     from groundstation.replay import ReplayError
     from vehicle.world.scene import SceneError
 

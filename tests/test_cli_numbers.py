@@ -8,6 +8,7 @@ spots), a sweep of nothing (0 seeds).
 """
 
 import argparse
+import json
 
 import pytest
 
@@ -63,3 +64,21 @@ def test_the_checks_keep_what_is_good_and_say_what_they_wanted():
                                 (options.port, "0", "1 to 65535"), (options.whole(1), "x", "1 or more")]:
         with pytest.raises(argparse.ArgumentTypeError, match=wanted):
             parse(text)
+
+
+def test_a_point_west_of_the_origin_or_south_of_the_equator_is_a_value_not_an_option(capsys):
+    """``--start -40,0`` and ``--datum -35.36,149.17`` (ArduPilot's simulator home) were "expected one argument":
+    argparse takes ``-40,0`` for an option, as only a plain number may start with a minus sign."""
+    assert vehicle(["experiment", "--mission", "browse", "--start", "-5,-3", "--datum", "-35.363261,149.16523,584",
+                    "--json"]) == 0
+    flown = json.loads(capsys.readouterr().out)
+    assert flown["start"] == [-5.0, -3.0] and flown["outcome"] == "finished"
+    with pytest.raises(SystemExit):
+        vehicle(["experiment", "--mission", "browse", "--start", "-5"])
+    assert "argument --start: expected X,Y or X,Y,Z, not '-5'" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        groundstation(["serve", "--datum", "-91,0"])
+    assert "argument --datum:" in capsys.readouterr().err  # the value reached its check, not "expected one argument"
+    assert options.glue_negative_points(["--start", "-1,2", "--heading", "-90", "--datum", "-.5,1", "-h"]) == \
+        ["--start=-1,2", "--heading", "-90", "--datum=-.5,1", "-h"]
+    assert options.glue_negative_points(["--start", "--json"]) == ["--start", "--json"]

@@ -25,7 +25,7 @@ def _point(text: str) -> tuple[float, ...]:
     except ValueError:
         point = ()
     if len(point) not in (2, 3) or not all(map(math.isfinite, point)):
-        raise argparse.ArgumentTypeError(f"expected X,Y or X,Y,Z (write --start=X,Y for a negative X), not {text!r}")
+        raise argparse.ArgumentTypeError(f"expected X,Y or X,Y,Z, not {text!r}")
     return point
 
 
@@ -338,7 +338,7 @@ def main(argv: list[str] | None = None) -> int:
     sweep.add_argument("--out", default="sweep-results", help="output folder (default: %(default)s)")
     sweep.set_defaults(run=cmd_sweep)
 
-    args = parser.parse_args(argv)
+    args = parser.parse_args(options.glue_negative_points(sys.argv[1:] if argv is None else argv))
     from vehicle.agent.settings import SettingsError
     from vehicle.protocol.waypoints import WaypointError
     from vehicle.sim.simulation import PlacementError

@@ -3,14 +3,17 @@
 A typo or an absurd value is a usage error naming the option, before anything
 starts: never a traceback from a socket (port 70000), a vehicle no station
 shows (system id 0, MAVLink's broadcast address), or a simulation that stands
-still (a speed-up of 0 or NaN).
+still (a speed-up of 0 or NaN). A point that starts with a minus sign
+(``--start -40,0``, ``--datum -35.36,149.17``) is taken as the value it is, not
+as an option (``glue_negative_points``).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Sequence
 
 
 def finite(text: str) -> float:
@@ -54,3 +57,21 @@ def _float(text: str) -> float | None:
     except ValueError:
         return None
     return value if math.isfinite(value) else None
+
+
+POINT_OPTIONS = ("--start", "--datum")  # their values are comma-separated numbers: X,Y[,Z] or LAT,LON[,ALT]
+_NEGATIVE = re.compile(r"-\.?\d")
+
+
+def glue_negative_points(argv: Sequence[str]) -> list[str]:
+    """``argv`` with a point that starts with a minus sign joined to its option (``--start -40,0`` becomes
+    ``--start=-40,0``): argparse takes a plain number such as ``-40`` for a value, but ``-40,0`` for an option,
+    and said "expected one argument", with no hint, to a start west of the origin or a datum south of the
+    equator (ArduPilot's simulator home among them)."""
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1] in POINT_OPTIONS and _NEGATIVE.match(arg):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
