@@ -77,6 +77,31 @@ def test_scene_top_view_writes_a_png(runs):
     assert len(colours) > 5  # a picture, not a blank canvas
 
 
+def test_the_top_view_shows_where_the_origin_the_start_and_round_coordinates_are():
+    """The picture had no coordinates, no north and no origin: nothing to read a ``--start`` off."""
+    from vehicle.world.scene import load_scene
+    from vehicle.world.topview import ORIGIN, START, draw_top_view
+
+    scene = load_scene(ROOT / "scenes" / "house.wrl")  # 16 x 12 m, its Start at (-3, -1.5)
+    view = draw_top_view(scene, start=scene.start)
+    image = view.image.convert("RGB")
+
+    def at(x: float, y: float, dx: int = 0, dy: int = 0) -> tuple[int, int, int]:
+        column, row = view.pixel(x, y)
+        return image.getpixel((round(column) + dx, round(row) + dy))
+
+    assert at(0.0, 0.0, 4, 0) == ORIGIN and at(0.0, 0.0, 0, -4) == ORIGIN  # a cross at 0,0
+    assert START in (at(-3.0, -1.5, 5, 0), at(-3.0, -1.5, 6, 0)) and at(-3.0, -1.5) != START  # a ring round the start
+    left, top, right, bottom = view.map_box
+    assert left > 0 and top > 0 and right < image.width and bottom < image.height  # room for the labels
+    lighter = 0
+    for x in (-6.0, -4.0, 4.0, 6.0):  # lines every 2 m (a quarter of the width, rounded down), lighter
+        # than the floor a pixel beside them
+        lighter += sum(at(x, -1.0)) > sum(at(x, -1.0, 3, 0)) and sum(at(x, -1.0)) > sum(at(x, -1.0, -3, 0))
+    assert lighter == 4  # faint lines, over the scene
+    assert view.pixel(*view.window[::3][:1], view.window[3]) == (left, top)  # the window's north-west corner
+
+
 def test_a_broken_file_exits_2_with_file_line_and_column(runs):
     result = runs["broken"]
     assert result.returncode == 2

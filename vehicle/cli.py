@@ -86,7 +86,8 @@ def cmd_scene(args: argparse.Namespace) -> int:
     if scene.start is not None:
         report["start"] = [round(v, 3) for v in scene.start]
     if args.top_view:
-        render_top_view(scene, args.top_view, start=scene.start)
+        render_top_view(scene, args.top_view, start=scene.start,
+                        title=f"{Path(args.file).name}: scene metres, x east, y north")
     if args.json:
         print(json.dumps(report))
         return 0

@@ -52,15 +52,12 @@ Point = tuple[float, float]
 
 
 @dataclass
-class MapPicture:
-    """The picture and where things are on it (for tests and callers that annotate it)."""
+class Picture:
+    """A picture of part of the scene seen from above, and where scene points fall on it."""
 
     image: Image.Image
-    map_box: tuple[int, int, int, int]  # left, top, right, bottom pixels of the map
-    window: tuple[float, float, float, float]  # west, south, east, north scene metres the map shows
-    cell_pixels: int  # pixels a drawn cell is wide
-    block: int  # map cells a drawn cell stands for, along each side
-    swatches: dict[str, tuple[int, int, int, int]] = field(default_factory=dict)  # legend entry -> its box
+    map_box: tuple[int, int, int, int]  # left, top, right, bottom pixels of the drawn area
+    window: tuple[float, float, float, float]  # west, south, east, north scene metres it shows
 
     def pixel(self, x: float, y: float) -> tuple[float, float]:
         """Where a scene point falls on the picture."""
@@ -76,6 +73,15 @@ class MapPicture:
 
     def save(self, path: str | Path) -> None:
         self.image.save(path, "PNG", optimize=True)
+
+
+@dataclass
+class MapPicture(Picture):
+    """A map's picture (for tests and callers that annotate it)."""
+
+    cell_pixels: int = 1  # pixels a drawn cell is wide
+    block: int = 1  # map cells a drawn cell stands for, along each side
+    swatches: dict[str, tuple[int, int, int, int]] = field(default_factory=dict)  # legend entry -> its box
 
 
 def draw_map(grid: np.ndarray, resolution: float, origin: Point, title: str = "", home: Point | None = None,
@@ -100,7 +106,7 @@ def draw_map(grid: np.ndarray, resolution: float, origin: Point, title: str = ""
     window = (origin[0] + c0 / resolution, origin[1] + r0 / resolution,
               origin[0] + c1 / resolution, origin[1] + r1 / resolution)
 
-    font, small = _font(15), _font(12)
+    font, small = load_font(15), load_font(12)
     map_width, map_height = cells.shape[1] * cell_pixels, cells.shape[0] * cell_pixels
     width = max(map_width + 2 * PAD, MIN_WIDTH)
     lines = []
@@ -119,13 +125,13 @@ def draw_map(grid: np.ndarray, resolution: float, origin: Point, title: str = ""
 
     for i, (line, first) in enumerate(lines):
         draw.text((PAD, PAD + 20 * i), line, fill=TEXT if first else DIM_TEXT, font=font if first else small)
-    _north_arrow(draw, width - PAD - 12, PAD, small)
+    north_arrow(draw, width - PAD - 12, PAD, small)
     image.paste(_cells_image(cells, cell_pixels), map_box[:2])
-    _grid_lines(draw, picture)
+    grid_lines(draw, picture)
     draw.rectangle([map_box[0] - 1, map_box[1] - 1, map_box[2], map_box[3]], outline=(110, 114, 120))
     _overlays(picture, trail_points, path, waypoints, home, position)
     below = map_box[3] + PAD
-    _scale_bar(draw, picture, PAD, below, small)
+    scale_bar(draw, picture, PAD, below, small)
     picture.swatches = _draw_legend(draw, legend_rows, PAD, below + 26 + 4, small)
     return picture
 
@@ -191,17 +197,22 @@ def _overlays(picture: MapPicture, trail: list[Point], path: Sequence[Point],
     picture.image.paste(layer, picture.map_box[:2], layer)
 
 
-def _grid_lines(draw: ImageDraw.ImageDraw, picture: MapPicture) -> None:
-    """Faint lines every scale-bar length, on round scene coordinates, to judge distances anywhere."""
+def grid_lines(draw: ImageDraw.ImageDraw, picture: Picture, font=None) -> None:
+    """Faint lines every scale-bar length, on round scene coordinates, to judge distances anywhere; with a
+    ``font``, each labelled with its coordinate outside the drawn area (x below it, y left of it)."""
     west, south, east, north = picture.window
     step = nice_length((east - west) / 4)
     left, top, right, bottom = picture.map_box
     for x in np.arange(math.ceil(west / step) * step, east, step):
-        column = picture.pixel(x, north)[0]
+        column = round(picture.pixel(x, north)[0])
         draw.line([(column, top), (column, bottom - 1)], fill=(255, 255, 255, 30))
+        if font is not None:
+            draw.text((column, bottom + 4), f"{x:g}", fill=DIM_TEXT, font=font, anchor="mt")
     for y in np.arange(math.ceil(south / step) * step, north, step):
-        row = picture.pixel(west, y)[1]
+        row = round(picture.pixel(west, y)[1])
         draw.line([(left, row), (right - 1, row)], fill=(255, 255, 255, 30))
+        if font is not None:
+            draw.text((left - 6, row), f"{y:g}", fill=DIM_TEXT, font=font, anchor="rm")
 
 
 def _wrap(text: str, font, width: float) -> list[str]:
@@ -221,13 +232,13 @@ def _dot(draw: ImageDraw.ImageDraw, centre: tuple[float, float], radius: float, 
     draw.ellipse([x - radius, y - radius, x + radius, y + radius], fill=fill, outline=outline, width=2)
 
 
-def _north_arrow(draw: ImageDraw.ImageDraw, x: float, top: float, font) -> None:
+def north_arrow(draw: ImageDraw.ImageDraw, x: float, top: float, font) -> None:
     """An arrow pointing up (north: rows run north) with an N under it."""
     draw.polygon([(x, top), (x - 7, top + 16), (x, top + 12), (x + 7, top + 16)], fill=TEXT)
     draw.text((x, top + 18), "N", fill=TEXT, font=font, anchor="mt")
 
 
-def _scale_bar(draw: ImageDraw.ImageDraw, picture: MapPicture, x: float, y: float, font) -> None:
+def scale_bar(draw: ImageDraw.ImageDraw, picture: Picture, x: float, y: float, font) -> None:
     """A bar of a round length (1, 2 or 5 times a power of ten metres) near a quarter of the map's width."""
     west, _, east, _ = picture.window
     left, _, right, _ = picture.map_box
@@ -305,7 +316,8 @@ def _draw_legend(draw: ImageDraw.ImageDraw, rows: list[list], x0: float, y0: flo
     return swatches
 
 
-def _font(size: int):
+def load_font(size: int):
+    """Pillow's scalable font at ``size`` pixels (its small bitmap font where FreeType is missing)."""
     try:
         return ImageFont.load_default(size=size)  # Pillow's own scalable font (needs FreeType)
     except (TypeError, ImportError, OSError):
