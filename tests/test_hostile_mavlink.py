@@ -292,6 +292,18 @@ def test_a_replayed_log_forgets_no_vehicle_however_long_it_was_silent(tmp_path):
     assert replay.fleet.ids() == [9, 10]
 
 
+def assert_orders_reach_only(link: Link, vehicle: Peer, attacker: Peer) -> None:
+    """A mode change the station sends to vehicle 1 reaches the vehicle, and none of it the attacker."""
+    vehicle.receive(0.3), attacker.receive(0.3)  # what the station said before: its telemetry requests
+
+    def orders(peer):
+        return [m for m in peer.receive()
+                if m.get_type() == "COMMAND_LONG" and m.command == mavlink.MAV_CMD_DO_SET_MODE]
+
+    link.send(command(mavlink.MAV_CMD_DO_SET_MODE, 1, 4), 1)
+    assert len(orders(vehicle)) == 1 and orders(attacker) == []
+
+
 def test_a_flood_in_a_vehicles_name_from_elsewhere_does_not_take_its_orders():
     """A map snapshot in vehicle 1's name, 8,555 chunks from an attacker's address, took vehicle 1's route: the
     operator's commands went to the attacker for as long as the flood lasted, and came back unanswered."""
@@ -304,14 +316,7 @@ def test_a_flood_in_a_vehicles_name_from_elsewhere_does_not_take_its_orders():
             for _ in range(50):
                 attacker.send(tunnel(32801, b"\0" * 100), position())
             wait_wall(lambda: link.stats["received"] >= 101, 5, "the flood heard")
-            vehicle.receive(0.3), attacker.receive(0.3)  # what the station said before: its telemetry requests
-
-            def orders(peer):
-                return [m for m in peer.receive() if m.get_type() == "COMMAND_LONG"
-                        and m.command == mavlink.MAV_CMD_DO_SET_MODE]
-
-            link.send(command(mavlink.MAV_CMD_DO_SET_MODE, 1, 4), 1)
-            assert len(orders(vehicle)) == 1 and orders(attacker) == []
+            assert_orders_reach_only(link, vehicle, attacker)
     finally:
         link.close()
 
@@ -332,14 +337,7 @@ def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_i
             wait_wall(lambda: 2 in link.route, 5, "the unsigned vehicle heard")
             assert link.health()["signing"]["refused"] == [{"sysid": 1, "messages": 3}]
             assert fleet.vehicles[1].signed is True and fleet.vehicles[2].signed is False
-            vehicle.receive(0.3), attacker.receive(0.3)  # what the station said before: its telemetry requests
-
-            def orders(peer):
-                return [m for m in peer.receive() if m.get_type() == "COMMAND_LONG"
-                        and m.command == mavlink.MAV_CMD_DO_SET_MODE]
-
-            link.send(command(mavlink.MAV_CMD_DO_SET_MODE, 1, 4), 1)
-            assert len(orders(vehicle)) == 1 and orders(attacker) == []
+            assert_orders_reach_only(link, vehicle, attacker)
     finally:
         link.close()
 
