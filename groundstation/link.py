@@ -18,9 +18,11 @@ With a signing key the station signs everything it sends and shows, per
 vehicle, whether its messages carry a valid signature; with
 ``require_signing`` it drops what is not signed with its key (such a vehicle
 is never shown; its system id and the messages dropped are in the health
-report). Without ``require_signing``, a system once heard signed stays signed: what
-comes unsigned (or wrongly signed) in its name afterwards is refused too, or an
-unsigned heartbeat from anywhere would take its route and its orders.
+report). Without ``require_signing``, a component once heard signed stays signed
+while its system is remembered (``FORGET_AFTER``): what comes unsigned (or wrongly
+signed) in its name afterwards is refused too, or an unsigned heartbeat in an
+autopilot's name, from anywhere, would take its route and its orders. Other
+components of the system that never signed (a camera behind a router) still pass.
 """
 
 from __future__ import annotations
@@ -83,7 +85,7 @@ class Link:
         # keyed by the 8-bit system id (so at most 255 entries), and pruned after FORGET_AFTER of silence:
         self.route: dict[int, tuple] = {}  # sysid -> (the port its heartbeat came on, its address there, when)
         self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
-        self._signers: set[int] = set()  # systems heard signed with the key (8-bit ids: at most 255)
+        self._signers: set[tuple[int, int]] = set()  # (system, component) heard signed with the key
         self._pruned = 0.0
         self._waiters: list[_Waiter] = []
         self._lock = threading.Lock()
@@ -190,12 +192,13 @@ class Link:
                 waiter.replies.put(message)
 
     def _signed_as_before(self, port, message, sysid: int) -> bool:
-        """False (and counted with what its link refused) for a message not signed in the name of a system heard
-        signed before."""
+        """False (and counted with what its link refused) for a message not signed in the name of a component
+        heard signed before."""
         verified = getattr(message, "_verified", None)  # None: the link has no key
+        sender = (sysid, message.get_srcComponent())
         if verified:
-            self._signers.add(sysid)
-        elif verified is False and sysid in self._signers and message.get_msgId() not in signing.UNSIGNED_ALLOWED:
+            self._signers.add(sender)
+        elif verified is False and sender in self._signers and message.get_msgId() not in signing.UNSIGNED_ALLOWED:
             port.refused[sysid] += 1
             return False
         return True
@@ -209,13 +212,15 @@ class Link:
             self.route[sysid] = (port, peer, now)
 
     def _prune(self, now: float) -> None:
-        """Once a second: forget the routes to systems not heard for FORGET_AFTER (as the fleet forgets them)."""
+        """Once a second: forget the routes to systems not heard for FORGET_AFTER (as the fleet forgets them), and
+        that they signed."""
         if now - self._pruned < 1.0:
             return
         self._pruned = now
         for sysid in [s for s, (_, _, heard) in self.route.items() if now - heard > FORGET_AFTER]:
             del self.route[sysid]
             self._asked.pop(sysid, None)
+            self._signers = {sender for sender in self._signers if sender[0] != sysid}
 
     def _ask_for_telemetry(self, sysid: int, now: float) -> None:
         """Ask a vehicle heard for the first time, or again after its link was lost, for what the page shows."""

@@ -333,11 +333,18 @@ def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_i
             vehicle.send(vehicle_heartbeat())
             wait_wall(lambda: 1 in link.route and fleet.vehicles.get(1) is not None, 5, "the vehicle heard")
             attacker.send(vehicle_heartbeat(), vehicle_heartbeat(), position())
+            received = link.stats["received"]
+            attacker.send(mavlink.MAVLink_radio_status_message(200, 190, 90, 80, 70, 0, 0))  # radios never sign
+            attacker.as_system(1, 100).send(vehicle_heartbeat(mav_type=mavlink.MAV_TYPE_CAMERA))  # a part never signed
             stranger.send(vehicle_heartbeat())  # a vehicle never heard signed is still shown, as unsigned
-            wait_wall(lambda: 2 in link.route, 5, "the unsigned vehicle heard")
+            wait_wall(lambda: 2 in link.route and link.stats["received"] >= received + 3, 5, "the unsigned heard")
             assert link.health()["signing"]["refused"] == [{"sysid": 1, "messages": 3}]
             assert fleet.vehicles[1].signed is True and fleet.vehicles[2].signed is False
-            assert_orders_reach_only(link, vehicle, attacker)
+            assert_orders_reach_only(link, vehicle, attacker.as_system(1, 1))
+            link._prune(time.time() + FORGET_AFTER + 1)  # vehicle 1 silent for ten minutes: forgotten, with its key
+            attacker.send(vehicle_heartbeat())
+            wait_wall(lambda: 1 in link.route, 5, "a new vehicle 1 heard")
+            assert link.health()["signing"]["refused"] == [{"sysid": 1, "messages": 3}]
     finally:
         link.close()
 
