@@ -39,9 +39,11 @@ SLOW_EVERY = 8  # trails, sonar, maps and labels every this many frames
 MAP_PIXELS = 512  # a map image is at most this many pixels a side
 LAYER_NODES = ("trails", "beams", "echoes", "paths", "waypoints")  # a vehicle's node in each of these layers
 
-# A viewer that closes its page is gone before viser tells us (``_gone``): a frame drawn in between updates its
-# handles, and viser drops the update, as it should, but warns on the station's terminal every time.
-warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning)
+# A viewer that closes its page is gone before viser tells us (``_gone``, which stops drawing for it): a frame
+# drawn in between updates its handles, never to be delivered, and viser warns of it on the station's terminal,
+# once for each viewer that left. Only viser's own warning of that is silenced.
+warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning,
+                        module=r"viser\.")
 
 
 def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:

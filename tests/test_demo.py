@@ -158,14 +158,13 @@ def test_ctrl_c_stops_the_demo_and_its_vehicles_quietly(tmp_path):
 
 
 DRAWN_FOR_A_VIEWER_GONE = """
-import asyncio, sys
+import sys
+import viser
 if sys.argv[1] == "station":
     import groundstation.viz
-from viser import _messages
-from viser.infra._async_message_buffer import AsyncMessageBuffer
-buffer = AsyncMessageBuffer(asyncio.new_event_loop(), persistent_messages=False)
-buffer.set_done()  # the viewer closed its page
-buffer.push(_messages.SetOrientationMessage(name="/x", wxyz=(1.0, 0.0, 0.0, 0.0)))  # a frame drawn meanwhile
+server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+server.stop()  # its connections closed, as a viewer's when it closes its page
+server.scene.add_frame("/x", show_axes=False)  # a frame drawn meanwhile: never delivered
 """
 
 
