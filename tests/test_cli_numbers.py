@@ -69,8 +69,8 @@ def test_the_checks_keep_what_is_good_and_say_what_they_wanted():
 def test_a_point_west_of_the_origin_or_south_of_the_equator_is_a_value_not_an_option(capsys):
     """``--start -40,0`` and ``--datum -35.36,149.17`` (ArduPilot's simulator home) were "expected one argument":
     argparse takes ``-40,0`` for an option, as only a plain number may start with a minus sign."""
-    assert vehicle(["experiment", "--mission", "browse", "--start", "-5,-3", "--datum", "-35.363261,149.16523,584",
-                    "--json"]) == 0
+    assert vehicle(["experiment", "--mission", "browse", "--sta", "-5,-3", "--datum", "-35.363261,149.16523,584",
+                    "--json"]) == 0  # --sta: argparse's abbreviation of --start
     flown = json.loads(capsys.readouterr().out)
     assert flown["start"] == [-5.0, -3.0] and flown["outcome"] == "finished"
     with pytest.raises(SystemExit):
@@ -78,7 +78,9 @@ def test_a_point_west_of_the_origin_or_south_of_the_equator_is_a_value_not_an_op
     assert "argument --start: expected X,Y or X,Y,Z, not '-5'" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         groundstation(["serve", "--datum", "-91,0"])
-    assert "argument --datum:" in capsys.readouterr().err  # the value reached its check, not "expected one argument"
+    said = capsys.readouterr().err
+    assert "argument --datum:" in said and "expected one argument" not in said  # the value reached its check
     assert options.glue_negative_points(["--start", "-1,2", "--heading", "-90", "--datum", "-.5,1", "-h"]) == \
         ["--start=-1,2", "--heading", "-90", "--datum=-.5,1", "-h"]
-    assert options.glue_negative_points(["--start", "--json"]) == ["--start", "--json"]
+    assert options.glue_negative_points(["--sta", "-1,2", "--start", "--json", "--", "--start", "-3,4"]) == \
+        ["--sta=-1,2", "--start", "--json", "--", "--start", "-3,4"]

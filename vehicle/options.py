@@ -65,13 +65,21 @@ _NEGATIVE = re.compile(r"-\.?\d")
 
 def glue_negative_points(argv: Sequence[str]) -> list[str]:
     """``argv`` with a point that starts with a minus sign joined to its option (``--start -40,0`` becomes
-    ``--start=-40,0``): argparse takes a plain number such as ``-40`` for a value, but ``-40,0`` for an option,
-    and said "expected one argument", with no hint, to a start west of the origin or a datum south of the
-    equator (ArduPilot's simulator home among them)."""
+    ``--start=-40,0``, as does ``--sta -40,0``, argparse's abbreviation): argparse takes a plain number such as
+    ``-40`` for a value, but ``-40,0`` for an option, and said "expected one argument", with no hint, to a start
+    west of the origin or a datum south of the equator (ArduPilot's simulator home among them). Nothing after
+    ``--`` is touched."""
     out: list[str] = []
-    for arg in argv:
-        if out and out[-1] in POINT_OPTIONS and _NEGATIVE.match(arg):
+    for index, arg in enumerate(argv):
+        if arg == "--":
+            return out + list(argv[index:])
+        if out and _names_a_point_option(out[-1]) and _NEGATIVE.match(arg):
             out[-1] = f"{out[-1]}={arg}"
         else:
             out.append(arg)
     return out
+
+
+def _names_a_point_option(arg: str) -> bool:
+    """``--start`` or ``--datum``, or an abbreviation of one (argparse says which when it is ambiguous)."""
+    return arg.startswith("--") and len(arg) > 2 and "=" not in arg and any(o.startswith(arg) for o in POINT_OPTIONS)
