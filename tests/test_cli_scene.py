@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from PIL import Image
 
@@ -79,8 +80,9 @@ def test_scene_top_view_writes_a_png(runs):
 
 def test_the_top_view_shows_where_the_origin_the_start_and_round_coordinates_are():
     """The picture had no coordinates, no north and no origin: nothing to read a ``--start`` off."""
+    from vehicle.mapping.picture import BACKGROUND, POSITION, TEXT
     from vehicle.world.scene import load_scene
-    from vehicle.world.topview import ORIGIN, START, draw_top_view
+    from vehicle.world.topview import LEFT, ORIGIN, draw_top_view
 
     scene = load_scene(ROOT / "scenes" / "house.wrl")  # 16 x 12 m, its Start at (-3, -1.5)
     view = draw_top_view(scene, start=scene.start)
@@ -91,15 +93,52 @@ def test_the_top_view_shows_where_the_origin_the_start_and_round_coordinates_are
         return image.getpixel((round(column) + dx, round(row) + dy))
 
     assert at(0.0, 0.0, 4, 0) == ORIGIN and at(0.0, 0.0, 0, -4) == ORIGIN  # a cross at 0,0
-    assert START in (at(-3.0, -1.5, 5, 0), at(-3.0, -1.5, 6, 0)) and at(-3.0, -1.5) != START  # a ring round the start
+    assert POSITION in (at(-3.0, -1.5, 5, 0), at(-3.0, -1.5, 6, 0)) and at(-3.0, -1.5) != POSITION  # the start
     left, top, right, bottom = view.map_box
-    assert left > 0 and top > 0 and right < image.width and bottom < image.height  # room for the labels
+    west, south, east, north = view.window
+    assert view.pixel(east, south) == pytest.approx((right, bottom))  # the window is what is drawn
+    assert west < -8 and east > 8 and south < -6 and north > 6  # the whole house
     lighter = 0
-    for x in (-6.0, -4.0, 4.0, 6.0):  # lines every 2 m (a quarter of the width, rounded down), lighter
+    for x in (-6.0, -4.0, 4.0, 6.0):  # lines every 2 m (a quarter of the longer side, rounded down), lighter
         # than the floor a pixel beside them
         lighter += sum(at(x, -1.0)) > sum(at(x, -1.0, 3, 0)) and sum(at(x, -1.0)) > sum(at(x, -1.0, -3, 0))
     assert lighter == 4  # faint lines, over the scene
-    assert view.pixel(*view.window[::3][:1], view.window[3]) == (left, top)  # the window's north-west corner
+
+    def ink(box) -> int:  # pixels that are not the background
+        part = np.asarray(image.crop(box))
+        return int(np.any(part != BACKGROUND, axis=2).sum())
+
+    column = round(view.pixel(0.0, 0.0)[0])
+    assert ink((column - 8, bottom + 3, column + 8, bottom + 18)) > 5  # "0" under the x = 0 line
+    row = round(view.pixel(0.0, 0.0)[1])
+    assert ink((left - 20, row - 7, left - 4, row + 7)) > 5  # "0" left of the y = 0 line
+    assert ink((left - 20, row + 12, left - 4, row + 26)) == 0  # and nothing between two labels
+    assert image.getpixel((LEFT + 3, bottom + 24 + 8)) == TEXT  # the scale bar
+    assert ink((image.width - 40, 0, image.width, top - 4)) > 10  # the north arrow
+
+
+def test_a_start_off_the_scene_and_a_map_larger_than_it_stay_in_their_place():
+    """A start outside the scene's bounds fell off the picture, and a memory map larger than a small scene
+    covered the labels around it."""
+    from vehicle.mapping.memory_map import MemoryMap
+    from vehicle.mapping.picture import POSITION
+    from vehicle.world.scene import load_scene
+    from vehicle.world.topview import draw_top_view
+
+    scene = load_scene(ROOT / "scenes" / "house.wrl")
+    memory_map = MemoryMap((0.0, 0.0), space_size=40.0)
+    memory_map.grid[:] = 20  # occupied everywhere: red over the whole 80 x 80 m
+    view = draw_top_view(scene, memory_map=memory_map, start=(-30.0, 5.0))
+    image = view.image.convert("RGB")
+    left, top, right, bottom = view.map_box
+    column, row = (round(v) for v in view.pixel(-30.0, 5.0))
+    assert left <= column < right and top <= row < bottom
+    assert POSITION in [image.getpixel((column + dx, row)) for dx in (5, 6)]
+    red = image.getpixel(((left + right) // 2, (top + bottom) // 2))
+    assert red[0] > 150 and red[1] < 80  # the map is drawn over the scene
+    outside = [image.getpixel((x, y)) for x in range(0, image.width, 7) for y in (top - 10, bottom + 40)]
+    outside += [image.getpixel((x, y)) for x in (left - 30, right + 5) for y in range(top, bottom, 7)]
+    assert not any(p[0] > 150 and p[1] < 80 for p in outside)  # and nowhere around it
 
 
 def test_a_broken_file_exits_2_with_file_line_and_column(runs):

@@ -79,8 +79,8 @@ class Picture:
 class MapPicture(Picture):
     """A map's picture (for tests and callers that annotate it)."""
 
-    cell_pixels: int = 1  # pixels a drawn cell is wide
-    block: int = 1  # map cells a drawn cell stands for, along each side
+    cell_pixels: int  # pixels a drawn cell is wide
+    block: int  # map cells a drawn cell stands for, along each side
     swatches: dict[str, tuple[int, int, int, int]] = field(default_factory=dict)  # legend entry -> its box
 
 
@@ -201,18 +201,26 @@ def grid_lines(draw: ImageDraw.ImageDraw, picture: Picture, font=None) -> None:
     """Faint lines every scale-bar length, on round scene coordinates, to judge distances anywhere; with a
     ``font``, each labelled with its coordinate outside the drawn area (x below it, y left of it)."""
     west, south, east, north = picture.window
-    step = nice_length((east - west) / 4)
+    step = grid_step(picture)
     left, top, right, bottom = picture.map_box
-    for x in np.arange(math.ceil(west / step) * step, east, step):
-        column = round(picture.pixel(x, north)[0])
-        draw.line([(column, top), (column, bottom - 1)], fill=(255, 255, 255, 30))
-        if font is not None:
-            draw.text((column, bottom + 4), f"{x:g}", fill=DIM_TEXT, font=font, anchor="mt")
-    for y in np.arange(math.ceil(south / step) * step, north, step):
-        row = round(picture.pixel(west, y)[1])
-        draw.line([(left, row), (right - 1, row)], fill=(255, 255, 255, 30))
-        if font is not None:
-            draw.text((left - 6, row), f"{y:g}", fill=DIM_TEXT, font=font, anchor="rm")
+    for k in range(math.ceil(west / step), math.floor(east / step) + 1):  # whole multiples: no 1e-16 for 0
+        column = round(picture.pixel(k * step, north)[0])
+        if column < right:
+            draw.line([(column, top), (column, bottom - 1)], fill=(255, 255, 255, 30))
+            if font is not None:
+                draw.text((column, bottom + 4), f"{k * step:g}", fill=DIM_TEXT, font=font, anchor="mt")
+    for k in range(math.ceil(south / step), math.floor(north / step) + 1):
+        row = round(picture.pixel(west, k * step)[1])
+        if row > top:
+            draw.line([(left, row), (right - 1, row)], fill=(255, 255, 255, 30))
+            if font is not None:
+                draw.text((left - 6, row), f"{k * step:g}", fill=DIM_TEXT, font=font, anchor="rm")
+
+
+def grid_step(picture: Picture) -> float:
+    """The scale bar's length and the grid's spacing: a round length near a quarter of the longer side."""
+    west, south, east, north = picture.window
+    return nice_length(max(east - west, north - south) / 4)
 
 
 def _wrap(text: str, font, width: float) -> list[str]:
@@ -239,12 +247,11 @@ def north_arrow(draw: ImageDraw.ImageDraw, x: float, top: float, font) -> None:
 
 
 def scale_bar(draw: ImageDraw.ImageDraw, picture: Picture, x: float, y: float, font) -> None:
-    """A bar of a round length (1, 2 or 5 times a power of ten metres) near a quarter of the map's width."""
+    """A bar of a round length (1, 2 or 5 times a power of ten metres) near a quarter of the longer side."""
     west, _, east, _ = picture.window
     left, _, right, _ = picture.map_box
-    per_metre = (right - left) / (east - west)
-    metres = nice_length((east - west) / 4)
-    length = metres * per_metre
+    metres = grid_step(picture)
+    length = metres * (right - left) / (east - west)
     draw.rectangle([x, y + 6, x + length, y + 11], fill=TEXT)
     for tick in (x, x + length / 2, x + length):
         draw.line([(tick, y + 2), (tick, y + 15)], fill=TEXT, width=1)
