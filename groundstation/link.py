@@ -28,6 +28,7 @@ components of the system that never signed (a camera behind a router) still pass
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
@@ -83,7 +84,8 @@ class Link:
         if signing_key is not None:
             signing.sign_outgoing(self.packer, signing_key)
         # keyed by the 8-bit system id (so at most 255 entries), and pruned after FORGET_AFTER of silence:
-        self.route: dict[int, tuple] = {}  # sysid -> (the port its heartbeat came on, its address there, when)
+        # sysid -> (the port its heartbeat comes on, its address there, when heard there, when its heartbeat was)
+        self.route: dict[int, tuple] = {}
         self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
         self._signers: set[tuple[int, int]] = set()  # (system, component) heard signed with the key
         self._pruned = 0.0
@@ -204,12 +206,16 @@ class Link:
         return True
 
     def _learn_route(self, sysid: int, port, peer, now: float, beat: bool) -> None:
-        """Where orders to a system go: where it was first heard, then where its autopilot's heartbeat last came
-        from. Any other message only keeps its route fresh: a flood of another kind of message in its name (a
-        map snapshot, say) from elsewhere took its route, and its orders went to the flood's sender, unanswered."""
+        """Where orders to a system go: where it was first heard, then where its autopilot's heartbeat comes
+        from, and elsewhere only once no heartbeat came from there for LINK_LOST_AFTER (its link died; it came
+        back on another port or link). Any other message only keeps its route fresh: a flood of another kind of
+        message in its name (a map snapshot, say) from elsewhere took its route, as did a spoofed heartbeat
+        while the vehicle's own still came, and its orders went to the sender, unanswered."""
         route = self.route.get(sysid)
-        if route is None or beat or route[:2] == (port, peer):
-            self.route[sysid] = (port, peer, now)
+        if route is not None and route[:2] == (port, peer):
+            self.route[sysid] = (port, peer, now, now if beat else route[3])
+        elif route is None or (beat and now - route[3] > LINK_LOST_AFTER):
+            self.route[sysid] = (port, peer, now, now if beat else -math.inf)
 
     def _prune(self, now: float) -> None:
         """Once a second: forget the routes to systems not heard for FORGET_AFTER (as the fleet forgets them), and
@@ -217,7 +223,7 @@ class Link:
         if now - self._pruned < 1.0:
             return
         self._pruned = now
-        for sysid in [s for s, (_, _, heard) in self.route.items() if now - heard > FORGET_AFTER]:
+        for sysid in [s for s, (_, _, heard, _) in self.route.items() if now - heard > FORGET_AFTER]:
             del self.route[sysid]
             self._asked.pop(sysid, None)
             self._signers = {sender for sender in self._signers if sender[0] != sysid}
@@ -264,7 +270,7 @@ class Link:
             packet = pack(message, self.packer)
         self.fleet.apply(message, time.time())  # this station's orders: not another's, and on the timeline
         if sysid in self.route:
-            port, peer, _ = self.route[sysid]
+            port, peer, _, _ = self.route[sysid]
             port.write(packet, peer)
         else:
             for port in self.ports:

@@ -48,7 +48,7 @@ from mavlink_peer import Peer, acked, command, gcs_heartbeat, non_finite_message
 
 from groundstation.link import Link
 from groundstation.replay import Replay
-from groundstation.state import FORGET_AFTER, MAX_VEHICLES, Fleet
+from groundstation.state import FORGET_AFTER, LINK_LOST_AFTER, MAX_VEHICLES, Fleet
 from vehicle.agent.companion import tunnel
 from vehicle.agent.settings import Settings
 from vehicle.cli import DEFAULT_SIM_LINK
@@ -321,6 +321,39 @@ def test_a_flood_in_a_vehicles_name_from_elsewhere_does_not_take_its_orders():
         link.close()
 
 
+def test_a_spoofed_heartbeat_does_not_take_the_orders_of_a_vehicle_whose_own_still_comes():
+    """Without signing, a heartbeat in vehicle 1's name from another address took its route at once: the
+    operator's orders went to the spoofer for as long as it kept beating."""
+    port = free_udp_port()
+    link = Link([f"udpin:127.0.0.1:{port}"], Fleet()).start()
+    try:
+        with Peer(("127.0.0.1", port), sysid=1) as vehicle, Peer(("127.0.0.1", port), sysid=1) as attacker:
+            vehicle.send(vehicle_heartbeat())
+            wait_wall(lambda: 1 in link.route, 5, "the vehicle heard")
+            received = link.stats["received"]
+            attacker.send(*[vehicle_heartbeat()] * 5)
+            wait_wall(lambda: link.stats["received"] >= received + 5, 5, "the spoofed heartbeats heard")
+            assert_orders_reach_only(link, vehicle, attacker)
+    finally:
+        link.close()
+
+
+def test_a_vehicle_silent_where_it_was_is_followed_where_its_heartbeat_comes_from_now():
+    """Its link died and it came back on another (a radio after Wi-Fi, a restarted process on a new port): its
+    heartbeat there takes the route once none came from the old place for LINK_LOST_AFTER."""
+    link = Link([], Fleet())
+    old, new = ("udp", ("127.0.0.1", 5000)), ("radio", None)
+    link._learn_route(1, *old, 100.0, beat=True)
+    link._learn_route(1, *new, 99.5 + LINK_LOST_AFTER, beat=True)  # the old place beat less than that ago
+    assert link.route[1][:2] == old
+    link._learn_route(1, *old, 101.0, beat=False)  # telemetry from the old place does not count as its heartbeat
+    link._learn_route(1, *new, 100.1 + LINK_LOST_AFTER, beat=True)
+    assert link.route[1][:2] == new
+    link._learn_route(2, *old, 100.0, beat=False)  # first heard by another message: any heartbeat takes it
+    link._learn_route(2, *new, 100.1, beat=True)
+    assert link.route[2][:2] == new
+
+
 def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_its_name():
     """A station with a key that does not require signing let an unsigned heartbeat in a signed vehicle's name, from
     anywhere, take its route: the operator's orders went to the sender of the heartbeat."""
@@ -352,7 +385,7 @@ def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_i
 def test_the_links_routes_and_unfinished_texts_stay_bounded():
     link = Link([], Fleet())
     for sysid in range(1, 256):
-        link.route[sysid] = (None, None, 0.0 if sysid > 1 else FORGET_AFTER)
+        link.route[sysid] = (None, None, 0.0 if sysid > 1 else FORGET_AFTER, 0.0)
         link._asked[sysid] = (0.0, 0.0)
     link._prune(FORGET_AFTER + 1)
     assert list(link.route) == [1] and list(link._asked) == [1]  # only the one heard within ten minutes
