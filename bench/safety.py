@@ -180,7 +180,8 @@ def _picture(job: Job, scene: Scene, agent, route: list[tuple[float, float]], re
         route = [*route, (final[0], final[1])]
     path = OUT / f"{stem}.png"
     render_top_view(scene, path, memory_map=agent.map if agent is not None else None, route=route,
-                    start=tuple(result.get("start") or (0.0, 0.0)))
+                    start=tuple(result.get("start") or (0.0, 0.0)),
+                    title=f"{result['outcome']}: {job.vehicle} {job.mission} in {Path(job.scene).stem}")
     return str(path)
 
 
