@@ -105,7 +105,8 @@ class Link:
 
     def close(self) -> None:
         self._stop.set()
-        self._thread.join(timeout=2)
+        if self._thread.ident is not None:  # a station that never started has no thread to wait for
+            self._thread.join(timeout=2)
         for port in self.ports:
             port.close()
 

@@ -11,6 +11,7 @@ import asyncio
 import math
 import secrets
 import socket
+import ssl
 import stat as file_mode
 import sys
 import threading
@@ -72,8 +73,12 @@ class GroundStation:
         self.recorder = Recorder(record_dir, note_text(scene_file) if scene_file else None) \
             if record_dir and urls else None
         self.link_urls = list(urls)
-        self.link = Link(urls, self.live, self.recorder, signing_key=signing_key,
-                         require_signing=require_signing) if urls else None
+        try:
+            self.link = Link(urls, self.live, self.recorder, signing_key=signing_key,
+                             require_signing=require_signing) if urls else None
+        except BaseException:  # a link that cannot open: no station, and no empty recording left behind
+            self._close_recording()
+            raise
         self.view = SceneView(self.live, scene, viser_port, clock=self.now)
         self.proxy = VizProxy(self.view.port)
         self.view.on_target(self._target)
@@ -151,9 +156,17 @@ class GroundStation:
         if self.link is not None:
             self.link.close()
         self.view.close()
-        if self.recorder is not None:
-            self.recorder.close()
+        self._close_recording()
         self._indexer.shutdown(wait=False, cancel_futures=True)
+
+    def _close_recording(self) -> None:
+        """Close the session's recording; one that holds no message (the station never ran: a port in use, a
+        certificate that would not load) is removed, not left in the list as an empty session."""
+        if self.recorder is None:
+            return
+        self.recorder.close()
+        if not self.recorder.packets:
+            self.recorder.path.unlink(missing_ok=True)
 
     # ---- what the app asks for -------------------------------------------------------------------
     def status(self) -> dict:
@@ -364,6 +377,12 @@ def app_config(station: GroundStation, host: str = "127.0.0.1", port: int = 8000
     (tests use this too)."""
     if bool(tls_cert) != bool(tls_key):
         raise ValueError("--tls-cert and --tls-key go together")
+    if tls_cert:  # uvicorn loads them only once it runs, after the address was announced, and names neither
+        try:
+            ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER).load_cert_chain(tls_cert, tls_key)
+        except (OSError, ssl.SSLError) as error:
+            raise ValueError(f"cannot serve HTTPS with --tls-cert {tls_cert} and --tls-key {tls_key}: "
+                             f"{error.strerror or error}") from None
     station.access = access or Access.for_host(host, station.token, viewer_token, allowed_hosts)
     return uvicorn.Config(create_app(station), host=host, port=port, log_level="warning", ssl_certfile=tls_cert,
                           ssl_keyfile=tls_key, ws_ping_interval=None, ws_max_size=WS_MAX_SIZE,
@@ -373,7 +392,15 @@ def app_config(station: GroundStation, host: str = "127.0.0.1", port: int = 8000
 def serve(station: GroundStation, host: str = "127.0.0.1", port: int = 8000, tls_cert: str | None = None,
           tls_key: str | None = None, announce=print, viewer_token: str | None = None,
           allowed_hosts: tuple[str, ...] = ()) -> None:
-    """Run the web app until interrupted (blocking)."""
+    """Run the web app until interrupted (blocking); the station is closed when it returns, or fails to start."""
+    try:
+        _run_app(station, host, port, tls_cert, tls_key, announce, viewer_token, allowed_hosts)
+    finally:
+        station.close()
+    time.sleep(0)
+
+
+def _run_app(station, host, port, tls_cert, tls_key, announce, viewer_token, allowed_hosts) -> None:
     config = app_config(station, host, port, tls_cert, tls_key, viewer_token, allowed_hosts)
     scheme = "https" if tls_cert else "http"
     if not is_loopback(host):
@@ -394,11 +421,7 @@ def serve(station: GroundStation, host: str = "127.0.0.1", port: int = 8000, tls
     announce(f"ground station: {scheme}://{shown}:{port}/#token={station.token}  (operator token {station.token}; "
              f"listening to {links}"
              + (f"; recording to {station.recorder.path}" if station.recorder else "") + ")")
-    try:
-        server.run(sockets=[listening])
-    finally:
-        station.close()
-    time.sleep(0)
+    server.run(sockets=[listening])
 
 
 def _listening_socket(host: str, port: int) -> socket.socket:

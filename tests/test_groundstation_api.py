@@ -17,6 +17,7 @@ import math
 import os
 import selectors
 import socket
+import ssl
 import subprocess
 import sys
 import time
@@ -754,7 +755,7 @@ def _health(port: int, token: str | None = None) -> dict | None:
     ("0.0.0.0", True, False, "https://127.0.0.1:8123/"), ("::1", False, False, "http://[::1]:8123/"),
     ("::", False, True, "http://127.0.0.1:8123/"), ("2001:db8::7", True, False, "https://[2001:db8::7]:8123/"),
 ])
-def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, host, tls, warned, url):
+def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, tmp_path, host, tls, warned, url):
     """serve() itself, with its binding and uvicorn's run replaced: the warning depends on the host and TLS alone."""
     import uvicorn
 
@@ -765,7 +766,7 @@ def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, host, tl
     monkeypatch.setattr(uvicorn.Server, "run", lambda self, *a, **k: ran.append(self.config))
     station = server.GroundStation([], None, TOKEN, record_dir=None)
     lines = []
-    cert = ("cert.pem", "key.pem") if tls else (None, None)
+    cert = (certificate(tmp_path),) * 2 if tls else (None, None)
     server.serve(station, host, 8123, *cert, announce=lines.append)
     err = capsys.readouterr().err
     assert ("without TLS" in err) is warned
@@ -773,22 +774,84 @@ def test_serve_warns_only_when_exposed_without_tls(monkeypatch, capsys, host, tl
     assert lines and f"{url}" in lines[0] and f"#token={TOKEN}" in lines[0], lines
 
 
-def test_a_web_port_in_use_is_an_error_before_the_address_is_announced():
-    """uvicorn binds after the station announced its address (another server's) and only logged the failure."""
+def certificate(folder: Path) -> str:
+    """A PEM file holding a key and a certificate for 127.0.0.1 (trustme's test CA); the CA's is ca.pem beside it."""
+    import trustme
+
+    authority = trustme.CA()
+    authority.cert_pem.write_to_path(str(folder / "ca.pem"))
+    path = folder / "server.pem"
+    authority.issue_cert("127.0.0.1", "localhost").private_key_and_cert_chain_pem.write_to_path(str(path))
+    return str(path)
+
+
+def test_a_web_port_in_use_is_an_error_before_the_address_is_announced(tmp_path):
+    """uvicorn binds after the station announced its address (another server's) and only logged the failure;
+    and the session's recording, empty, stayed in the list."""
     from groundstation import server
 
     taken = socket.socket()
     taken.bind(("127.0.0.1", 0))
     taken.listen()
-    station = server.GroundStation([], None, TOKEN, record_dir=None)
+    station = server.GroundStation([f"udpin:127.0.0.1:{free_udp_port()}"], None, TOKEN, record_dir=tmp_path)
     lines = []
     try:
+        assert list(tmp_path.glob("session-*.tlog"))  # the station made its recording
         with pytest.raises(OSError, match=f"cannot serve on 127.0.0.1:{taken.getsockname()[1]}"):
             server.serve(station, "127.0.0.1", taken.getsockname()[1], announce=lines.append)
         assert lines == []
+        assert list(tmp_path.glob("session-*.tlog")) == []  # and took it away, empty, with itself
     finally:
-        station.close()
         taken.close()
+
+
+@pytest.mark.parametrize("content", [None, b"not a certificate\n"])
+def test_a_certificate_that_will_not_load_is_an_error_naming_it_before_the_address_is_announced(tmp_path, content):
+    """uvicorn loaded the certificate only once it ran: the address was announced, then '[Errno 2] No such file
+    or directory' named no file, and an empty recording stayed."""
+    from groundstation import server
+
+    pem = tmp_path / "server.pem"
+    if content is not None:
+        pem.write_bytes(content)
+    station = server.GroundStation([f"udpin:127.0.0.1:{free_udp_port()}"], None, TOKEN, record_dir=tmp_path)
+    lines = []
+    with pytest.raises(ValueError, match=f"cannot serve HTTPS with --tls-cert {pem} and --tls-key {pem}: "):
+        server.serve(station, "127.0.0.1", free_tcp_port(), str(pem), str(pem), announce=lines.append)
+    assert lines == [] and list(tmp_path.glob("session-*.tlog")) == []
+
+
+def test_a_link_that_cannot_open_leaves_no_recording(tmp_path):
+    from groundstation import server
+
+    with pytest.raises(OSError, match="cannot listen on udpin:999.1.1.1:14550"):
+        server.GroundStation(["udpin:999.1.1.1:14550"], None, TOKEN, record_dir=tmp_path)
+    assert list(tmp_path.glob("session-*.tlog")) == []
+
+
+def test_the_station_serves_https_with_its_certificate(tmp_path):
+    pem, port = certificate(tmp_path), free_tcp_port()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "groundstation.cli", "serve", "--port", str(port), "--token", TOKEN,
+         "--record-dir", "", "--mavlink", f"udpin:127.0.0.1:{free_udp_port()}", "--tls-cert", pem, "--tls-key", pem],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"})
+    try:
+        out, err = read_until(process, "ground station:", timeout=30)
+        assert f"https://127.0.0.1:{port}/#token={TOKEN}" in out, (out, err)
+
+        trusted = ssl.create_default_context(cafile=str(tmp_path / "ca.pem"))
+
+        def health():
+            try:
+                return httpx.get(f"https://127.0.0.1:{port}/api/health", verify=trusted, timeout=2)
+            except httpx.HTTPError:
+                return None
+
+        assert wait_wall(health, 10, "the station answers over HTTPS").json()["status"] == "ok"
+    finally:
+        process.terminate()
+        process.communicate(timeout=10)
 
 
 def test_the_web_port_listens_before_the_address_is_announced():
