@@ -33,16 +33,20 @@ class Recorder:
         self._writer = TlogWriter(path)
         self._lock = threading.Lock()
         self._flushed = time.monotonic()
-        self.packets = 0
+        self.messages = 0  # that the station sent or heard (the scene's notes not counted)
         self._first: float | None = None
         self._last: float | None = None
         self._notes = SceneNotes(scene_note) if scene_note else None
         self._write_note(time.time())
 
     def write(self, packet: bytes, timestamp: float) -> None:
+        """A message the station sent or heard."""
+        self._record(packet, timestamp, message=True)
+
+    def _record(self, packet: bytes, timestamp: float, message: bool = False) -> None:
         with self._lock:
             self._writer.write(packet, timestamp)
-            self.packets += 1
+            self.messages += message
             if self._first is None:
                 self._first = timestamp
             self._last = timestamp
@@ -55,7 +59,7 @@ class Recorder:
     def _write_note(self, now: float) -> None:
         if self._notes is not None:
             for packet in self._notes.take(now):
-                self.write(packet, now)
+                self._record(packet, now)
 
     def tick(self, now: float | None = None) -> None:
         """Write the scene's note when due and flush if a second has passed since the last flush (called by

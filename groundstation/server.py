@@ -160,12 +160,12 @@ class GroundStation:
         self._indexer.shutdown(wait=False, cancel_futures=True)
 
     def _close_recording(self) -> None:
-        """Close the session's recording; one that holds no message (the station never ran: a port in use, a
-        certificate that would not load) is removed, not left in the list as an empty session."""
+        """Close the session's recording; one that holds no message but the scene's note (the station never ran:
+        a port in use, a certificate that would not load) is removed, not left in the list as an empty session."""
         if self.recorder is None:
             return
         self.recorder.close()
-        if not self.recorder.packets:
+        if not self.recorder.messages:
             self.recorder.path.unlink(missing_ok=True)
 
     # ---- what the app asks for -------------------------------------------------------------------

@@ -49,6 +49,7 @@ from groundstation.security import is_loopback
 from vehicle.mapping.picture import HOME
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.waypoints import parse_mission
+from vehicle.world.scene import load_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 STOPPED_SYSID = 3
@@ -787,16 +788,17 @@ def certificate(folder: Path) -> str:
 
 def test_a_web_port_in_use_is_an_error_before_the_address_is_announced(tmp_path):
     """uvicorn binds after the station announced its address (another server's) and only logged the failure;
-    and the session's recording, empty, stayed in the list."""
+    and the session's recording, empty but for the note naming its scene, stayed in the list."""
     from groundstation import server
 
     taken = socket.socket()
     taken.bind(("127.0.0.1", 0))
     taken.listen()
-    station = server.GroundStation([f"udpin:127.0.0.1:{free_udp_port()}"], None, TOKEN, record_dir=tmp_path)
+    scene = load_scene(ROOT / "scenes" / "default.wrl")  # a file: the recording names it in a note
+    station = server.GroundStation([f"udpin:127.0.0.1:{free_udp_port()}"], scene, TOKEN, record_dir=tmp_path)
     lines = []
     try:
-        assert list(tmp_path.glob("session-*.tlog"))  # the station made its recording
+        assert len(list(tmp_path.glob("session-*.tlog"))) == 1  # its note written (not flushed yet)
         with pytest.raises(OSError, match=f"cannot serve on 127.0.0.1:{taken.getsockname()[1]}"):
             server.serve(station, "127.0.0.1", taken.getsockname()[1], announce=lines.append)
         assert lines == []
