@@ -156,10 +156,28 @@ def test_one_call_reads_a_bounded_number_of_datagrams(listening, monkeypatch):
 
 
 @pytest.mark.parametrize("url", ["udpin:127.0.0.1", "udpout::14550", "udp:host:port",
-                                 "udpin:127.0.0.1:70000", "udpout:127.0.0.1:0"])  # a socket's OverflowError before
-def test_a_udp_url_without_host_and_port_is_refused(url):
+                                 "udpin:127.0.0.1:70000", "udpout:127.0.0.1:0",  # a socket's OverflowError before
+                                 "tcp:127.0.0.1", "tcpin::5760", "tcp:host:port"])  # retried for ever before
+def test_a_udp_or_tcp_url_without_host_and_port_is_refused(url):
     with pytest.raises(ValueError, match="HOST:PORT"):
         links.connect(url)
+
+
+@pytest.mark.parametrize("url", ["bogus://", "http://127.0.0.1:14550", "udp-in:127.0.0.1:14550"])
+def test_a_url_that_names_no_kind_of_link_is_refused_saying_which_are(url):
+    """Anything not UDP or TCP went to pymavlink as a serial port that never opened: retried for ever (the
+    station showed the link down) or, for an agent, an error only once its connect timeout ran out."""
+    with pytest.raises(ValueError, match="not a MAVLink link: .* or a serial port such as /dev/ttyUSB0,57600"):
+        links.connect(url)
+
+
+@pytest.mark.parametrize("url", ["/dev/ttyNOPE0,57600", "COM9", "tcpin:127.0.0.1:{port}"])
+def test_a_serial_port_or_a_tcp_listener_is_a_link_even_before_it_opens(url):
+    link = links.connect(url.format(port=free_tcp_port()))
+    try:
+        assert isinstance(link, links.StreamLink)
+    finally:
+        link.close()
 
 
 def test_a_stream_that_is_not_up_yet_reports_itself_down_then_comes_up(monkeypatch):

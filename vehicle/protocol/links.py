@@ -30,6 +30,7 @@ by design), hence this module.
 
 from __future__ import annotations
 
+import re
 import socket
 import time
 from collections import Counter, OrderedDict, deque
@@ -41,17 +42,24 @@ MAX_SENDERS = 64  # UDP peers remembered (parsers, and where broadcasts go)
 SENDER_IDLE = 30.0  # s after which a silent UDP peer gets no more broadcasts and is forgotten
 MAX_DATAGRAMS = 2000  # read at most this many per call, so one flood cannot stall the caller's loop
 RETRY = (0.5, 10.0)  # s: first and longest pause between attempts to open a stream
+OTHER_KINDS = frozenset({"udpbcast", "mcast", "ws", "wss", "wsserver"})  # pymavlink's other links, as it opens them
+_SCHEME = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*")  # a word before a colon: a kind of link, not a serial port's path
 
 
 def connect(url: str, source_system: int = 255, source_component: int = 0, key: bytes | None = None,
             require_signed: bool = True) -> UdpLink | StreamLink:
     """A link for a pymavlink-style URL (see the module's docstring); with ``key``, signed both ways
     (``require_signed``: refuse what is not signed with it, as a vehicle does)."""
-    kind, _, rest = url.partition(":")
-    if kind in ("udpin", "udp", "udpout"):
+    kind, colon, rest = url.partition(":")
+    if kind in ("udpin", "udp", "udpout", "tcp", "tcpin"):
         host, _, port = rest.rpartition(":")
         if not host or not port.isdigit() or not 0 < int(port) < 65536:
-            raise ValueError(f"a UDP link is {kind}:HOST:PORT with a port from 1 to 65535, not {url!r}")
+            transport = "a TCP" if kind.startswith("tcp") else "a UDP"
+            raise ValueError(f"{transport} link is {kind}:HOST:PORT with a port from 1 to 65535, not {url!r}")
+    elif colon and _SCHEME.fullmatch(kind) and kind not in OTHER_KINDS:
+        raise ValueError(f"not a MAVLink link: {url!r} (udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, "
+                         "tcpin:HOST:PORT or a serial port such as /dev/ttyUSB0,57600)")
+    if kind in ("udpin", "udp", "udpout"):
         link = UdpLink(url, host, int(port), listen=kind != "udpout", source_system=source_system,
                        source_component=source_component)
     else:
