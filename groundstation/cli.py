@@ -227,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     commands = parser.add_subparsers(dest="command", required=True)
 
     serve = commands.add_parser("serve", help="serve the ground station for vehicles on MAVLink links")
-    serve.add_argument("--mavlink", action="append", metavar="URL",
+    serve.add_argument("--mavlink", action="append", metavar="URL", type=options.link_url,
                        help=f"pymavlink connection string, repeatable (default {DEFAULT_LINK})")
     serve.add_argument("--scene", help="VRML scene to show (default: none, vehicles over a ground grid)")
     _server_options(serve)

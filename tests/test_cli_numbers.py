@@ -84,3 +84,19 @@ def test_a_point_west_of_the_origin_or_south_of_the_equator_is_a_value_not_an_op
         ["--start=-1,2", "--heading", "-90", "--datum=-.5,1", "-h"]
     assert options.glue_negative_points(["--sta", "-1,2", "--start", "--json", "--", "--start", "-3,4"]) == \
         ["--sta=-1,2", "--start", "--json", "--", "--start", "-3,4"]
+
+
+@pytest.mark.parametrize("main, args, option", [
+    (vehicle, ["agent", "--mission", "browse", "--connect", "bogus://"], "--connect"),
+    (vehicle, ["agent", "--mission", "browse", "--connect", "udpin:127.0.0.1:14550", "--gcs", "tcp:host"], "--gcs"),
+    (vehicle, ["sim", "--mission", "browse", "--mavlink", "udpin:127.0.0.1"], "--mavlink"),
+    (groundstation, ["serve", "--mavlink", "http://127.0.0.1:14550"], "--mavlink"),
+])
+def test_a_link_url_that_names_no_link_is_a_usage_error_naming_the_option(main, args, option, capsys):
+    """The agent waited out its connect timeout and then failed with exit code 1 ("error - not a MAVLink link"),
+    a station or a simulated vehicle stopped with a plain error: a mistyped URL is a usage error, at once."""
+    with pytest.raises(SystemExit) as exit_:
+        main(args)
+    assert exit_.value.code == 2
+    said = capsys.readouterr().err
+    assert f"argument {option}: " in said and ("HOST:PORT" in said or "not a MAVLink link" in said)

@@ -271,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
     sim.add_argument("--role", choices=["vehicle", "autopilot"], default="vehicle",
                      help="vehicle: the autopilot and its onboard agent in one (default); autopilot: a plain "
                           "ArduPilot-like flight controller, for `vehicle agent` to fly")
-    sim.add_argument("--mavlink", action="append", metavar="URL",
+    sim.add_argument("--mavlink", action="append", metavar="URL", type=options.link_url,
                      help=f"pymavlink connection string, repeatable (default {DEFAULT_SIM_LINK})")
     sim.add_argument("--sysid", type=options.system_id, default=1, help="MAVLink system id, 1 to 255 (default 1)")
     sim.add_argument("--speedup", type=options.positive, default=1.0,
@@ -286,7 +286,7 @@ def main(argv: list[str] | None = None) -> int:
 
     agent = commands.add_parser("agent", help="the onboard agent on a companion computer, flying an autopilot "
                                                "(ArduPilot, or vehicle sim --role autopilot) over MAVLink")
-    agent.add_argument("--connect", required=True, metavar="URL",
+    agent.add_argument("--connect", required=True, metavar="URL", type=options.link_url,
                        help="the flight controller, in pymavlink's form: tcp:HOST:PORT, udpin:HOST:PORT, "
                             "/dev/ttyAMA0,921600 ...")
     agent.add_argument("--mission", required=True, type=str.lower, choices=list(MISSIONS),
@@ -304,7 +304,7 @@ def main(argv: list[str] | None = None) -> int:
                        help="set a mission parameter (as for vehicle experiment)")
     agent.add_argument("--config", help="TOML file of mission parameters")
     agent.add_argument("--waypoints", help="QGC WPL 110 file of waypoints (square, pathfind)")
-    agent.add_argument("--gcs", action="append", default=[], metavar="URL",
+    agent.add_argument("--gcs", action="append", default=[], metavar="URL", type=options.link_url,
                        help="a ground station to send the map, path and state to directly too (repeatable)")
     agent.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
                        help="where the scene origin lies on Earth (default: the scene's hint, else ArduPilot's "

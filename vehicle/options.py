@@ -59,6 +59,17 @@ def _float(text: str) -> float | None:
     return value if math.isfinite(value) else None
 
 
+def link_url(text: str) -> str:
+    """A MAVLink link's URL that ``vehicle.protocol.links.connect`` can open (pymavlink loads only when the
+    option is given: help stays fast)."""
+    from vehicle.protocol.links import check_url
+
+    try:
+        return check_url(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 POINT_OPTIONS = ("--start", "--datum")  # their values are comma-separated numbers: X,Y[,Z] or LAT,LON[,ALT]
 _NEGATIVE = re.compile(r"-\.?\d")
 

@@ -50,6 +50,23 @@ def connect(url: str, source_system: int = 255, source_component: int = 0, key: 
             require_signed: bool = True) -> UdpLink | StreamLink:
     """A link for a pymavlink-style URL (see the module's docstring); with ``key``, signed both ways
     (``require_signed``: refuse what is not signed with it, as a vehicle does)."""
+    check_url(url)
+    kind, _, rest = url.partition(":")
+    if kind in ("udpin", "udp", "udpout"):
+        host, _, port = rest.rpartition(":")
+        link = UdpLink(url, host, int(port), listen=kind != "udpout", source_system=source_system,
+                       source_component=source_component)
+    else:
+        link = StreamLink(url, source_system, source_component)
+    if key is not None:
+        link.verifier = signing.Verifier(key, require_signed)
+        signing.sign_outgoing(link.mav, key)
+    return link
+
+
+def check_url(url: str) -> str:
+    """``url`` if ``connect`` can open it (now or, for a stream, once its peer is up); ValueError saying why not:
+    a UDP or TCP URL without a host and a port from 1 to 65535, or a kind of link pymavlink does not know."""
     kind, colon, rest = url.partition(":")
     if kind in ("udpin", "udp", "udpout", "tcp", "tcpin"):
         host, _, port = rest.rpartition(":")
@@ -59,15 +76,7 @@ def connect(url: str, source_system: int = 255, source_component: int = 0, key: 
     elif colon and _SCHEME.fullmatch(kind) and kind not in OTHER_KINDS:
         raise ValueError(f"not a MAVLink link: {url!r} (udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, "
                          "tcpin:HOST:PORT or a serial port such as /dev/ttyUSB0,57600)")
-    if kind in ("udpin", "udp", "udpout"):
-        link = UdpLink(url, host, int(port), listen=kind != "udpout", source_system=source_system,
-                       source_component=source_component)
-    else:
-        link = StreamLink(url, source_system, source_component)
-    if key is not None:
-        link.verifier = signing.Verifier(key, require_signed)
-        signing.sign_outgoing(link.mav, key)
-    return link
+    return url
 
 
 class LinkWatch:
