@@ -357,7 +357,7 @@ class Fleet:
         if m.get_srcComponent() == COMPANION and m.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER:
             vehicle.companion_heartbeat = now
             return
-        if m.type in NOT_VEHICLES:
+        if not makes_a_vehicle(m.type, m.autopilot):  # another part of the system: its mode is not the vehicle's
             return
         changed = vehicle.custom_mode not in (-1, m.custom_mode)
         vehicle.mav_type = m.type

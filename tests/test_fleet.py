@@ -69,6 +69,18 @@ def test_the_companions_heartbeat_neither_makes_a_vehicle_nor_changes_its_mode(f
     assert vehicle.has_companion(1.5) and not vehicle.has_companion(10.0)  # heard within the link timeout
 
 
+def test_a_heartbeat_of_another_part_of_the_system_does_not_change_the_vehicles_mode(fleet):
+    """A component that sends a vehicle's type with no autopilot (a companion program of another make, a
+    gimbal driver) made no vehicle, yet its heartbeat set the vehicle's mode (to custom mode 0) and armed state."""
+    other = Sender(42)
+    hear(fleet, 0.0, autopilot(heartbeat(mode=4)))
+    hear(fleet, 1.0, other(heartbeat(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_INVALID, 0)))
+    vehicle = fleet.get(SYSID)
+    assert vehicle.mode == "GUIDED" and vehicle.custom_mode == 4
+    hear(fleet, 2.0, autopilot(heartbeat(mode=6)))
+    assert vehicle.mode == "RTL"  # the autopilot's own still does
+
+
 def test_system_0_is_no_vehicle(fleet):
     """0 is MAVLink's broadcast address: a "vehicle" there would have every command to it go to all of them."""
     broadcast = mavlink.MAVLink(None, srcSystem=0, srcComponent=1)
