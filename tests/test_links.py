@@ -171,6 +171,12 @@ def test_a_url_that_names_no_kind_of_link_is_refused_saying_which_are(url):
         links.connect(url)
 
 
+@pytest.mark.parametrize("url", ["/dev/ttyUSB0,fast", "/dev/ttyUSB0,0", "/dev/ttyUSB0,", "COM3,-9600"])
+def test_a_serial_port_with_a_baud_rate_that_is_no_number_is_refused(url):
+    with pytest.raises(ValueError, match="a serial port is PATH or PATH,BAUD with a baud rate such as 57600"):
+        links.connect(url)
+
+
 @pytest.mark.parametrize("url", ["/dev/ttyNOPE0,57600", "COM9", "tcpin:127.0.0.1:{port}"])
 def test_a_serial_port_or_a_tcp_listener_is_a_link_even_before_it_opens(url):
     link = links.connect(url.format(port=free_tcp_port()))
@@ -225,9 +231,11 @@ def test_a_second_listener_on_a_udp_port_is_refused_and_the_first_keeps_hearing(
         sender.close()
 
 
-def test_a_serial_port_carries_mavlink_both_ways():
+@pytest.mark.parametrize("name", ["its own", "a stable name with colons"])
+def test_a_serial_port_carries_mavlink_both_ways_at_its_baud_rate(name, tmp_path):
     """A telemetry radio or a USB autopilot is a serial port: here a pseudo-terminal, the same to pyserial (the
-    link crashed with ModuleNotFoundError while pyserial was not a dependency)."""
+    link crashed with ModuleNotFoundError while pyserial was not a dependency). Linux's stable names for a USB
+    port have colons, and pymavlink's factory took such a name for a UDP address ("invalid literal for int()")."""
     import os
     import termios
     import tty
@@ -237,9 +245,14 @@ def test_a_serial_port_carries_mavlink_both_ways():
     tty.setraw(slave)
     termios.tcflush(slave, termios.TCIOFLUSH)
     os.set_blocking(master, False)
-    link = links.connect(f"{os.ttyname(slave)},57600", source_system=9, source_component=1)
+    device = os.ttyname(slave)
+    if name != "its own":
+        device = tmp_path / "pci-0000:00:14.0-usb-0:2:1.0-port0"
+        device.symlink_to(os.ttyname(slave))
+    link = links.connect(f"{device},57600", source_system=9, source_component=1)
     try:
         assert link.up, link.error
+        assert termios.tcgetattr(slave)[4:6] == [termios.B57600] * 2  # input and output speed
         link.mav.statustext_send(6, b"out of the port")
         parser = mavlink.MAVLink(None)
 

@@ -15,7 +15,10 @@ cannot be trusted:
   nor is sent our traffic.
 - Streams (``tcp:``, serial ports) never block and never give up: a peer that
   is not up yet, or that drops, is retried with a growing pause while the link
-  reports itself down (``up``, ``error``).
+  reports itself down (``up``, ``error``). A serial port is ``PATH[,BAUD]``
+  and opened as one whatever its name: pymavlink takes a name with a colon
+  for a UDP address, and Linux's stable names for a USB autopilot
+  (``/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0``) have them.
 
 With a signing key (``vehicle.protocol.signing``) a link signs what it sends
 and checks what it receives, one table of stream timestamps for all its
@@ -30,6 +33,7 @@ by design), hence this module.
 
 from __future__ import annotations
 
+import os
 import re
 import socket
 import time
@@ -44,6 +48,8 @@ MAX_DATAGRAMS = 2000  # read at most this many per call, so one flood cannot sta
 RETRY = (0.5, 10.0)  # s: first and longest pause between attempts to open a stream
 OTHER_KINDS = frozenset({"udpbcast", "mcast", "ws", "wss", "wsserver"})  # pymavlink's other links, as it opens them
 _SCHEME = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*")  # a word before a colon: a kind of link, not a serial port's path
+STREAM_KINDS = frozenset({"tcp", "tcpin"}) | OTHER_KINDS  # opened by pymavlink from their URL; the rest are serial
+DEFAULT_BAUD = 115200  # pymavlink's
 
 
 def connect(url: str, source_system: int = 255, source_component: int = 0, key: bytes | None = None,
@@ -76,7 +82,20 @@ def check_url(url: str) -> str:
     elif colon and _SCHEME.fullmatch(kind) and kind not in OTHER_KINDS:
         raise ValueError(f"not a MAVLink link: {url!r} (udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, "
                          "tcpin:HOST:PORT or a serial port such as /dev/ttyUSB0,57600)")
+    elif kind not in OTHER_KINDS:
+        serial_port(url)
     return url
+
+
+def serial_port(url: str) -> tuple[str, int]:
+    """(device, baud) of a serial port's URL, ``PATH[,BAUD]`` (a path that exists with its comma is a path);
+    ValueError if the baud rate is not a whole number above zero."""
+    device, comma, baud = url.rpartition(",")
+    if not comma or os.path.exists(url):
+        return url, DEFAULT_BAUD
+    if not baud.isdigit() or int(baud) == 0:
+        raise ValueError(f"a serial port is PATH or PATH,BAUD with a baud rate such as 57600, not {url!r}")
+    return device, int(baud)
 
 
 class LinkWatch:
@@ -248,10 +267,16 @@ class StreamLink(_Signed):
     def _open(self) -> None:
         if time.monotonic() < self._retry_at:
             return
+        source_system, source_component = self.source
         try:
-            self.connection = mavutil.mavlink_connection(self.url, source_system=self.source[0],
-                                                         source_component=self.source[1], autoreconnect=True,
-                                                         retries=0)
+            if self.url.partition(":")[0] in STREAM_KINDS:
+                self.connection = mavutil.mavlink_connection(self.url, source_system=source_system,
+                                                             source_component=source_component, autoreconnect=True,
+                                                             retries=0)
+            else:  # by name: pymavlink's factory would take a path with a colon for a UDP address
+                device, baud = serial_port(self.url)
+                self.connection = mavutil.mavserial(device, baud=baud, source_system=source_system,
+                                                    source_component=source_component, autoreconnect=True)
         except (OSError, ValueError) as error:
             self._down(error)
             return
