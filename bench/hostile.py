@@ -211,6 +211,21 @@ def send_at(sender: socket.socket, port: int, packets: list[bytes], rate: float,
         time.sleep(0.0005)
 
 
+def vehicle_beat(sysid: int, mode: int = 4) -> bytes:
+    """A copter's heartbeat in ``sysid``'s name: an attacker's own fake vehicle, whose messages the station
+    hears from the attacker's address (in the real vehicle's name they come from elsewhere, and are dropped)."""
+    beat = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                             mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode,
+                                             mavlink.MAV_STATE_ACTIVE, 3)
+    return beat.pack(packer(sysid))
+
+
+def dropped_from_elsewhere(target: Target, sysid: int) -> int:
+    """Messages the station dropped in ``sysid``'s name for coming from elsewhere than its heartbeat."""
+    counts = target.api.get("/api/health").json()["link"]["from_elsewhere"]
+    return next((c["messages"] for c in counts if c["sysid"] == sysid), 0)
+
+
 def tunnel(sysid: int, kind: int, payload: bytes) -> bytes:
     message = mavlink.MAVLink_tunnel_message(0, 0, kind, len(payload), list(payload.ljust(PAYLOAD, b"\0")))
     return message.pack(packer(sysid, mavlink.MAV_COMP_ID_ONBOARD_COMPUTER))
@@ -238,6 +253,8 @@ def view_socket_elsewhere(target: Target):
 
 def nan_attitude(target: Target):
     sender = udp_sender()
+    dropped = dropped_from_elsewhere(target, 1)
+    sender.sendto(vehicle_beat(77), ("127.0.0.1", target.station_udp))
     for sysid in (1, 77):
         nan = mavlink.MAVLink_attitude_message(1000, float("nan"), float("inf"), float("-inf"), 0, 0, 0)
         for _ in range(20):
@@ -255,14 +272,34 @@ def nan_attitude(target: Target):
         strict = True
     except ValueError:
         strict = False
-    return response.status_code == 200 and strict, f"/api/vehicles {response.status_code}, JSON strict: {strict}"
+    dropped = dropped_from_elsewhere(target, 1) - dropped
+    return response.status_code == 200 and strict and dropped == 20, \
+        f"/api/vehicles {response.status_code}, JSON strict: {strict}; vehicle 1's {dropped} dropped as from elsewhere"
+
+
+def spoofed_position(target: Target):
+    """Positions 5 km away and LAND heartbeats in the real vehicle's name, from another address."""
+    sender = udp_sender()
+    dropped = dropped_from_elsewhere(target, 1)
+    far = mavlink.MAVLink_global_position_int_message(1000, int(-35.32e7), int(149.17e7), 600000, 50000, 0, 0, 0, 0)
+    packets = [far.pack(packer(1)), vehicle_beat(1, mode=9)] * 50
+    for packet in packets:
+        sender.sendto(packet, ("127.0.0.1", target.station_udp))
+        time.sleep(0.01)
+    time.sleep(0.5)
+    vehicle = next(v for v in target.api.get("/api/vehicles").json() if v["sysid"] == 1)
+    where = vehicle["position"] or {"x": 0.0, "y": 0.0}
+    dropped = dropped_from_elsewhere(target, 1) - dropped
+    held = abs(where["x"]) < 1000 and abs(where["y"]) < 1000 and vehicle["mode"] != "LAND" and dropped == len(packets)
+    return held, (f"vehicle 1 shown at ({where['x']:.0f}, {where['y']:.0f}) in {vehicle['mode']}; "
+                  f"{dropped} of {len(packets)} dropped as from elsewhere")
 
 
 def zlib_bomb(target: Target):
     squeezer = zlib.compressobj(9)
     zeros = bytes(1 << 20)
     data = b"".join(squeezer.compress(zeros) for _ in range(1024)) + squeezer.flush()  # 1 GB of cells
-    packets = snapshot_packets(1, 4242, 4000, 4000, data)
+    packets = [vehicle_beat(79)] + snapshot_packets(79, 4242, 4000, 4000, data)  # the attacker's own vehicle
     sender = udp_sender()
     send_at(sender, target.station_udp, packets, 5000, len(packets) / 5000 + 0.5)
     time.sleep(1.0)
@@ -272,9 +309,9 @@ def zlib_bomb(target: Target):
 
 def map_claim(side: int):
     def claim(target: Target):
-        packets = snapshot_packets(1, 4000 + side % 1000, side, side, zlib.compress(b""))
+        packets = snapshot_packets(79, 4000 + side % 1000, side, side, zlib.compress(b""))
         sender = udp_sender()
-        for packet in packets * 5:
+        for packet in [vehicle_beat(79)] + packets * 5:
             sender.sendto(packet, ("127.0.0.1", target.station_udp))
         time.sleep(1.0)
         response = httpx.get(f"{target.base}/api/vehicles")
@@ -543,6 +580,7 @@ def tiny_map_resolution(target: Target):
 ATTACKS = [
     ("view socket elsewhere (?websocket=, CSP)", view_socket_elsewhere),
     ("NaN in ATTITUDE (the vehicle's sysid and a foreign one)", nan_attitude),
+    ("positions and LAND heartbeats in the vehicle's name from elsewhere", spoofed_position),
     ("zlib bomb in a map snapshot", zlib_bomb),
     ("map claiming 30,000 cells a side", map_claim(30000)),
     ("map claiming 65,535 cells a side", map_claim(65535)),

@@ -185,7 +185,9 @@ def test_warnings_are_a_banner_shown_whole(page, station):
     text = ("RTL: obstacle 1.2 m ahead at (10.5, -3.0); climbing to 15 m before flying home past the building "
             "that stands between here and home")
     assert len(text) > 100  # three STATUSTEXT chunks
-    sender = mavutil.mavlink_connection(station.vehicle_url(), source_system=FLYER, source_component=1)
+    # another part of the vehicle (the autopilot's own name is heard only from where its heartbeat comes)
+    sender = mavutil.mavlink_connection(station.vehicle_url(), source_system=FLYER,
+                                        source_component=mavlink.MAV_COMP_ID_OBSTACLE_AVOIDANCE)
     try:
         for message in statustexts(text, mavlink.MAV_SEVERITY_WARNING, 77):
             sender.mav.send(message)

@@ -307,39 +307,74 @@ def assert_orders_reach_only(link: Link, vehicle: Peer, attacker: Peer) -> None:
 @pytest.mark.parametrize("attack", [
     pytest.param([tunnel(32801, b"\0" * 100), position()] * 50, id="a map snapshot flood"),
     pytest.param([vehicle_heartbeat()] * 5, id="spoofed heartbeats"),
+    pytest.param([position(), position(alt=80.0)], id="spoofed positions"),
 ])
-def test_what_comes_in_a_vehicles_name_from_elsewhere_does_not_take_its_orders(attack):
+def test_what_comes_in_a_vehicles_name_from_elsewhere_neither_moves_it_nor_takes_its_orders(attack):
     """A map snapshot in vehicle 1's name, 8,555 chunks from an attacker's address, took vehicle 1's route, as
     did (without signing) a single heartbeat in its name: the operator's commands went to the attacker for as
-    long as the attack lasted, and came back unanswered."""
+    long as the attack lasted, and came back unanswered. Positions in its name from anywhere moved it on the
+    page."""
     port = free_udp_port()
-    link = Link([f"udpin:127.0.0.1:{port}"], Fleet()).start()
+    fleet = Fleet()
+    link = Link([f"udpin:127.0.0.1:{port}"], fleet).start()
     try:
         with Peer(("127.0.0.1", port), sysid=1) as vehicle, Peer(("127.0.0.1", port), sysid=1) as attacker:
-            vehicle.send(vehicle_heartbeat())
-            wait_wall(lambda: 1 in link.route, 5, "the vehicle heard")
-            received = link.stats["received"]
+            vehicle.send(vehicle_heartbeat(), position(alt=4.0))
+            wait_wall(lambda: 1 in link.route and fleet.vehicles[1].alt == 4.0, 5, "the vehicle heard")
             attacker.send(*attack)
-            wait_wall(lambda: link.stats["received"] >= received + len(attack), 5, "the attack heard")
+            wait_wall(lambda: link.from_elsewhere[1] == len(attack), 5, "the attack heard")
+            assert fleet.vehicles[1].alt == 4.0 and fleet.vehicles[1].map_stream.payloads == 0
+            assert link.health()["from_elsewhere"] == [{"sysid": 1, "messages": len(attack)}]
             assert_orders_reach_only(link, vehicle, attacker)
     finally:
         link.close()
 
 
-def test_a_vehicle_silent_where_it_was_is_followed_where_its_heartbeat_comes_from_now():
+class KeptPort:
+    """A link's stand-in that keeps who was written to (the station answers a heartbeat with requests)."""
+
+    def __init__(self):
+        self.refused: Counter = Counter()
+        self.written: list = []
+
+    def write(self, packet: bytes, peer=None) -> None:
+        self.written.append(peer)
+
+
+def test_a_vehicle_is_heard_where_its_heartbeat_comes_from_and_followed_once_silent_there():
     """Its link died and it came back on another (a radio after Wi-Fi, a restarted process on a new port): its
-    heartbeat there takes the route once none came from the old place for LINK_LOST_AFTER."""
-    link = Link([], Fleet())
-    old, new = ("udp", ("127.0.0.1", 5000)), ("radio", None)
-    link._learn_route(1, *old, 100.0, beat=True)
-    link._learn_route(1, *new, 99.5 + LINK_LOST_AFTER, beat=True)  # the old place beat less than that ago
-    assert link.route[1][:2] == old
-    link._learn_route(1, *old, 101.0, beat=False)  # telemetry from the old place does not count as its heartbeat
-    link._learn_route(1, *new, 100.1 + LINK_LOST_AFTER, beat=True)
-    assert link.route[1][:2] == new
-    link._learn_route(2, *old, 100.0, beat=False)  # first heard by another message: any heartbeat takes it
-    link._learn_route(2, *new, 100.1, beat=True)
-    assert link.route[2][:2] == new
+    heartbeat there is heard once none came from the old place for LINK_LOST_AFTER, and only then is what comes
+    from there. Another part of the system (its onboard agent) is heard from its own place."""
+    fleet = Fleet()
+    link = Link([], fleet)
+    wifi, radio = KeptPort(), KeptPort()
+    start = time.time()
+
+    def hear(port: KeptPort, message, after: float, compid: int = 1) -> None:
+        packet = pack(message, mavlink.MAVLink(None, srcSystem=1, srcComponent=compid))
+        parsed = mavlink.MAVLink(None).parse_buffer(packet)[0]
+        parsed._peer = ("127.0.0.1", 5000) if port is wifi else None
+        link._receive(port, parsed, start + after)
+
+    hear(wifi, vehicle_heartbeat(), 0.0)
+    hear(wifi, position(alt=4.0), 0.1)
+    hear(radio, vehicle_heartbeat(), 0.2)  # a second link to it, or another sender: not heard while wifi beats
+    hear(radio, position(alt=50.0), 0.3)
+    assert fleet.vehicles[1].alt == 4.0 and link.from_elsewhere[1] == 2 and link.route[1][0] is wifi
+    hear(wifi, position(alt=5.0), 1.0)  # telemetry from wifi does not count as its heartbeat
+    hear(radio, vehicle_heartbeat(), LINK_LOST_AFTER - 0.1)
+    assert link.from_elsewhere[1] == 3 and link.route[1][0] is wifi
+    hear(radio, vehicle_heartbeat(), LINK_LOST_AFTER + 0.1)
+    hear(radio, position(alt=6.0), LINK_LOST_AFTER + 0.2)
+    hear(wifi, position(alt=60.0), LINK_LOST_AFTER + 0.3)  # now wifi is elsewhere
+    assert fleet.vehicles[1].alt == 6.0 and link.from_elsewhere[1] == 4 and link.route[1][0] is radio
+    hear(wifi, vehicle_heartbeat(mav_type=mavlink.MAV_TYPE_ONBOARD_CONTROLLER), LINK_LOST_AFTER + 0.4, compid=191)
+    hear(wifi, mavlink.MAVLink_statustext_message(6, b"agent here"), LINK_LOST_AFTER + 0.5, compid=191)
+    assert fleet.vehicles[1].status == "agent here" and link.route[1][0] is radio
+    assert link.from_elsewhere[1] == 4
+    link._prune(start + LINK_LOST_AFTER + FORGET_AFTER + 1)  # forgotten: the next sender to beat is heard
+    hear(wifi, position(alt=7.0), LINK_LOST_AFTER + FORGET_AFTER + 2)
+    assert link.route[1][0] is wifi and link._places == {}
 
 
 def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_its_name():
@@ -355,7 +390,8 @@ def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_i
             wait_wall(lambda: 1 in link.route and fleet.vehicles.get(1) is not None, 5, "the vehicle heard")
             attacker.send(vehicle_heartbeat(), vehicle_heartbeat(), position())
             received = link.stats["received"]
-            attacker.send(mavlink.MAVLink_radio_status_message(200, 190, 90, 80, 70, 0, 0))  # radios never sign
+            radio = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)  # on the vehicle's link; radios never sign
+            vehicle.raw(pack(mavlink.MAVLink_radio_status_message(200, 190, 90, 80, 70, 0, 0), radio))
             attacker.as_system(1, 100).send(vehicle_heartbeat(mav_type=mavlink.MAV_TYPE_CAMERA))  # a part never signed
             stranger.send(vehicle_heartbeat())  # a vehicle never heard signed is still shown, as unsigned
             wait_wall(lambda: 2 in link.route and link.stats["received"] >= received + 3, 5, "the unsigned heard")
@@ -373,7 +409,7 @@ def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_i
 def test_the_links_routes_and_unfinished_texts_stay_bounded():
     link = Link([], Fleet())
     for sysid in range(1, 256):
-        link.route[sysid] = (None, None, 0.0 if sysid > 1 else FORGET_AFTER, 0.0)
+        link.route[sysid] = (None, None, 0.0 if sysid > 1 else FORGET_AFTER)
         link._asked[sysid] = (0.0, 0.0)
     link._prune(FORGET_AFTER + 1)
     assert list(link.route) == [1] and list(link._asked) == [1]  # only the one heard within ten minutes
