@@ -122,6 +122,11 @@ def create_app(station: GroundStation) -> FastAPI:
     def page():
         return FileResponse(STATIC / "index.html")
 
+    @app.get("/favicon.ico", include_in_schema=False)
+    def icon():
+        """Where browsers and bookmarking tools look first, whatever the page names."""
+        return FileResponse(STATIC / "favicon.svg", media_type="image/svg+xml")
+
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
 
     @app.get("/docs", include_in_schema=False)

@@ -592,6 +592,10 @@ def test_the_page_docs_and_3d_view(api):
     assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
     assert 'id="view"' in page.text and "<iframe" in page.text
     assert api.get("/static/app.js").status_code == 200
+    assert '<link rel="icon" href="/static/favicon.svg"' in page.text
+    for icon in (api.get("/static/favicon.svg"), api.get("/favicon.ico")):  # the page's, and where browsers look
+        assert icon.status_code == 200 and icon.headers["content-type"].startswith("image/svg+xml")
+        assert icon.text.startswith("<svg")
     docs = api.get("/docs")
     assert docs.status_code == 200 and "swagger" in docs.text.lower()
     schema = api.get("/openapi.json")
