@@ -8,7 +8,9 @@ only and is reached through here. Three things keep a hostile party out:
   loader unpacks), WebAssembly, and websockets to this origin only; a
   ``?websocket=`` query (viser's client would connect wherever it names) is
   refused outright. Script that a viser server might send (HTML elements,
-  ``RunJavascriptMessage``) cannot run.
+  ``RunJavascriptMessage``) cannot run. Nor can viser's Gaussian-splat sorter
+  (Emscripten's embind makes functions from strings): it fails once, with an
+  EvalError in the console, as the page loads; the station draws no splats.
 - The operator page opens its view at ``/viz/v/VIEWER/``, and viser's client
   connects to the socket of the same path: the viewer id travels with that
   one connection. Only the first live connection may claim an id.
