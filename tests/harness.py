@@ -17,10 +17,12 @@
 from __future__ import annotations
 
 import functools
+import itertools
+import os
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import httpx
@@ -65,16 +67,48 @@ def load_default_scene() -> Scene:
     return load_scene(default_scene())
 
 
+# ---- ports ----------------------------------------------------------------------------------------------
+PORT_BLOCK = 1500  # ports a test worker hands out, at most, before it uses them again
+
+
+def _ports_to_hand_out() -> Iterator[int]:
+    """Ports for what a test starts (a station's web or MAVLink port), in a block below the kernel's range for
+    sockets bound to port 0: every client socket takes one of those, and with a port from there another test
+    could take it between the probe and its use. Each pytest-xdist worker has a block of its own."""
+    try:
+        ephemeral = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        ephemeral = 32768  # Linux's default
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
+    first = ephemeral - PORT_BLOCK * (int(worker) + 1 if worker.isdigit() else 1)
+    if first < 1024:  # no room below the range: the kernel's choice, as a probe on port 0 gets it
+        return itertools.repeat(0)
+    return itertools.cycle(range(first, first + PORT_BLOCK))
+
+
+_ports = _ports_to_hand_out()
+_ports_lock = threading.Lock()
+
+
+def free_port(kind: int = socket.SOCK_DGRAM) -> int:
+    """A port on 127.0.0.1 nothing holds now, of this kind (``socket.SOCK_DGRAM`` or ``SOCK_STREAM``)."""
+    with _ports_lock:
+        for _ in range(PORT_BLOCK):
+            with socket.socket(socket.AF_INET, kind) as probe:
+                try:
+                    probe.bind(("127.0.0.1", next(_ports)))
+                except OSError:  # held by something else on the machine, or a closed TCP port's TIME_WAIT
+                    continue
+                return probe.getsockname()[1]
+    raise OSError(f"no free port among the {PORT_BLOCK} this test worker hands out")
+
+
 def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
+    return free_port(socket.SOCK_DGRAM)
 
 
 def free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
+    return free_port(socket.SOCK_STREAM)
 
 
 # ---- waits ----------------------------------------------------------------------------------------------

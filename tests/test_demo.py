@@ -19,14 +19,9 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+from harness import free_port
 
 WAIT = 120.0  # s: generous, the demo's vehicles start as separate processes on a busy machine
-
-
-def free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def processes_mentioning(text: str) -> list[int]:

@@ -24,14 +24,9 @@ from pathlib import Path
 
 import httpx
 import pytest
+from harness import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
