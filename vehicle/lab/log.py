@@ -106,7 +106,6 @@ class ExperimentLog:
         self.messages = 0
         self._batch = _Batch()
         self._writer: _Forked | _Writer | None = None
-        self._scratch = mavlink.MAVLink(None)  # packs a rare message; its payload is framed with the rest
         self._pose_due = self._hud_due = self._telemetry_due = self._agent_due = self._delta_due = 0.0
         self._pose_interval = self._hud_interval = self._delta_period = 0.0
         self._agent_status: agent_status.AgentStatus | None = None  # the last the companion was asked about
@@ -180,8 +179,8 @@ class ExperimentLog:
             if isinstance(message, tuple):
                 kind, payload = message
                 self._batch.add(stamp, component, _TUNNEL, _TUNNEL_HEAD.pack(kind, 0, 0, len(payload)) + payload)
-            else:  # pymavlink's packet less its framing
-                self._batch.add(stamp, component, type(message), message.pack(self._scratch)[10:-2])
+            else:
+                self._batch.add(stamp, component, type(message), _payload(message))
 
     def _note(self, now: float, stamp: int) -> None:
         """The scene's note where it falls in the log: after all noted so far (sent on), before what follows."""
@@ -447,6 +446,17 @@ def _serve(setup: tuple, connection) -> None:
     while (batch := connection.recv()) is not None:
         writer.write(batch)
     connection.send(writer.close())
+
+
+def _payload(message) -> bytes:
+    """A pymavlink message's payload, as its ``pack`` makes it before framing it (the writer frames them all at
+    once): framing one costs ten times as much, most of it the CRC in Python."""
+    message._pack = _payload_only  # pack() hands the payload to _pack, which frames it; here it is given back
+    return message.pack(None)
+
+
+def _payload_only(mav, crc_extra: int, payload: bytes, force_mavlink1: bool = False) -> bytes:
+    return payload
 
 
 def _frame_nothing() -> None:
