@@ -278,11 +278,15 @@ def nan_attitude(target: Target):
 
 
 def spoofed_position(target: Target):
-    """Positions 5 km away and LAND heartbeats in the real vehicle's name, from another address."""
+    """Positions 5 km away and LAND heartbeats in the real vehicle's name, from another address: as its autopilot
+    (component 1), and as another part of it (component 250)."""
     sender = udp_sender()
     dropped = dropped_from_elsewhere(target, 1)
     far = mavlink.MAVLink_global_position_int_message(1000, int(-35.32e7), int(149.17e7), 600000, 50000, 0, 0, 0, 0)
-    packets = [far.pack(packer(1)), vehicle_beat(1, mode=9)] * 50
+    other = mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                              mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 9, mavlink.MAV_STATE_ACTIVE, 3)
+    as_autopilot = [far.pack(packer(1)), vehicle_beat(1, mode=9)]
+    packets = (as_autopilot + [far.pack(packer(1, 250)), other.pack(packer(1, 250))]) * 25
     for packet in packets:
         sender.sendto(packet, ("127.0.0.1", target.station_udp))
         time.sleep(0.01)
@@ -290,9 +294,9 @@ def spoofed_position(target: Target):
     vehicle = next(v for v in target.api.get("/api/vehicles").json() if v["sysid"] == 1)
     where = vehicle["position"] or {"x": 0.0, "y": 0.0}
     dropped = dropped_from_elsewhere(target, 1) - dropped
-    held = abs(where["x"]) < 1000 and abs(where["y"]) < 1000 and vehicle["mode"] != "LAND" and dropped == len(packets)
+    held = abs(where["x"]) < 1000 and abs(where["y"]) < 1000 and vehicle["mode"] != "LAND" and dropped == 50
     return held, (f"vehicle 1 shown at ({where['x']:.0f}, {where['y']:.0f}) in {vehicle['mode']}; "
-                  f"{dropped} of {len(packets)} dropped as from elsewhere")
+                  f"{dropped} of the 50 as its autopilot dropped as from elsewhere")
 
 
 def zlib_bomb(target: Target):

@@ -73,6 +73,10 @@ MODE_ORDERS = {mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
                mavlink.MAV_CMD_COMPONENT_ARM_DISARM}  # commands after which a vehicle may change its mode
 MAX_VEHICLES = 64  # vehicles held at once; each may hold a map of up to 16 MB
 FORGET_AFTER = 600.0  # s of the receiver's clock without a message before a vehicle is forgotten
+# a vehicle's own state, taken only from its autopilot (the component whose heartbeat made it): another part of
+# the system, or a sender that took another component's name, does not move it or set its battery or mission
+AUTOPILOTS_OWN = frozenset({"GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE", "VFR_HUD", "SYS_STATUS",
+                            "HOME_POSITION", "MISSION_CURRENT", "MISSION_ITEM_REACHED"})
 
 TYPES = {
     mavlink.MAV_TYPE_GROUND_ROVER: "rover", mavlink.MAV_TYPE_SURFACE_BOAT: "boat",
@@ -116,6 +120,7 @@ class Sonar:
 @dataclass
 class VehicleState:
     sysid: int
+    component: int = mavlink.MAV_COMP_ID_AUTOPILOT1  # its autopilot's: the component whose heartbeat made it
     mav_type: int = 0
     autopilot: int = 0
     mode: str = "UNKNOWN"
@@ -268,10 +273,12 @@ class Fleet:
                 if len(self.vehicles) >= self.max_vehicles:
                     self.refused += 1
                     return
-                vehicle = self.vehicles[sysid] = VehicleState(sysid, first_heard=now)
+                vehicle = self.vehicles[sysid] = VehicleState(sysid, message.get_srcComponent(), first_heard=now)
             handler = getattr(self, f"_{kind.lower()}", None)
             vehicle.last_message = now
             vehicle.messages_received += 1
+            if kind in AUTOPILOTS_OWN and message.get_srcComponent() != vehicle.component:
+                return
             if handler is not None:
                 handler(vehicle, message, now)
                 vehicle.version += 1
@@ -357,8 +364,8 @@ class Fleet:
         if m.get_srcComponent() == COMPANION and m.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER:
             vehicle.companion_heartbeat = now
             return
-        if not makes_a_vehicle(m.type, m.autopilot):  # another part of the system: its mode is not the vehicle's
-            return
+        if not makes_a_vehicle(m.type, m.autopilot) or m.get_srcComponent() != vehicle.component:
+            return  # another part of the system: its mode is not the vehicle's
         changed = vehicle.custom_mode not in (-1, m.custom_mode)
         vehicle.mav_type = m.type
         vehicle.autopilot = m.autopilot

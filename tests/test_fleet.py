@@ -81,6 +81,31 @@ def test_a_heartbeat_of_another_part_of_the_system_does_not_change_the_vehicles_
     assert vehicle.mode == "RTL"  # the autopilot's own still does
 
 
+def test_only_the_autopilot_that_made_the_vehicle_sets_its_mode_position_and_battery(fleet):
+    """Any other component (or a sender in its name: the link hears each component where its heartbeat comes
+    from, so a spoofer took a component id of its own) set the vehicle's mode with a heartbeat of an autopilot,
+    and moved it with its positions. Its messages still show, and its sensors' readings count."""
+    other = Sender(250)
+    hear(fleet, 0.0, autopilot(heartbeat(mode=4)), autopilot(position(1.0, 2.0)),
+         autopilot(mavlink.MAVLink_sys_status_message(0, 0, 0, 500, 16000, 1400, 90, 0, 0, 0, 0, 0, 0)))
+    hear(fleet, 1.0, other(heartbeat(mode=9)), other(position(500.0, 500.0, 60.0)),
+         other(mavlink.MAVLink_attitude_message(1000, 0.5, 0.5, 3.0, 0, 0, 0)),
+         other(mavlink.MAVLink_sys_status_message(0, 0, 0, 500, 9000, 9000, 1, 0, 0, 0, 0, 0, 0)),
+         other(mavlink.MAVLink_home_position_message(0, 0, 0, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0)),
+         other(mavlink.MAVLink_mission_current_message(7)),
+         other(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, b"gimbal hot", 0, 0)),
+         other(echo(300)))
+    vehicle = fleet.get(SYSID)
+    assert (vehicle.mode, vehicle.component) == ("GUIDED", 1)
+    assert (vehicle.x, vehicle.y, vehicle.alt) == pytest.approx((1.0, 2.0, 4.0), abs=0.01)
+    assert (vehicle.roll, vehicle.voltage, vehicle.remaining, vehicle.mission_current) == (0.0, 16.0, 90, None)
+    assert vehicle.home == pytest.approx((1.0, 2.0), abs=0.01)  # its first fix, not the other's home
+    assert vehicle.status == "gimbal hot" and vehicle.sonar[0].distance == 3.0
+    assert vehicle.messages_received == 11  # all heard, as the vehicle's
+    hear(fleet, 2.0, autopilot(heartbeat(mode=6)), autopilot(position(3.0, 4.0)))
+    assert vehicle.mode == "RTL" and (vehicle.x, vehicle.y) == pytest.approx((3.0, 4.0), abs=0.01)
+
+
 def test_system_0_is_no_vehicle(fleet):
     """0 is MAVLink's broadcast address: a "vehicle" there would have every command to it go to all of them."""
     broadcast = mavlink.MAVLink(None, srcSystem=0, srcComponent=1)
