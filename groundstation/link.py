@@ -24,19 +24,24 @@ signed) in its name afterwards is refused too, or an unsigned heartbeat in an
 autopilot's name, from anywhere, would take its route and its orders. Other
 components of the system that never signed (a camera behind a router) still pass.
 
-Signed or not, a component is heard where its heartbeat comes from: what comes
-in its name from another place (another link, or another address on one) while
-its heartbeat still comes is dropped and counted (``from_elsewhere`` in the
-health report). Without that, anyone who could send a datagram to the station
-moved a vehicle on the page with positions in its name. A second link to the
-same vehicle (a radio beside Wi-Fi) is heard once it is the only one left, as
-QGroundControl does with its primary link. Only signing stops a sender that
-is heard before the vehicle, or outlasts its link.
+Signed or not, a vehicle's autopilot is heard, and orders go, where its
+heartbeat comes from: what comes in its name from another place (another link,
+or another address on one) while its heartbeat still comes is dropped and
+counted (``from_elsewhere`` in the health report). Without that, anyone who
+could send a datagram to the station moved a vehicle on the page with
+positions in its name. A second link to the same vehicle (a radio beside
+Wi-Fi) is heard once the first has been silent for LINK_LOST_AFTER (and its
+copies counted there until then). Other components (the onboard agent, which
+may be heard both through the autopilot and on its own link) are heard from
+anywhere, and a reply is taken only from the component asked. Only signing
+stops a sender that is heard before the vehicle, or outlasts its link, or
+speaks as another component.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
@@ -72,6 +77,7 @@ class LinkError(Exception):
 @dataclass
 class _Waiter:
     sysid: int
+    component: int  # the component asked, which alone may answer (0: any)
     accepts: Callable[[object], bool]
     replies: queue.Queue
 
@@ -92,10 +98,8 @@ class Link:
         if signing_key is not None:
             signing.sign_outgoing(self.packer, signing_key)
         # keyed by the 8-bit system id (so at most 255 entries), and pruned after FORGET_AFTER of silence:
-        # sysid -> (the port its autopilot's heartbeat comes on, its address there, when heard there)
+        # sysid -> (the port its heartbeat comes on, its address there, when heard there, when its heartbeat was)
         self.route: dict[int, tuple] = {}
-        # (system, component) -> ((port, address) its heartbeat comes from, when it last came), pruned with the route
-        self._places: dict[tuple[int, int], tuple[tuple, float]] = {}
         self.from_elsewhere: Counter[int] = Counter()  # system id -> messages dropped as not from its place
         self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
         self._signers: set[tuple[int, int]] = set()  # (system, component) heard signed with the key
@@ -188,18 +192,18 @@ class Link:
         sysid = message.get_srcSystem()
         if not self._signed_as_before(port, message, sysid):
             return
-        peer = getattr(message, "_peer", None)
-        if not self._from_its_place(message, sysid, (port, peer), now):
+        peer, component = getattr(message, "_peer", None), message.get_srcComponent()
+        if component == AUTOPILOT and not self._from_its_place(sysid, port, peer, now):
             self.from_elsewhere[sysid] += 1
             return
         self.stats["received"] += 1
         self._record(message.get_msgbuf(), now)
-        beat = message.get_type() == "HEARTBEAT" and message.get_srcComponent() == AUTOPILOT
+        beat = message.get_type() == "HEARTBEAT" and component == AUTOPILOT
         self._learn_route(sysid, port, peer, now, beat)
         self.fleet.apply(message, now)
         if beat and sysid in self.fleet.vehicles:  # a vehicle the fleet holds (a refused one gets no answer)
             self._ask_for_telemetry(sysid, now)
-        if hasattr(message, "time_boot_ms") and sysid in self._asked:
+        if hasattr(message, "time_boot_ms") and component == AUTOPILOT and sysid in self._asked:
             heard, boot = self._asked[sysid]
             if message.time_boot_ms / 1000.0 + 5.0 < boot:  # it rebooted: ask again at its next heartbeat
                 del self._asked[sysid]
@@ -208,7 +212,7 @@ class Link:
         with self._lock:
             waiters = list(self._waiters)
         for waiter in waiters:
-            if waiter.sysid == sysid and waiter.accepts(message):
+            if waiter.sysid == sysid and waiter.component in (0, component) and waiter.accepts(message):
                 waiter.replies.put(message)
 
     def _signed_as_before(self, port, message, sysid: int) -> bool:
@@ -223,37 +227,34 @@ class Link:
             return False
         return True
 
-    def _from_its_place(self, message, sysid: int, place: tuple, now: float) -> bool:
-        """Whether a message comes from where its sender's heartbeat comes (or from anywhere, for a sender whose
-        heartbeat has not come, or has not come for LINK_LOST_AFTER: its link died, and it came back on another
-        port or link). A heartbeat from such a new place makes it the sender's place."""
-        sender = (sysid, message.get_srcComponent())
-        known = self._places.get(sender)
-        here = known is None or known[0] == place or now - known[1] > LINK_LOST_AFTER
-        if here and message.get_type() == "HEARTBEAT":
-            self._places[sender] = (place, now)
-        return here
+    def _from_its_place(self, sysid: int, port, peer, now: float) -> bool:
+        """Whether a message of a system's autopilot comes from where its heartbeat comes (or from anywhere while
+        no heartbeat has come from there for LINK_LOST_AFTER: its link died, and it came back on another port
+        or link; or before its first heartbeat)."""
+        route = self.route.get(sysid)
+        return route is None or route[:2] == (port, peer) or now - route[3] > LINK_LOST_AFTER
 
     def _learn_route(self, sysid: int, port, peer, now: float, beat: bool) -> None:
         """Where orders to a system go: where it was first heard, then where its autopilot's heartbeat comes
-        from (``_from_its_place`` has let that heartbeat in). Any other message only keeps its route fresh: a
-        flood of another kind of message in its name (a map snapshot, say) from elsewhere took its route, as did
-        a spoofed heartbeat while the vehicle's own still came, and its orders went to the sender, unanswered."""
+        from (``_from_its_place`` let that heartbeat in). Any other message only keeps its route fresh: a flood
+        of another kind of message in its name (a map snapshot, say) from elsewhere took its route, as did a
+        spoofed heartbeat while the vehicle's own still came, and its orders went to the sender, unanswered."""
         route = self.route.get(sysid)
-        if route is None or beat or route[:2] == (port, peer):
-            self.route[sysid] = (port, peer, now)
+        if route is not None and route[:2] == (port, peer):
+            self.route[sysid] = (port, peer, now, now if beat else route[3])
+        elif route is None or beat:
+            self.route[sysid] = (port, peer, now, now if beat else -math.inf)
 
     def _prune(self, now: float) -> None:
-        """Once a second: forget the routes to systems not heard for FORGET_AFTER (as the fleet forgets them), that
-        they signed, and where their components' heartbeats came from."""
+        """Once a second: forget the routes to systems not heard for FORGET_AFTER (as the fleet forgets them), and
+        that they signed."""
         if now - self._pruned < 1.0:
             return
         self._pruned = now
-        for sysid in [s for s, (_, _, heard) in self.route.items() if now - heard > FORGET_AFTER]:
+        for sysid in [s for s, (_, _, heard, _) in self.route.items() if now - heard > FORGET_AFTER]:
             del self.route[sysid]
             self._asked.pop(sysid, None)
             self._signers = {sender for sender in self._signers if sender[0] != sysid}
-            self._places = {sender: place for sender, place in self._places.items() if sender[0] != sysid}
 
     def _ask_for_telemetry(self, sysid: int, now: float) -> None:
         """Ask a vehicle heard for the first time, or again after its link was lost, for what the page shows."""
@@ -296,8 +297,9 @@ class Link:
         with self._lock:
             packet = pack(message, self.packer)
         self.fleet.apply(message, time.time())  # this station's orders: not another's, and on the timeline
-        if sysid in self.route:
-            port, peer, _ = self.route[sysid]
+        route = self.route.get(sysid)  # (the link thread may forget it meanwhile)
+        if route is not None:
+            port, peer, _, _ = route
             port.write(packet, peer)
         else:
             for port in self.ports:
@@ -308,7 +310,7 @@ class Link:
     def request(self, sysid: int, message, accepts: Callable[[object], bool], timeout: float = 1.0,
                 retries: int = 3, resend: Callable[[int], object] | None = None):
         """Send ``message`` and wait for a reply that ``accepts``; resend up to ``retries`` times."""
-        waiter = _Waiter(sysid, accepts, queue.Queue())
+        waiter = _Waiter(sysid, getattr(message, "target_component", 0), accepts, queue.Queue())
         with self._lock:
             self._waiters.append(waiter)
         try:

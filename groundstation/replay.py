@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.state import Fleet, makes_a_vehicle
+from groundstation.state import AUTOPILOT, Fleet, makes_a_vehicle
 from vehicle.protocol.agent_status import AGENT_STATUS
 from vehicle.protocol.mapstream import MAP_SNAPSHOT, PATH, PATH_CHUNK, SNAPSHOT_CHUNK
 from vehicle.protocol.mav import mavlink
@@ -319,7 +319,8 @@ class Replay:
                     rest.append(np.flatnonzero(theirs & (msgids == msgid))[-1:])
                 statuses = np.flatnonzero(theirs & (msgids == TUNNEL))
                 rest.append(statuses[index.tunnel_types[statuses] == AGENT_STATUS][-RECENT_STATUSES:])
-            poses = np.flatnonzero(mine & np.isin(msgids, POSES))
+            autopilot = mine & (compids == AUTOPILOT)  # its pose is its autopilot's (the fleet takes no other)
+            poses = np.flatnonzero(autopilot & np.isin(msgids, POSES))
             if len(poses):
                 rest.append(poses[np.linspace(0, len(poses) - 1, min(len(poses), TRAIL_SAMPLES)).astype(int)])
             rest.append(np.flatnonzero(mine & (msgids == STATUSTEXT))[-RECENT_TEXTS:])
@@ -332,7 +333,7 @@ class Replay:
             if len(snapshot_chunks):
                 maps.append(tunnels[tunnels >= self._whole_start(snapshot_chunks, SNAPSHOT_CHUNK)])
                 readings = readings[-RECENT_READINGS:]  # (with none, the station maps every reading)
-            attitudes = np.flatnonzero(mine & (msgids == ATTITUDE))
+            attitudes = np.flatnonzero(autopilot & (msgids == ATTITUDE))
             before = np.searchsorted(attitudes, readings) - 1  # the latest attitude before each reading
             rest.append(attitudes[before[before >= 0]])
             for msgid in POSES:  # and the latest pose of each kind, which the trail's sample may have left out
@@ -357,7 +358,7 @@ class Replay:
             made: dict[int, int] = {}
             for i in heartbeats.tolist():
                 sysid = int(index.sysids[i])
-                if sysid not in made and makes_a_vehicle(*self._heartbeat_kind(i)):
+                if sysid not in made and makes_a_vehicle(*self._heartbeat_kind(i), int(index.compids[i])):
                     message = self.decode(i)
                     if message is not None and message.get_type() == "HEARTBEAT":
                         made[sysid] = i

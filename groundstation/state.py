@@ -50,6 +50,7 @@ from vehicle.protocol.statustext import Reassembler
 
 LINK_LOST_AFTER = 3.0  # s without a heartbeat
 COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 TRAIL_POINTS = 2000
 TRAIL_SPACING = 0.3  # m between recorded trail points
 HITS_KEPT = 600
@@ -73,8 +74,8 @@ MODE_ORDERS = {mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
                mavlink.MAV_CMD_COMPONENT_ARM_DISARM}  # commands after which a vehicle may change its mode
 MAX_VEHICLES = 64  # vehicles held at once; each may hold a map of up to 16 MB
 FORGET_AFTER = 600.0  # s of the receiver's clock without a message before a vehicle is forgotten
-# a vehicle's own state, taken only from its autopilot (the component whose heartbeat made it): another part of
-# the system, or a sender that took another component's name, does not move it or set its battery or mission
+# a vehicle's own state, taken only from its autopilot (component AUTOPILOT, whose heartbeat alone makes a
+# vehicle): another part of the system, or a sender that took another component's name, does not move it
 AUTOPILOTS_OWN = frozenset({"GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE", "VFR_HUD", "SYS_STATUS",
                             "HOME_POSITION", "MISSION_CURRENT", "MISSION_ITEM_REACHED"})
 
@@ -92,10 +93,11 @@ NOT_VEHICLES = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavli
                 mavlink.MAV_TYPE_ADSB, mavlink.MAV_TYPE_CAMERA, mavlink.MAV_TYPE_ANTENNA_TRACKER}
 
 
-def makes_a_vehicle(mav_type: int, autopilot: int) -> bool:
-    """Whether a heartbeat of this type and autopilot makes a vehicle (a replay's seek asks it of the raw
-    bytes, to leave out what a system sent before it was one, as playing does)."""
-    return mav_type not in NOT_VEHICLES and autopilot != mavlink.MAV_AUTOPILOT_INVALID
+def makes_a_vehicle(mav_type: int, autopilot: int, component: int) -> bool:
+    """Whether a heartbeat of this type, autopilot and sending component makes a vehicle: an autopilot's
+    (QGroundControl's rule too; a replay's seek asks it of the raw bytes, to leave out what a system sent
+    before it was one, as playing does)."""
+    return component == AUTOPILOT and mav_type not in NOT_VEHICLES and autopilot != mavlink.MAV_AUTOPILOT_INVALID
 
 
 def colour_of(sysid: int) -> tuple[int, int, int]:
@@ -120,7 +122,6 @@ class Sonar:
 @dataclass
 class VehicleState:
     sysid: int
-    component: int = mavlink.MAV_COMP_ID_AUTOPILOT1  # its autopilot's: the component whose heartbeat made it
     mav_type: int = 0
     autopilot: int = 0
     mode: str = "UNKNOWN"
@@ -268,16 +269,17 @@ class Fleet:
                 self._command_sent(message, now)  # a ground station's (ours, or another's) to a vehicle
                 return
             if vehicle is None:
-                if kind != "HEARTBEAT" or not makes_a_vehicle(message.type, message.autopilot) or sysid == 0:
+                if kind != "HEARTBEAT" or sysid == 0 or not makes_a_vehicle(message.type, message.autopilot,
+                                                                            message.get_srcComponent()):
                     return  # only a vehicle's heartbeat makes a vehicle; 0 is MAVLink's broadcast, no one's id
                 if len(self.vehicles) >= self.max_vehicles:
                     self.refused += 1
                     return
-                vehicle = self.vehicles[sysid] = VehicleState(sysid, message.get_srcComponent(), first_heard=now)
+                vehicle = self.vehicles[sysid] = VehicleState(sysid, first_heard=now)
             handler = getattr(self, f"_{kind.lower()}", None)
             vehicle.last_message = now
             vehicle.messages_received += 1
-            if kind in AUTOPILOTS_OWN and message.get_srcComponent() != vehicle.component:
+            if kind in AUTOPILOTS_OWN and message.get_srcComponent() != AUTOPILOT:
                 return
             if handler is not None:
                 handler(vehicle, message, now)
@@ -364,7 +366,7 @@ class Fleet:
         if m.get_srcComponent() == COMPANION and m.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER:
             vehicle.companion_heartbeat = now
             return
-        if not makes_a_vehicle(m.type, m.autopilot) or m.get_srcComponent() != vehicle.component:
+        if not makes_a_vehicle(m.type, m.autopilot, m.get_srcComponent()):
             return  # another part of the system: its mode is not the vehicle's
         changed = vehicle.custom_mode not in (-1, m.custom_mode)
         vehicle.mav_type = m.type

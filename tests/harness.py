@@ -79,10 +79,10 @@ def _ports_to_hand_out() -> Iterator[int]:
         ephemeral = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
     except (OSError, ValueError, IndexError):
         ephemeral = 32768  # Linux's default
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
-    first = ephemeral - PORT_BLOCK * (int(worker) + 1 if worker.isdigit() else 1)
-    if first < 1024:  # no room below the range: the kernel's choice, as a probe on port 0 gets it
-        return itertools.repeat(0)
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "").removeprefix("gw")
+    first = ephemeral - PORT_BLOCK * (int(worker) + 1) if worker.isdigit() else 0
+    if first < 1024:  # not a worker (other runs of the tests may be beside it), or no room below the range:
+        return itertools.repeat(0)  # the kernel's choice, as a probe on port 0 gets it
     return itertools.cycle(range(first, first + PORT_BLOCK))
 
 

@@ -81,11 +81,14 @@ def test_a_heartbeat_of_another_part_of_the_system_does_not_change_the_vehicles_
     assert vehicle.mode == "RTL"  # the autopilot's own still does
 
 
-def test_only_the_autopilot_that_made_the_vehicle_sets_its_mode_position_and_battery(fleet):
-    """Any other component (or a sender in its name: the link hears each component where its heartbeat comes
-    from, so a spoofer took a component id of its own) set the vehicle's mode with a heartbeat of an autopilot,
-    and moved it with its positions. Its messages still show, and its sensors' readings count."""
+def test_only_the_autopilot_makes_the_vehicle_and_sets_its_mode_position_and_battery(fleet):
+    """Any other component (or a sender in its name: the link hears the autopilot only where its heartbeat
+    comes from, so a spoofer takes a component id of its own) set the vehicle's mode with a heartbeat of an
+    autopilot, and moved it with its positions; heard first, it made the vehicle, and the station then took
+    the vehicle's own autopilot for another part of it. Its messages still show, its sensors' readings count."""
     other = Sender(250)
+    hear(fleet, 0.0, other(heartbeat(mode=9)), other(position(500.0, 500.0, 60.0)))
+    assert fleet.ids() == []
     hear(fleet, 0.0, autopilot(heartbeat(mode=4)), autopilot(position(1.0, 2.0)),
          autopilot(mavlink.MAVLink_sys_status_message(0, 0, 0, 500, 16000, 1400, 90, 0, 0, 0, 0, 0, 0)))
     hear(fleet, 1.0, other(heartbeat(mode=9)), other(position(500.0, 500.0, 60.0)),
@@ -96,7 +99,7 @@ def test_only_the_autopilot_that_made_the_vehicle_sets_its_mode_position_and_bat
          other(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, b"gimbal hot", 0, 0)),
          other(echo(300)))
     vehicle = fleet.get(SYSID)
-    assert (vehicle.mode, vehicle.component) == ("GUIDED", 1)
+    assert vehicle.mode == "GUIDED" and vehicle.last_heartbeat == 0.0
     assert (vehicle.x, vehicle.y, vehicle.alt) == pytest.approx((1.0, 2.0, 4.0), abs=0.01)
     assert (vehicle.roll, vehicle.voltage, vehicle.remaining, vehicle.mission_current) == (0.0, 16.0, 90, None)
     assert vehicle.home == pytest.approx((1.0, 2.0), abs=0.01)  # its first fix, not the other's home

@@ -344,7 +344,7 @@ class KeptPort:
 def test_a_vehicle_is_heard_where_its_heartbeat_comes_from_and_followed_once_silent_there():
     """Its link died and it came back on another (a radio after Wi-Fi, a restarted process on a new port): its
     heartbeat there is heard once none came from the old place for LINK_LOST_AFTER, and only then is what comes
-    from there. Another part of the system (its onboard agent) is heard from its own place."""
+    from there. Another part of the system (its onboard agent, on a link of its own) is heard from anywhere."""
     fleet = Fleet()
     link = Link([], fleet)
     wifi, radio = KeptPort(), KeptPort()
@@ -372,9 +372,42 @@ def test_a_vehicle_is_heard_where_its_heartbeat_comes_from_and_followed_once_sil
     hear(wifi, mavlink.MAVLink_statustext_message(6, b"agent here"), LINK_LOST_AFTER + 0.5, compid=191)
     assert fleet.vehicles[1].status == "agent here" and link.route[1][0] is radio
     assert link.from_elsewhere[1] == 4
-    link._prune(start + LINK_LOST_AFTER + FORGET_AFTER + 1)  # forgotten: the next sender to beat is heard
+    link._prune(start + LINK_LOST_AFTER + FORGET_AFTER + 1)  # forgotten: whoever is heard next is heard
+    assert 1 not in link.route
     hear(wifi, position(alt=7.0), LINK_LOST_AFTER + FORGET_AFTER + 2)
-    assert link.route[1][0] is wifi and link._places == {}
+    assert link.route[1][0] is wifi and link.from_elsewhere[1] == 4
+
+
+def test_a_reply_is_taken_only_from_the_component_asked_and_a_boot_time_only_from_the_autopilot():
+    """A COMMAND_ACK in vehicle 1's name from another component (a sender that took a component id of its own)
+    answered the station's order to the autopilot: a LAND the vehicle never saw came back "denied". A small
+    boot time from such a component made the station ask again for all its telemetry at every heartbeat."""
+    port = free_udp_port()
+    link = Link([f"udpin:127.0.0.1:{port}"], Fleet()).start()
+    try:
+        with Peer(("127.0.0.1", port), sysid=1) as vehicle, Peer(("127.0.0.1", port), sysid=1, compid=250) as other:
+            vehicle.send(vehicle_heartbeat(), mavlink.MAVLink_attitude_message(600_000, 0, 0, 0, 0, 0, 0))
+            wait_wall(lambda: link._asked.get(1, (0, 0))[1] == 600.0, 5, "the vehicle heard, ten minutes up")
+            asked = link._asked[1]
+
+            def answer():
+                time.sleep(0.2)  # the station waits for a reply by now
+                other.send(mavlink.MAVLink_command_ack_message(mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_RESULT_DENIED))
+                time.sleep(0.3)
+                vehicle.send(mavlink.MAVLink_command_ack_message(mavlink.MAV_CMD_NAV_LAND,
+                                                                 mavlink.MAV_RESULT_ACCEPTED))
+
+            threading.Thread(target=answer, daemon=True).start()
+            reply = link.request(1, command(mavlink.MAV_CMD_NAV_LAND), lambda m: m.get_type() == "COMMAND_ACK",
+                                 timeout=3.0, retries=1)
+            assert (reply.result, reply.get_srcComponent()) == (mavlink.MAV_RESULT_ACCEPTED, 1)
+            received = link.stats["received"]
+            other.send(mavlink.MAVLink_attitude_message(1000, 0, 0, 0, 0, 0, 0))  # "rebooted a second ago"
+            vehicle.send(vehicle_heartbeat())
+            wait_wall(lambda: link.stats["received"] >= received + 2, 5, "both heard")
+            assert link._asked[1][1] == asked[1]  # not taken for a reboot: not asked again
+    finally:
+        link.close()
 
 
 def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_its_name():
@@ -409,7 +442,7 @@ def test_a_vehicle_heard_signed_keeps_its_orders_from_an_unsigned_heartbeat_in_i
 def test_the_links_routes_and_unfinished_texts_stay_bounded():
     link = Link([], Fleet())
     for sysid in range(1, 256):
-        link.route[sysid] = (None, None, 0.0 if sysid > 1 else FORGET_AFTER)
+        link.route[sysid] = (None, None, 0.0 if sysid > 1 else FORGET_AFTER, 0.0)
         link._asked[sysid] = (0.0, 0.0)
     link._prune(FORGET_AFTER + 1)
     assert list(link.route) == [1] and list(link._asked) == [1]  # only the one heard within ten minutes

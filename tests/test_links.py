@@ -171,7 +171,8 @@ def test_a_url_that_names_no_kind_of_link_is_refused_saying_which_are(url):
         links.connect(url)
 
 
-@pytest.mark.parametrize("url", ["/dev/ttyUSB0,fast", "/dev/ttyUSB0,0", "/dev/ttyUSB0,", "COM3,-9600"])
+@pytest.mark.parametrize("url", ["/dev/ttyUSB0,fast", "/dev/ttyUSB0,0", "/dev/ttyUSB0,", "COM3,-9600",
+                                 "/dev/ttyUSB0,4294967296", ",57600", ""])  # an OverflowError, no path
 def test_a_serial_port_with_a_baud_rate_that_is_no_number_is_refused(url):
     with pytest.raises(ValueError, match="a serial port is PATH or PATH,BAUD with a baud rate such as 57600"):
         links.connect(url)

@@ -452,7 +452,10 @@ def _payload(message) -> bytes:
     """A pymavlink message's payload, as its ``pack`` makes it before framing it (the writer frames them all at
     once): framing one costs ten times as much, most of it the CRC in Python."""
     message._pack = _payload_only  # pack() hands the payload to _pack, which frames it; here it is given back
-    return message.pack(None)
+    try:
+        return message.pack(None)
+    finally:
+        del message._pack  # the message packs as before
 
 
 def _payload_only(mav, crc_extra: int, payload: bytes, force_mavlink1: bool = False) -> bytes:

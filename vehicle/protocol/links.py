@@ -50,6 +50,7 @@ OTHER_KINDS = frozenset({"udpbcast", "mcast", "ws", "wss", "wsserver"})  # pymav
 _SCHEME = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*")  # a word before a colon: a kind of link, not a serial port's path
 STREAM_KINDS = frozenset({"tcp", "tcpin"}) | OTHER_KINDS  # opened by pymavlink from their URL; the rest are serial
 DEFAULT_BAUD = 115200  # pymavlink's
+FASTEST_BAUD = 20_000_000  # bits/s: faster than any serial port a MAVLink device has (a larger one overflowed)
 
 
 def connect(url: str, source_system: int = 255, source_component: int = 0, key: bytes | None = None,
@@ -89,11 +90,11 @@ def check_url(url: str) -> str:
 
 def serial_port(url: str) -> tuple[str, int]:
     """(device, baud) of a serial port's URL, ``PATH[,BAUD]`` (a path that exists with its comma is a path);
-    ValueError if the baud rate is not a whole number above zero."""
+    ValueError if there is no path, or the baud rate is not a whole number from 1 to FASTEST_BAUD."""
     device, comma, baud = url.rpartition(",")
     if not comma or os.path.exists(url):
-        return url, DEFAULT_BAUD
-    if not baud.isdigit() or int(baud) == 0:
+        device, baud = url, str(DEFAULT_BAUD)
+    if not device or not baud.isdigit() or not 0 < int(baud) <= FASTEST_BAUD:
         raise ValueError(f"a serial port is PATH or PATH,BAUD with a baud rate such as 57600, not {url!r}")
     return device, int(baud)
 
