@@ -65,7 +65,8 @@ def link_url(text: str) -> str:
     from vehicle.protocol.links import check_url
 
     try:
-        return check_url(text)
+        check_url(text)
+        return text
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
 

@@ -46,9 +46,10 @@ MAX_SENDERS = 64  # UDP peers remembered (parsers, and where broadcasts go)
 SENDER_IDLE = 30.0  # s after which a silent UDP peer gets no more broadcasts and is forgotten
 MAX_DATAGRAMS = 2000  # read at most this many per call, so one flood cannot stall the caller's loop
 RETRY = (0.5, 10.0)  # s: first and longest pause between attempts to open a stream
+UDP_KINDS = frozenset({"udpin", "udp", "udpout"})  # parsed here per datagram and per sender
+TCP_KINDS = frozenset({"tcp", "tcpin"})
 OTHER_KINDS = frozenset({"udpbcast", "mcast", "ws", "wss", "wsserver"})  # pymavlink's other links, as it opens them
 _SCHEME = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*")  # a word before a colon: a kind of link, not a serial port's path
-STREAM_KINDS = frozenset({"tcp", "tcpin"}) | OTHER_KINDS  # opened by pymavlink from their URL; the rest are serial
 DEFAULT_BAUD = 115200  # pymavlink's
 FASTEST_BAUD = 20_000_000  # bits/s: faster than any serial port a MAVLink device has (a larger one overflowed)
 
@@ -57,10 +58,9 @@ def connect(url: str, source_system: int = 255, source_component: int = 0, key: 
             require_signed: bool = True) -> UdpLink | StreamLink:
     """A link for a pymavlink-style URL (see the module's docstring); with ``key``, signed both ways
     (``require_signed``: refuse what is not signed with it, as a vehicle does)."""
-    check_url(url)
-    kind, _, rest = url.partition(":")
-    if kind in ("udpin", "udp", "udpout"):
-        host, _, port = rest.rpartition(":")
+    kind = check_url(url)
+    if kind in UDP_KINDS:
+        host, _, port = url.partition(":")[2].rpartition(":")
         link = UdpLink(url, host, int(port), listen=kind != "udpout", source_system=source_system,
                        source_component=source_component)
     else:
@@ -72,20 +72,23 @@ def connect(url: str, source_system: int = 255, source_component: int = 0, key: 
 
 
 def check_url(url: str) -> str:
-    """``url`` if ``connect`` can open it (now or, for a stream, once its peer is up); ValueError saying why not:
-    a UDP or TCP URL without a host and a port from 1 to 65535, or a kind of link pymavlink does not know."""
+    """The kind of link ``url`` names (``udpin``, ``tcp``, ... or ``serial``) if ``connect`` can open it (now or,
+    for a stream, once its peer is up); ValueError saying why not: a UDP or TCP URL without a host and a port
+    from 1 to 65535, a serial port without a path or a baud rate, or a kind of link pymavlink does not know."""
     kind, colon, rest = url.partition(":")
-    if kind in ("udpin", "udp", "udpout", "tcp", "tcpin"):
+    if kind in UDP_KINDS | TCP_KINDS:
         host, _, port = rest.rpartition(":")
         if not host or not port.isdigit() or not 0 < int(port) < 65536:
-            transport = "a TCP" if kind.startswith("tcp") else "a UDP"
+            transport = "a TCP" if kind in TCP_KINDS else "a UDP"
             raise ValueError(f"{transport} link is {kind}:HOST:PORT with a port from 1 to 65535, not {url!r}")
-    elif colon and _SCHEME.fullmatch(kind) and kind not in OTHER_KINDS:
+        return kind
+    if kind in OTHER_KINDS:
+        return kind
+    if colon and _SCHEME.fullmatch(kind):
         raise ValueError(f"not a MAVLink link: {url!r} (udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, "
                          "tcpin:HOST:PORT or a serial port such as /dev/ttyUSB0,57600)")
-    elif kind not in OTHER_KINDS:
-        serial_port(url)
-    return url
+    serial_port(url)
+    return "serial"
 
 
 def serial_port(url: str) -> tuple[str, int]:
@@ -270,7 +273,7 @@ class StreamLink(_Signed):
             return
         source_system, source_component = self.source
         try:
-            if self.url.partition(":")[0] in STREAM_KINDS:
+            if check_url(self.url) != "serial":
                 self.connection = mavutil.mavlink_connection(self.url, source_system=source_system,
                                                              source_component=source_component, autoreconnect=True,
                                                              retries=0)
