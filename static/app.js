@@ -687,6 +687,8 @@ function render(msg) {
 // incomplete or drawn in the wrong place because of it.
 
 const HEALTH_PERIOD_MS = 5000;
+const ELSEWHERE_SHOWN_MS = 60000;  // how long messages dropped as from elsewhere stay said after the last one
+const elsewhere = new Map();  // sysid -> { messages: dropped so far, at: when that count last grew (page clock) }
 
 function healthProblems(health) {
   const problems = [];
@@ -705,6 +707,14 @@ function healthProblems(health) {
   if (held.refused) problems.push(`${held.refused} new vehicles turned away: ${held.held} held, the most allowed`);
   for (const refused of (link.signing && link.signing.refused) || []) {
     problems.push(`system ${refused.sysid}: ${refused.messages} messages dropped, not signed with the key`);
+  }
+  for (const dropped of link.from_elsewhere || []) {
+    const seen = elsewhere.get(dropped.sysid);
+    if (!seen || dropped.messages > seen.messages) elsewhere.set(dropped.sysid, { messages: dropped.messages, at: Date.now() });
+    if (Date.now() - elsewhere.get(dropped.sysid).at < ELSEWHERE_SHOWN_MS) {
+      problems.push(`vehicle ${dropped.sysid}: ${dropped.messages} messages in its autopilot's name dropped, from ` +
+                    "elsewhere than its heartbeat (a second link to it, or someone sending as it)");
+    }
   }
   return problems;
 }

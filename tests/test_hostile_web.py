@@ -14,6 +14,7 @@ import json
 import logging
 import re
 import socket
+import threading
 import time
 from pathlib import Path
 
@@ -784,6 +785,40 @@ def test_the_page_says_when_a_vehicle_flies_far_from_the_scene(browser):
                 expect(banner.locator("li").first).to_have_text(re.compile(
                     r"^vehicle 7 is 15,\d{3}\.\d km from the scene: is the station's datum where it flies\?"))
             finally:
+                page.close()
+
+
+@chromium_needed
+@pytest.mark.browser
+def test_the_page_says_when_messages_in_a_vehicles_name_come_from_elsewhere(browser):
+    """The station drops them (they moved the vehicle on the page); the operator should know someone sends them."""
+    from mavlink_peer import Peer, position, vehicle_heartbeat
+    from playwright.sync_api import expect
+
+    with RunningStation(small_scene(), None) as running:
+        address = ("127.0.0.1", running.mavlink_port)
+        with Peer(address, sysid=9) as vehicle, Peer(address, sysid=9) as attacker:
+            beating = threading.Event()
+
+            def beat():  # its heartbeat keeps coming, so its place stays its own
+                while not beating.wait(0.5):
+                    vehicle.send(vehicle_heartbeat(), position())
+
+            threading.Thread(target=beat, daemon=True).start()
+            wait_wall(lambda: running.http.get("/api/health").json()["vehicles"] == 1, 10, "the vehicle heard")
+            page = browser.new_page()
+            try:
+                page.goto(running.base + "/")
+                banner = page.locator("#health-banner")
+                expect(banner).to_have_attribute("data-checked", "200")
+                expect(banner).to_be_hidden()
+                attacker.send(*[position(47.3769, 8.5417)] * 5)
+                expect(banner).to_be_visible(timeout=15_000)
+                expect(banner.locator("li").first).to_have_text(
+                    "vehicle 9: 5 messages in its autopilot's name dropped, from elsewhere than its heartbeat "
+                    "(a second link to it, or someone sending as it)")
+            finally:
+                beating.set()
                 page.close()
 
 
