@@ -136,7 +136,7 @@ class Link:
                              "forgotten": fleet.forgotten},
                 "signing": self._signing_health(),
                 "from_elsewhere": [{"sysid": sysid, "messages": count}
-                                   for sysid, count in sorted(self.from_elsewhere.items())],
+                                   for sysid, count in sorted(list(self.from_elsewhere.items()))],  # one copy
                 "other_stations": [{"sysid": sysid, "age": round(now - heard, 1)}
                                    for sysid, heard in list(fleet.stations.items())]}
 
