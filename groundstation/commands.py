@@ -12,13 +12,12 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
 
-from groundstation.link import AUTOPILOT, Link
-from groundstation.state import Fleet, VehicleState
+from groundstation.link import Link
+from groundstation.state import AUTOPILOT, COMPANION, Fleet, VehicleState
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import mavlink, mavutil
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE
 
-COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed"]
 GOTO_REACH = 1000.0  # m from home a goto may go when neither the vehicle's map nor a scene bounds its space
 SCENE_MARGIN = 20.0  # m beyond the scene's bounds a goto may go

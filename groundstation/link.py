@@ -49,7 +49,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from groundstation.state import FORGET_AFTER, LINK_LOST_AFTER, Fleet
+from groundstation.state import AUTOPILOT, FORGET_AFTER, LINK_LOST_AFTER, Fleet
 from vehicle.protocol import links, mission, signing
 from vehicle.protocol.mav import RESULT_WORDS, mavlink, pack
 from vehicle.protocol.mission import MissionItem
@@ -58,7 +58,6 @@ log = logging.getLogger("groundstation.link")
 
 GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER
-AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 TELEMETRY = {  # message -> Hz asked of every vehicle
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 20, mavlink.MAVLINK_MSG_ID_ATTITUDE: 20,
     mavlink.MAVLINK_MSG_ID_VFR_HUD: 4, mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1, mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 1,
@@ -136,7 +135,7 @@ class Link:
                              "forgotten": fleet.forgotten},
                 "signing": self._signing_health(),
                 "from_elsewhere": [{"sysid": sysid, "messages": count}
-                                   for sysid, count in sorted(list(self.from_elsewhere.items()))],  # one copy
+                                   for sysid, count in sorted(self.from_elsewhere.items())],
                 "other_stations": [{"sysid": sysid, "age": round(now - heard, 1)}
                                    for sysid, heard in list(fleet.stations.items())]}
 
