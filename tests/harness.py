@@ -27,6 +27,7 @@ from pathlib import Path
 
 import httpx
 import uvicorn
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from groundstation.security import Access
 from groundstation.server import GroundStation, app_config
@@ -185,10 +186,30 @@ def make_vehicle(scene: Scene, kind: str = "copter", mission: str = "browse", au
 
 def start_sim(station: RunningStation, scene: Scene, sysid: int = 1, kind: str = "copter", mission: str = "browse",
               autostart: bool = False, start: tuple[float, ...] | None = None, settings: Settings | None = None,
-              speedup: float = SPEEDUP, **options) -> RunningSim:
-    """A simulated vehicle sending to the station (not started: use it as a context manager or ``start()``)."""
+              speedup: float = SPEEDUP, hovering: float | None = None, **options) -> RunningSim:
+    """A simulated vehicle sending to the station (not started: use it as a context manager or ``start()``);
+    ``hovering``: already up at that altitude, its mission paused (``hover``)."""
     stepper = make_vehicle(scene, kind, mission, autostart, settings, start)
+    if hovering is not None:
+        hover(stepper, hovering)
     return RunningSim(stepper, [station.vehicle_url()], speedup=speedup, sysid=sysid, **options)
+
+
+def hover(stepper: Stepper, altitude: float, sim_timeout: float = 30.0) -> None:
+    """Take a copter up and have the operator take over, in simulated time before it goes live: what
+    ``take_off`` does over the API, where a test machine slow to answer would let the mission that a take-off
+    starts fly the vehicle elsewhere (or finish, and land it) before the operator's BRAKE. Then the vehicle
+    hovers in GUIDED over its start, its agent paused, whatever the machine's load."""
+    pilot, agent = stepper.simulation.autopilot, stepper.agent
+    for request in (lambda: pilot.set_mode("GUIDED"), pilot.arm, lambda: pilot.takeoff(altitude)):
+        assert request() == mavlink.MAV_RESULT_ACCEPTED
+    reached = stepper.run(sim_timeout, until=lambda: pilot.altitude > altitude - 0.3 and not pilot.taking_off)
+    assert reached, f"take-off to {altitude} m: not reached within {sim_timeout:g} s of simulated time"
+    pilot.set_mode("BRAKE")
+    stepper.run(1.0)
+    pilot.set_mode("GUIDED")
+    paused = stepper.run(sim_timeout, until=lambda: agent is None or agent.paused)
+    assert paused, "the agent did not notice the operator's take-over"
 
 
 # ---- the ground station ------------------------------------------------------------------------------------

@@ -79,10 +79,12 @@ def seen(api, sysid: int) -> dict:
 
 @pytest.fixture(scope="module")
 def flyer(station, api, scene):
-    """Vehicle 1: a copter flying at 4 m in GUIDED (the onboard mission paused by the operator)."""
-    with start_sim(station, scene, sysid=1, start=(0.0, 0.0)) as sim:
-        seen(api, 1)
-        take_off(api, 1)
+    """Vehicle 1: a copter hovering at 4 m over its start in GUIDED (the onboard mission paused by the operator),
+    taken there in simulated time: the map tests look at what it has seen from there."""
+    with start_sim(station, scene, sysid=1, start=(0.0, 0.0), hovering=4.0) as sim:
+        api.wait_vehicle(1, lambda v: v["mode"] == "GUIDED" and v["armed"] and (v["agent"] or {}).get("paused")
+                         and v["position"] is not None and v["position"]["alt"] > 3.5, sim_timeout=10,
+                         what="hovering, its mission paused")
         yield sim
 
 
