@@ -21,7 +21,11 @@ from pathlib import Path
 
 import pytest
 from harness import SCENE_TEXT, RunningStation, command_ok, free_udp_port, small_scene, wait_wall
+from mavlink_peer import Peer, vehicle_heartbeat
 
+from vehicle.agent import mavlink_controller
+from vehicle.agent.agent import Agent
+from vehicle.agent.companion import Companion
 from vehicle.agent.mavlink_controller import NO_ANSWER, FlightControllerError, MavlinkController
 from vehicle.agent.settings import Settings
 from vehicle.lab.experiment import Experiment, run_experiment
@@ -371,15 +375,18 @@ class ScriptedAutopilot:
 
 
 @contextmanager
-def controller(mav_type=mavlink.MAV_TYPE_QUADROTOR, kind="copter", retries=3):
+def controller(mav_type=mavlink.MAV_TYPE_QUADROTOR, kind="copter", retries=3, gcs: tuple[str, ...] = ()):
+    """A controller on a udpin port the scripted autopilot sends to (``fc.conn``), and on ``gcs`` links."""
     port = free_udp_port()
     link = links.connect(f"udpin:127.0.0.1:{port}", 1, 191)
+    extra = tuple(links.connect(url, 1, 191) for url in gcs)
     with ScriptedAutopilot(port, mav_type) as fake:
-        fc = MavlinkController(link, kind, Datum(), timeout=0.3, retries=retries)
+        fc = MavlinkController(link, kind, Datum(), timeout=0.3, retries=retries, extra_links=extra)
         try:
             yield fc, fake
         finally:
-            link.close()
+            for each in (link, *extra):
+                each.close()
 
 
 def pumped(fc) -> bool:
@@ -605,3 +612,113 @@ def test_nan_from_the_flight_controller_or_the_agent_never_moves_the_vehicle():
         assert fc.goto(math.nan, 3.0, 4.0) == mavlink.MAV_RESULT_DENIED
         assert fc.took_over() == "refused a target that is not a number"
         assert len(fake.sent(mavlink.MAV_CMD_DO_REPOSITION)) == before  # nothing was sent
+
+
+# ---- hostile senders -------------------------------------------------------------------------------------------
+def companion_on(fc) -> Companion:
+    """The agent and its Companion answering what comes to component 191, as ``vehicle agent`` wires them."""
+    companion = Companion(Agent(fc, "browse", Settings(), autostart=False), fc.sysid)
+    fc.handler = companion.handle
+    return companion
+
+
+def speed_set(speed: float):
+    return mavlink.MAVLink_param_set_message(1, 191, b"SCN_SPEED", speed, mavlink.MAV_PARAM_TYPE_REAL32)
+
+
+def test_a_flood_of_param_sets_is_each_answered_and_the_speed_sent_once_from_the_main_loop():
+    """A PARAM_SET of SCN_SPEED sent DO_CHANGE_SPEED from inside its handler and waited there for the ACK, and
+    that wait took in and answered the next PARAM_SET, which waited in turn: 150 queued nested 150 deep and the
+    agent died mid-flight (RecursionError). Each is answered with its PARAM_VALUE, as before; the speed goes to
+    the autopilot once, after them, from the main loop's pump."""
+    with controller() as (fc, fake), Peer(fc.conn.port.getsockname(), 255, 190) as gcs:
+        fc.connect(10)
+        companion = companion_on(fc)
+        fc.pump()  # room in the socket: a default UDP buffer holds about 250 small datagrams
+        speeds = [2.0 + (i % 5) * 0.1 for i in range(150)]
+        gcs.send(*[speed_set(speed) for speed in speeds])  # on loopback, all waiting before the agent looks
+        fc.pump()
+        answers = [m for m in gcs.receive(0.5) if m.get_type() == "PARAM_VALUE" and m.param_id == "SCN_SPEED"]
+        assert [m.param_value for m in answers] == pytest.approx(speeds)
+        sent = fake.sent(mavlink.MAV_CMD_DO_CHANGE_SPEED)
+        assert [m.param2 for m in sent] == pytest.approx([speeds[-1]])
+        assert companion.agent.settings.speed == pytest.approx(speeds[-1])
+        assert fc.took_over() is None and fc.problems == 0
+
+
+def test_requests_beyond_those_the_agent_holds_at_once_are_dropped_and_counted(monkeypatch):
+    """A flood cannot grow the agent's queue of requests without bound: the rest are counted, and said."""
+    monkeypatch.setattr(mavlink_controller, "REQUESTS_HELD", 10)
+    with controller() as (fc, fake), Peer(fc.conn.port.getsockname(), 255, 190) as gcs:
+        fc.connect(10)
+        companion_on(fc)
+        gcs.send(*[speed_set(3.0) for _ in range(15)])
+        fc.pump()
+        assert sum(m.get_type() == "PARAM_VALUE" for m in gcs.receive(0.5)) == 10
+        assert fc.dropped[mavlink_controller.TOO_MANY] == 5 and fc.news().startswith("dropped requests beyond")
+
+
+def test_a_request_waits_while_the_agent_waits_for_the_autopilot_and_is_answered_after():
+    """What comes to the agent while it waits for an ACK is answered by the next pump, not inside the wait."""
+    with controller() as (fc, fake), Peer(fc.conn.port.getsockname(), 255, 190) as gcs:
+        fc.connect(10)
+        companion_on(fc)
+        gcs.send(speed_set(3.0))
+        fake.answer[mavlink.MAV_CMD_COMPONENT_ARM_DISARM] = None  # the wait takes in the PARAM_SET meanwhile
+        fc.arm()
+        assert not fake.sent(mavlink.MAV_CMD_DO_CHANGE_SPEED) and not any(
+            m.get_type() == "PARAM_VALUE" for m in gcs.receive(0.2))
+        fc.pump()
+        assert gcs.wait(lambda m: m.get_type() == "PARAM_VALUE", 2).param_value == pytest.approx(3.0)
+        assert [m.param2 for m in fake.sent(mavlink.MAV_CMD_DO_CHANGE_SPEED)] == pytest.approx([3.0])
+
+
+def test_a_message_the_agent_fails_to_handle_is_counted_and_said_and_the_next_is_answered():
+    """One message that raised in its handler (a ground station's request, or the autopilot's own message) ended
+    the whole agent mid-flight; it is dropped, counted and said, and the agent goes on."""
+    with controller() as (fc, fake), Peer(fc.conn.port.getsockname(), 255, 190) as gcs:
+        fc.connect(10)
+        companion = companion_on(fc)
+
+        def bug(*_):
+            raise ValueError("a bug")
+
+        fc.handler = lambda m: bug() if m.get_type() == "PARAM_REQUEST_LIST" else companion.handle(m)
+        fc._on_statustext = bug  # a bug in what the agent reads from the autopilot
+        gcs.send(mavlink.MAVLink_param_request_list_message(1, 191), speed_set(3.0))
+        fake.link.mav.statustext_send(mavlink.MAV_SEVERITY_INFO, b"EKF3 IMU0 is using GPS")
+        wait_wall(lambda: pumped(fc) and fc.dropped.total() == 2, 5, "both messages taken in")
+        assert gcs.wait(lambda m: m.get_type() == "PARAM_VALUE", 2).param_value == pytest.approx(3.0)
+        assert fc.news() == "dropped messages it failed to handle: 2 (last: ValueError: a bug)"
+        assert fc.news() is None  # said once
+
+
+def test_the_autopilot_is_heard_only_where_its_heartbeat_comes_from_while_it_comes():
+    """One HEARTBEAT as system 1, component 1, saying RTL, from another sender on the agent's port or on a --gcs
+    link, paused the agent ("operator switched to RTL") while the vehicle flew on in GUIDED. While the
+    autopilot's heartbeat comes from one place (a link, and a sender on it), what comes in its name from
+    elsewhere is dropped and counted; another place is heard once the first has been silent for 3 s."""
+    gcs_port = free_udp_port()
+    with (
+        controller(gcs=(f"udpin:127.0.0.1:{gcs_port}",)) as (fc, fake),
+        Peer(fc.conn.port.getsockname(), 1, 1) as beside,
+        Peer(("127.0.0.1", gcs_port), 1, 1) as on_gcs,
+    ):
+        fc.connect(10)
+        assert fc.set_mode("GUIDED") == mavlink.MAV_RESULT_ACCEPTED
+        rtl = vehicle_heartbeat(mode=6)
+        beside.send(rtl)
+        on_gcs.send(rtl)
+        fc.pump()  # on loopback both came before it looked
+        assert fc.mode == "GUIDED" and fc.took_over() is None
+        assert fc.news() == "dropped messages in the autopilot's name from elsewhere: 2"
+
+        fake.beating = False  # its link died; it comes back on the --gcs link
+
+        def heard_there():
+            on_gcs.send(rtl)
+            fc.pump()
+            return fc.mode == "RTL"
+
+        wait_wall(heard_there, 10, "the autopilot heard on its new link")
+        assert fc.took_over() == "operator switched to RTL"

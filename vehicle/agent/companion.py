@@ -148,6 +148,6 @@ class Companion:
             refused = self.params.set(param_id, m.param_value)
             if refused:
                 return [*statustexts(refused, mavlink.MAV_SEVERITY_WARNING, 0), self.params.message(index)]
-            if param_id == "SCN_SPEED":
+            if param_id == "SCN_SPEED":  # over MAVLink sent by the controller's next pump: no waiting here
                 self.agent.fc.set_speed(self.params.value(param_id))
         return [self.params.message(index)]

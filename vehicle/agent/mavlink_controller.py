@@ -10,6 +10,15 @@ COMMAND_ACK, resent with confirmation += 1. A refusal or a silence is reported
 (``took_over`` returns it, so the agent pauses) and the vehicle is told to
 hold, so no target or velocity stays running that nobody watches.
 
+A ground station's requests to the agent (component 191) are answered by
+``pump``, the main loop's call, never inside a wait for the autopilot's answer:
+a request answered there could wait in turn, and a flood of them nested until
+the agent died. The autopilot is heard where its heartbeat comes from (a link,
+and a sender on it), as the ground station hears it: what comes in its name
+from elsewhere while that heartbeat still comes is dropped. What is dropped,
+and a message the agent fails on, is counted and said (``news``), and the
+agent flies on.
+
 What ArduPilot needs that our simulator does not: Rover refuses CONDITION_YAW
 (it turns to a heading target instead, which expires after 3 s and is resent);
 a mode change resets DO_CHANGE_SPEED (it is sent again); a copter holds best
@@ -21,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Callable
 
 from vehicle.protocol import mission as mission_protocol
@@ -39,6 +48,12 @@ UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
 NO_ANSWER = -1  # what a command returns when the autopilot never acknowledged it
 HEARTBEAT_LOST = 2.0  # wall s without the autopilot's heartbeat before the agent stops commanding
 FAILSAFE_NEWS = 3.0  # wall s: a mode change this soon after the autopilot said "failsafe" is the failsafe's
+LINK_LOST_AFTER = 3.0  # wall s the autopilot's heartbeat is silent where it came from before it is heard elsewhere
+REQUESTS_HELD = 256  # requests to the agent kept for the next pump's answers; more are dropped (a flood)
+NEWS_EVERY = 5.0  # wall s at least between two lines about what was dropped (a flood is said, not each message)
+FROM_ELSEWHERE = "messages in the autopilot's name from elsewhere"  # why a message was dropped (``dropped``)
+TOO_MANY = f"requests beyond the {REQUESTS_HELD} it holds at once"
+FAILED = "messages it failed to handle"
 STREAMS = {  # message -> rate (Hz of the autopilot's clock) the agent asks for
     "HEARTBEAT": 4, "GLOBAL_POSITION_INT": 20, "ATTITUDE": 20, "SYS_STATUS": 1, "HOME_POSITION": 0.5,
     "MISSION_CURRENT": 2, "EXTENDED_SYS_STATE": 4, "DISTANCE_SENSOR": 10,
@@ -97,6 +112,12 @@ class MavlinkController:
         self._prearm_ok = False
         self._progress = MissionProgress(0, 0, False, False)
         self._heard = -math.inf  # wall time of the autopilot's last heartbeat
+        self._place: tuple | None = None  # (link, sender) the autopilot's heartbeat comes from
+        self._requests: deque[tuple] = deque()  # (request, link) to answer at the next pump
+        self.dropped: Counter[str] = Counter()  # why (FROM_ELSEWHERE, TOO_MANY, FAILED) -> messages dropped
+        self.last_error = ""
+        self._dropped_said: Counter[str] = Counter()
+        self._news_at = -math.inf
         self._have_position = False
         self._readings: list[Reading] = []
         self._events: deque[str] = deque(maxlen=32)
@@ -112,6 +133,7 @@ class MavlinkController:
         self._next_heading = 0.0
         self._speed_wanted: float | None = None
         self._speed_applied = False
+        self._speed_news = False  # the operator set a speed that the next pump sends
         self._reposition_ok = True
         self._lost_reported = False
 
@@ -129,6 +151,7 @@ class MavlinkController:
                 if beat.type in mavlink.enums["MAV_TYPE"] else str(beat.type)
             raise FlightControllerError(f"the flight controller is a {found}, not a {self.kind.value} (--vehicle)")
         self.sysid = beat.get_srcSystem()
+        self._place, self._heard = beat._place, time.monotonic()  # heard there from now on (``_from_elsewhere``)
         self.conn.mav.srcSystem, self.conn.mav.srcComponent = self.sysid, COMPONENT
         for link in self.extra_links:
             link.mav.srcSystem, link.mav.srcComponent = self.sysid, COMPONENT
@@ -170,7 +193,17 @@ class MavlinkController:
 
     # ---- receiving ----------------------------------------------------------------------------------
     def pump(self) -> list:
-        """Take in everything waiting on the links; returns the messages (the caller may look at them too)."""
+        """Take in everything waiting on the links, answer the requests to the agent among it and send a speed
+        the operator set meanwhile; returns the messages (the caller may look at them too). The main loop's
+        call: a wait for the autopilot takes in (``_take_in``) and answers nothing."""
+        messages = self._take_in()
+        self._answer_requests()
+        if self._speed_news:
+            self._speed_news = False
+            self.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, self._speed_wanted, -1)
+        return messages
+
+    def _take_in(self) -> list:
         messages = list(self._receive())
         if self._yaw_target is not None and self._yaw_by_target and self._time >= self._next_heading:
             self._send_heading(self._yaw_target)
@@ -187,15 +220,62 @@ class MavlinkController:
                     break
                 if message.get_type() == "BAD_DATA":
                     continue
-                self._apply(message, link)
+                message._place = (link, getattr(message, "_peer", None))  # a UDP link has many senders
+                if self._from_elsewhere(message):
+                    self.dropped[FROM_ELSEWHERE] += 1
+                    continue
+                try:
+                    self._apply(message, link)
+                except Exception as error:  # noqa: BLE001 - one message must not end the flight; counted, said
+                    self._failed(error)
+                    continue
                 yield message
+
+    def _failed(self, error: Exception) -> None:
+        self.dropped[FAILED] += 1
+        self.last_error = f"{type(error).__name__}: {error}"[:200]
+
+    def _answer_requests(self) -> None:
+        """Answer the requests taken in so far; those that come meanwhile (while an answer waits for the
+        autopilot: a resume sets GUIDED) wait for the next pump."""
+        for _ in range(len(self._requests)):
+            request, link = self._requests.popleft()
+            try:
+                replies = self.handler(request) or []
+            except Exception as error:  # noqa: BLE001 - as in _receive
+                self._failed(error)
+                continue
+            for reply in replies:
+                self.send(reply, link=link)
+
+    def news(self) -> str | None:
+        """A line on the messages dropped since the last line (why, and how many), at most every NEWS_EVERY s;
+        None if there is nothing new to say yet."""
+        new = self.dropped - self._dropped_said
+        if not new or time.monotonic() - self._news_at < NEWS_EVERY:
+            return None
+        self._dropped_said, self._news_at = self.dropped.copy(), time.monotonic()
+        line = "dropped " + "; ".join(f"{why}: {count}" for why, count in new.items())
+        return line + (f" (last: {self.last_error})" if FAILED in new else "")
+
+    def _from_elsewhere(self, m) -> bool:
+        """A message in the autopilot's name from another place than the one its heartbeat comes from, while that
+        heartbeat still comes (after LINK_LOST_AFTER of silence its link died, and it may come back on another
+        link or port). The ground station's rule (groundstation/link.py): without it, one heartbeat saying RTL
+        from anyone paused the agent."""
+        if (m.get_srcSystem(), m.get_srcComponent()) != (self.sysid, AUTOPILOT) or self._place is None:
+            return False
+        return m._place != self._place and time.monotonic() - self._heard <= LINK_LOST_AFTER
 
     def _apply(self, m, link) -> None:
         kind = m.get_type()
         if kind in REQUESTS and (m.target_system, m.target_component) == (self.sysid, COMPONENT):
-            if self.handler is not None:  # a ground station asks the agent (resume, its parameters)
-                for reply in self.handler(m) or []:
-                    self.send(reply, link=link)
+            if self.handler is None:
+                return
+            if len(self._requests) >= REQUESTS_HELD:
+                self.dropped[TOO_MANY] += 1
+                return
+            self._requests.append((m, link))  # a ground station asks the agent (resume, its parameters)
             return
         if m.get_srcSystem() != self.sysid or m.get_srcComponent() == COMPONENT:
             return  # another system (a ground station), or an echo of ourselves
@@ -215,7 +295,7 @@ class MavlinkController:
         self._time = boot
 
     def _on_heartbeat(self, m) -> None:
-        self._heard = time.monotonic()
+        self._heard, self._place = time.monotonic(), m._place  # the autopilot is heard there (``_from_elsewhere``)
         self._lost_reported = False
         was_armed, self._armed = self._armed, bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         mode = (mavutil.mode_mapping_bynumber(m.type) or {}).get(m.custom_mode, f"MODE{m.custom_mode}")
@@ -416,7 +496,7 @@ class MavlinkController:
             self.send(build(attempt))
             deadline = time.monotonic() + self.timeout
             while time.monotonic() < deadline and command not in self._acks:
-                self.pump()
+                self._take_in()
                 if command not in self._acks:
                     time.sleep(0.002)
             result = self._acks.pop(command, NO_ANSWER)
@@ -440,7 +520,7 @@ class MavlinkController:
         self.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT, report=False)
         deadline = time.monotonic() + self.timeout
         while self._heard == heard and time.monotonic() < deadline:
-            self.pump()
+            self._take_in()
             time.sleep(0.002)
         return self._mode != self._wanted_mode or DISARMED in self._events
 
@@ -539,8 +619,10 @@ class MavlinkController:
         self._speed_wanted = speed
 
     def set_speed(self, speed: float) -> int:
-        self._speed_wanted = speed
-        return self.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, speed, -1)
+        """The operator's speed (PARAM_SET SCN_SPEED), sent by the next pump: a request's handler never waits for
+        the autopilot. IN_PROGRESS: the answer comes then (a refusal pauses the agent, as any)."""
+        self._speed_wanted, self._speed_news = speed, True
+        return mavlink.MAV_RESULT_IN_PROGRESS
 
     def set_servo(self, channel: int, pwm: int) -> int:
         result = self.command(mavlink.MAV_CMD_DO_SET_SERVO, channel, pwm)
@@ -586,7 +668,7 @@ class MavlinkController:
             self.send(message)
             deadline = time.monotonic() + timeout
             while time.monotonic() < deadline:
-                self.pump()
+                self._take_in()
                 found = next((m for m in self._replies if accepts(m)), None)
                 if found is not None:
                     return found

@@ -7,7 +7,8 @@ clock: every ``monitor_period`` of ``time_boot_ms`` the agent steps. Its own
 messages (``Companion``: heartbeat, map, path, state, texts) go to the
 autopilot, which routes them to every ground station, and straight to the
 ``--gcs`` links. A ground station's MISSION_START addressed to component 191
-resumes it.
+resumes it. A message the agent drops (in the autopilot's name from elsewhere,
+one request too many, one it fails on) is said, and the flight goes on.
 
 Readings come from the autopilot's DISTANCE_SENSOR / OBSTACLE_DISTANCE
 (``--sensors fc``, sonars wired to a real vehicle), or (``--sensors scene``)
@@ -121,6 +122,9 @@ class OnboardAgent:
             for line in watch.changes():
                 say(f"agent: {line}")
             self._record(came, now)
+            if (news := fc.news()) is not None:  # spoofed, flooded or failing messages: the agent flies on
+                say(f"agent: {news}")
+                self.agent.say(f"Agent: {news}", mavlink.MAV_SEVERITY_WARNING)
             if self.sonars is not None and fc.time >= next_reading:
                 next_reading = fc.time + 1.0 / SONAR_RATE
                 self._sense(now)
