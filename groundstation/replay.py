@@ -14,11 +14,15 @@ sending on (both found from the chunk headers in the raw TUNNEL payloads). Playi
 feeds the Fleet message by message, as a live link does: a log is just another
 MAVLink source, and the views cannot tell the difference. What a system sent
 before its first vehicle heartbeat (a text at boot, say) playing drops, as a
-live station does, and so does a seek.
+live station does, and so does a seek. A record that decodes but makes the
+Fleet raise is counted (``errors`` and ``last_error`` in the status) and
+passed over, as the live link does: one bad message in a recording must not
+stop its replay.
 """
 
 from __future__ import annotations
 
+import logging
 import mmap
 import struct
 import threading
@@ -33,6 +37,8 @@ from groundstation.state import AUTOPILOT, Fleet, makes_a_vehicle
 from vehicle.protocol.agent_status import AGENT_STATUS
 from vehicle.protocol.mapstream import MAP_SNAPSHOT, PATH, PATH_CHUNK, SNAPSHOT_CHUNK
 from vehicle.protocol.mav import mavlink
+
+log = logging.getLogger("groundstation.replay")
 
 V1, V2 = 0xFE, 0xFD
 SIGNED = 0x01
@@ -176,6 +182,8 @@ class Replay:
     position: int = 0  # index of the next record to apply
     clock: float = 0.0  # seconds from the start of the log
     seeks: int = 0  # seeks so far: the player does not count a seek's own time as played
+    errors: int = 0  # records that raised when applied (each time one was), passed over
+    last_error: str = ""
     _data: bytes = field(default=b"", repr=False)
     _vehicles_made_at: dict[int, int] | None = field(default=None, repr=False)  # sysid -> its first vehicle beat
     lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
@@ -199,7 +207,7 @@ class Replay:
         """Read without the lock, which a seek holds for a while: the event loop asks for it."""
         return {"name": self.name, "time": round(self.clock, 3), "duration": round(self.duration, 3),
                 "playing": self.playing, "speed": self.speed, "warning": self.index.warning or None,
-                "scene": self.scene}
+                "scene": self.scene, "errors": self.errors, "last_error": self.last_error or None}
 
     @property
     def now(self) -> float:
@@ -250,10 +258,19 @@ class Replay:
             message = self.decode(int(i))
             if message is None:
                 continue
-            if i in off_trail:
-                self._apply_off_trail(message, float(self.index.times[i]))
-            else:
-                self.fleet.apply(message, float(self.index.times[i]))
+            try:
+                if i in off_trail:
+                    self._apply_off_trail(message, float(self.index.times[i]))
+                else:
+                    self.fleet.apply(message, float(self.index.times[i]))
+            except Exception as error:  # noqa: BLE001 - one bad record must not stop the replay; counted, shown
+                self.failed(error, f"{message.get_type()} at {self.index.times[i] - self.index.start:.3f} s")
+
+    def failed(self, error: BaseException, where: str) -> None:
+        """Count a failure and keep it for the status, as the live link does for /api/health."""
+        self.errors += 1
+        self.last_error = f"{type(error).__name__}: {error} ({where})"[:200]
+        log.warning("replay: %s", self.last_error)
 
     def _apply_off_trail(self, message, now: float) -> None:
         """A pose applied only to place the sonar readings after it: its point is left off the trail, which a
@@ -464,7 +481,11 @@ class Player:
 
     def _run(self) -> None:
         while not self._stop.wait(self.TICK):
-            self.tick()
+            try:
+                self.tick()
+            except Exception as error:  # noqa: BLE001 - the thread must not die while the status says playing
+                self.replay.playing = False  # (a tick that failed would fail again): paused, and the status says why
+                self.replay.failed(error, "playing")
 
     def tick(self) -> None:
         """Play on by the time since the last tick (or since the last seek, if one came between)."""

@@ -324,7 +324,7 @@ class Fleet:
             vehicle.ordered = (now, message.custom_mode)
         elif kind in ("COMMAND_LONG", "COMMAND_INT") and message.command in MODE_ORDERS:
             named = message.command == mavlink.MAV_CMD_DO_SET_MODE
-            vehicle.ordered = (now, int(message.param2) if named else None)
+            vehicle.ordered = (now, _mode_number(message.param2) if named else None)
 
     def _station_heard(self, sysid: int, now: float) -> None:
         self.stations.pop(sysid, None)
@@ -584,12 +584,21 @@ def _command_name(command: int) -> str:
 def _command_text(vehicle: VehicleState, m) -> str:
     """A command as the operator would say it: "DO_SET_MODE RTL", "arm", "kill"."""
     if m.command == mavlink.MAV_CMD_DO_SET_MODE and m.param1 == mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        number = _mode_number(m.param2)
+        if number is None:
+            return f"DO_SET_MODE {m.param2}"  # as sent: "nan", "inf", "-1.0"
         mapping = mavutil.mode_mapping_bynumber(vehicle.mav_type) or {}
-        return f"DO_SET_MODE {mapping.get(int(m.param2), int(m.param2))}"
+        return f"DO_SET_MODE {mapping.get(number, number)}"
     if m.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
         return "arm" if m.param1 == 1 else "kill" if m.param2 == FORCE_DISARM else "disarm"
     to = " to the onboard agent" if m.target_component == COMPANION else ""
     return _command_name(m.command) + to
+
+
+def _mode_number(param: float) -> int | None:
+    """The custom mode a command's float parameter names; None for one no mode has (NaN, infinite, negative,
+    beyond 32 bits), which anyone on a link, or a recording of it, may send: int() of it would raise."""
+    return int(param) if math.isfinite(param) and 0 <= param < 2 ** 32 else None
 
 
 def _agent_text(status: agent_status.AgentStatus) -> str:

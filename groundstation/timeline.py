@@ -9,7 +9,9 @@ commands and their ACKs, the agent's state, homes), every map snapshot (for
 the occupied-cell count; the deltas between are skipped), and of the
 telemetry (poses, attitude, battery, sonar) only the first few of each
 stretch of ``every`` seconds. These go through a Fleet of their own, as a live
-link's would, in a background thread: the replay plays meanwhile.
+link's would, in a background thread: the replay plays meanwhile. A record
+the Fleet cannot take (it raises) is skipped and counted (``skipped``), as
+playing passes it over: one bad message must not cost the whole timeline.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ class Timeline:
         self.every = max(0.5, replay.duration / SAMPLES)
         self.history: History | None = None
         self.error: str | None = None
+        self.skipped = 0  # records that raised in the scan's Fleet, left out (playing counts them in the status)
         self._cancelled = False
         self._thread = threading.Thread(target=self._build, name="timeline", daemon=True)
         self._thread.start()
@@ -74,8 +77,12 @@ class Timeline:
                     self.error = "cancelled"
                     return
                 message = replay.message(int(i), decoder)
-                if message is not None:
+                if message is None:
+                    continue
+                try:
                     fleet.apply(message, float(replay.index.times[i]))
+                except Exception:  # noqa: BLE001 - one bad record must not cost the whole log's history
+                    self.skipped += 1
             self.history = history
         except Exception as error:  # noqa: BLE001 - a log we cannot scan still replays; the page says why
             self.error = f"{type(error).__name__}: {error}"

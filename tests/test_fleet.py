@@ -6,6 +6,8 @@ receiver's clock is given explicitly, so these tests need neither sockets nor sl
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from groundstation.state import OWN_MAP_AFTER, Fleet
@@ -152,3 +154,44 @@ def test_the_station_builds_a_map_for_a_vehicle_without_a_stream_from_all_its_re
     assert fleet.describe(vehicle, OWN_MAP_AFTER)["map"]["occupied"] == 1  # both readings, the same cell
     assert vehicle.own_map.grid.max() == 2 * HIT  # the reading from before the decision counts too
     assert vehicle.own_map.cells_ever_hit == 1 and not vehicle.unmapped
+
+
+def station(sysid: int):
+    """A ground station's component (``sysid`` 255 is this station's own)."""
+    packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=mavlink.MAV_COMP_ID_MISSIONPLANNER)
+    return lambda message: mavlink.MAVLink(None).decode(bytearray(message.pack(packer)))
+
+
+@pytest.mark.parametrize("sender", [77, 255], ids=["another station", "this station"])
+@pytest.mark.parametrize("value, shown", [(float("nan"), "nan"), (float("inf"), "inf"), (float("-inf"), "-inf"),
+                                          (-1.0, "-1.0"), (2.0 ** 32, "4294967296.0")])
+def test_a_command_with_a_number_no_mode_has_is_shown_as_sent_and_raises_nothing(fleet, sender, value, shown):
+    """A DO_SET_MODE whose mode (param2) was NaN raised in Fleet.apply (int() of it): live the link counted it,
+    but a recording holds it, and its replay stopped there. Every parameter of either command message, from any
+    station, to a known vehicle: no number raises; the mode shows as it was sent."""
+    send = station(sender)
+    custom = float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+    hear(fleet, 0.0, autopilot(heartbeat(mode=4)))
+    for k, command in enumerate((mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_COMPONENT_ARM_DISARM,
+                                 mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_DO_REPOSITION)):
+        hear(fleet, 1.0 + k,
+             send(mavlink.MAVLink_command_long_message(SYSID, 1, command, 0, custom, value, *[value] * 5)),
+             send(mavlink.MAVLink_command_long_message(SYSID, 1, command, 0, *[value] * 7)),
+             send(mavlink.MAVLink_command_int_message(SYSID, 1, 0, command, 0, 0, custom, value, value, value,
+                                                      0, 0, value)),
+             send(mavlink.MAVLink_command_int_message(SYSID, 1, 0, command, 0, 0, *[value] * 4, 0, 0, value)))
+    texts = [e.text for e in fleet.history.of(SYSID).events if e.kind == "command"]
+    assert texts[:2] == [f"sent DO_SET_MODE {shown}", "sent DO_SET_MODE"]
+    assert texts.count(f"sent DO_SET_MODE {shown}") == 2  # by COMMAND_LONG and by COMMAND_INT
+    hear(fleet, 9.0, send(mavlink.MAVLink_command_long_message(SYSID, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, custom,
+                                                               value, 0, 0, 0, 0, 0)))
+    # this station's order: a mode change may follow, but the order named no mode (another's is not ours)
+    assert fleet.get(SYSID).ordered == ((9.0, None) if sender == 255 else (-math.inf, None))
+
+
+def test_a_command_naming_a_mode_still_shows_and_orders_it(fleet):
+    hear(fleet, 0.0, autopilot(heartbeat(mode=4)))
+    hear(fleet, 1.0, station(255)(mavlink.MAVLink_command_long_message(
+        SYSID, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6.0, 0, 0, 0, 0, 0)))
+    assert [e.text for e in fleet.history.of(SYSID).events if e.kind == "command"] == ["sent DO_SET_MODE RTL"]
+    assert fleet.get(SYSID).ordered == (1.0, 6)
