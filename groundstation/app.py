@@ -12,9 +12,12 @@ in worker threads so the event loop keeps serving the page and the stream.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import functools
 import json
 import logging
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
@@ -32,10 +35,11 @@ from fastapi.responses import (
     StreamingResponse,
 )
 from fastapi.staticfiles import StaticFiles
+from fastapi.websockets import WebSocketState
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from groundstation.commands import Command, execute, outside_space
-from groundstation.link import LinkError
+from groundstation.link import LinkError, TransferBusy
 from groundstation.mapview import legend, trails
 from groundstation.proxy import VIEWER_ID
 from groundstation.replay import ReplayError
@@ -80,6 +84,7 @@ class ReplayControl(BaseModel):
 MAX_HISTORY = 3000  # samples per vehicle in a history or timeline answer
 STREAM_PERIOD = 0.25  # s between status frames on /ws
 MAX_STREAMS = 256  # /ws connections at once
+EXCHANGES = 16  # commands and mission transfers under way at once (each waits on a vehicle, not on the CPU)
 DOCS_ASSETS = "/docs/assets"
 log = logging.getLogger("groundstation")
 
@@ -116,6 +121,13 @@ def create_app(station: GroundStation) -> FastAPI:
     def live_only() -> None:
         if station.replay is not None:
             raise HTTPException(409, "commands are disabled in replay")
+
+    # Exchanges with vehicles (commands, missions) wait on the radio, up to seconds each: on threads of their
+    # own, so that slow or hostile vehicles never hold up what the page draws on asyncio's default threads.
+    exchanges = ThreadPoolExecutor(max_workers=EXCHANGES, thread_name_prefix="vehicle-exchange")
+
+    async def exchange(function, *args):
+        return await asyncio.get_running_loop().run_in_executor(exchanges, functools.partial(function, *args))
 
     # ---- the page ---------------------------------------------------------------------------------
     @app.get("/", include_in_schema=False)
@@ -274,7 +286,7 @@ def create_app(station: GroundStation) -> FastAPI:
             if refusal:
                 raise HTTPException(422, refusal)
         try:
-            result = await asyncio.to_thread(execute, station.link, v, body, station.fleet.datum, time.time())
+            result = await exchange(execute, station.link, v, body, station.fleet.datum, time.time())
         except LinkError as error:
             raise HTTPException(504, str(error)) from None
         log.info("vehicle %s: %s -> %s", sysid, body.action, result)
@@ -286,7 +298,7 @@ def create_app(station: GroundStation) -> FastAPI:
         live_only()
         vehicle_or_404(sysid)
         try:
-            items = await asyncio.to_thread(station.link.download_mission, sysid)
+            items = await exchange(station.link.download_mission, sysid)
         except LinkError as error:
             raise HTTPException(504, str(error)) from None
         station.note_waypoints(sysid, items)
@@ -305,7 +317,7 @@ def create_app(station: GroundStation) -> FastAPI:
         if not items:
             raise HTTPException(422, "the mission has no items")
         try:
-            result = await asyncio.to_thread(station.link.upload_mission, sysid, items)
+            result = await exchange(station.link.upload_mission, sysid, items)
         except LinkError as error:
             raise HTTPException(504, str(error)) from None
         if result == "accepted":
@@ -402,15 +414,19 @@ def create_app(station: GroundStation) -> FastAPI:
         await socket.accept()
         inbox = station.subscribe(viewer)
         sender = asyncio.create_task(_send_status(socket, inbox, station))
-        try:
-            while (message := await socket.receive())["type"] != "websocket.disconnect":
-                # the page's requests for its own 3D view (camera, selection, layers); answered to it alone
-                station.view_request(viewer, message.get("text") or message.get("bytes") or "", inbox)
-        except (WebSocketDisconnect, RuntimeError):
-            pass
+        receiver = asyncio.create_task(_receive_view_requests(socket, inbox, station, viewer))
+        try:  # until the page goes, or either half fails: then the page hears the stream end, and reconnects
+            done, _ = await asyncio.wait((sender, receiver), return_when=asyncio.FIRST_COMPLETED)
         finally:
             sender.cancel()
+            receiver.cancel()
             station.unsubscribe(viewer, inbox)
+        failure = next((task.exception() for task in done if not task.cancelled() and task.exception()), None)
+        gone = WebSocketState.DISCONNECTED in (socket.client_state, socket.application_state)
+        if failure is not None and not isinstance(failure, WebSocketDisconnect) and not gone:
+            log.error("the status stream failed: %r", failure, exc_info=failure)
+            with contextlib.suppress(Exception):  # the page may be gone already
+                await socket.close(code=1011, reason="the status stream failed; reconnect")
 
     # ---- the 3D view --------------------------------------------------------------------------------
     @app.get("/viz", include_in_schema=False)
@@ -439,6 +455,10 @@ def create_app(station: GroundStation) -> FastAPI:
     async def link_error(request: Request, error: LinkError):
         return JSONResponse({"detail": str(error)}, status_code=504)
 
+    @app.exception_handler(TransferBusy)
+    async def transfer_busy(request: Request, error: TransferBusy):
+        return JSONResponse({"detail": str(error)}, status_code=409)
+
     @app.exception_handler(RequestValidationError)
     async def invalid(request: Request, error: RequestValidationError):
         """What was wrong, without echoing the input (it may be NaN, which JSON cannot carry, or huge)."""
@@ -447,6 +467,14 @@ def create_app(station: GroundStation) -> FastAPI:
                             status_code=422)
 
     return app
+
+
+async def _receive_view_requests(socket: WebSocket, inbox: asyncio.Queue, station: GroundStation,
+                                 viewer: str | None) -> None:
+    """The page's requests for its own 3D view (camera, selection, layers), each answered to it alone; returns
+    when the page goes."""
+    while (message := await socket.receive())["type"] != "websocket.disconnect":
+        station.view_request(viewer, message.get("text") or message.get("bytes") or "", inbox)
 
 
 async def _send_status(socket: WebSocket, inbox: asyncio.Queue, station: GroundStation) -> None:

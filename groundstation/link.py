@@ -40,6 +40,7 @@ speaks as another component.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import queue
@@ -73,6 +74,10 @@ class LinkError(Exception):
     """A vehicle did not answer in time, or refused."""
 
 
+class TransferBusy(Exception):
+    """A mission transfer with the vehicle is already under way: the protocol carries one at a time."""
+
+
 @dataclass
 class _Waiter:
     sysid: int
@@ -104,6 +109,7 @@ class Link:
         self._signers: set[tuple[int, int]] = set()  # (system, component) heard signed with the key
         self._pruned = 0.0
         self._waiters: list[_Waiter] = []
+        self._transfers: set[int] = set()  # system ids a mission goes to or comes from now
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="mavlink", daemon=True)
@@ -359,14 +365,29 @@ class Link:
 
     # ---- the mission protocol, ground station side ----------------------------------------------------
     def download_mission(self, sysid: int, timeout: float = 1.0) -> list[MissionItem]:
-        return mission.download(self, sysid, timeout=timeout)
+        with self._transfer(sysid):
+            return mission.download(self, sysid, timeout=timeout)
 
     def upload_mission(self, sysid: int, items: list[MissionItem], timeout: float = 1.0) -> str:
         """Upload items (item 0 is home); returns the vehicle's MISSION_ACK result as a word."""
+        with self._transfer(sysid):
+            try:
+                return mission.upload(self, sysid, items, timeout=timeout)
+            except mission.MissionError as error:
+                raise LinkError(str(error)) from None
+
+    @contextlib.contextmanager
+    def _transfer(self, sysid: int):
+        """One mission transfer per vehicle at a time (else TransferBusy): two would take each other's replies."""
+        with self._lock:
+            if sysid in self._transfers:
+                raise TransferBusy(f"a mission transfer with vehicle {sysid} is under way; try again when it ends")
+            self._transfers.add(sysid)
         try:
-            return mission.upload(self, sysid, items, timeout=timeout)
-        except mission.MissionError as error:
-            raise LinkError(str(error)) from None
+            yield
+        finally:
+            with self._lock:
+                self._transfers.discard(sysid)
 
 
 def _gcs_heartbeat():

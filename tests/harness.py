@@ -60,6 +60,21 @@ class WaitTimeout(AssertionError):
     """A condition did not come true within its budget."""
 
 
+class StationClock:
+    """The station's retry clock in a test (``Link.retry_clock``): it stands still until the test moves it, so
+    however slow the machine, a try waits exactly as long as the test says (it starts at 1024 s and moves by
+    1/1024ths: sums are exact)."""
+
+    def __init__(self):
+        self.now = 1024.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def advance(self, seconds: float) -> None:
+        self.now += seconds
+
+
 def small_scene() -> Scene:
     return parse_scene(SCENE_TEXT)
 

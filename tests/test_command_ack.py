@@ -14,7 +14,7 @@ from concurrent.futures import Future
 from contextlib import contextmanager
 
 import pytest
-from harness import free_udp_port, wait_wall
+from harness import StationClock, free_udp_port, wait_wall
 
 from groundstation.link import REPLY_LOOK, Link, LinkError
 from groundstation.state import Fleet
@@ -80,20 +80,6 @@ class ScriptedVehicle:
 
     def tries(self, command: int) -> list:
         return [m for m in list(self.received) if m.command == command]
-
-
-class StationClock:
-    """The station's retry clock in a test: it stands still until the test moves it, so however slow the machine,
-    a try waits exactly as long as the test says (it starts at 1024 s and moves by 1/1024ths: sums are exact)."""
-
-    def __init__(self):
-        self.now = 1024.0
-
-    def __call__(self) -> float:
-        return self.now
-
-    def advance(self, seconds: float) -> None:
-        self.now += seconds
 
 
 @contextmanager

@@ -141,8 +141,12 @@ def download(link: Requester, sysid: int, component: int = 1, timeout: float = 1
     return items
 
 
+REQUESTS_PER_ITEM = 3  # an upload answers at most this many requests per item: a vehicle that lost some asks
+# again, one that keeps asking and never accepts would hold the uploader for ever
+
+
 class MissionError(Exception):
-    """The vehicle asked for an item the upload does not have."""
+    """The vehicle asked for an item the upload does not have, or kept asking without accepting the mission."""
 
 
 def upload(link: Requester, sysid: int, items: list[MissionItem], component: int = 1, timeout: float = 1.0) -> str:
@@ -152,13 +156,18 @@ def upload(link: Requester, sysid: int, items: list[MissionItem], component: int
 
     reply = link.request(sysid, mav.MAVLink_mission_count_message(sysid, component, len(items), MISSION), wanted,
                          timeout)
-    while reply.get_type() != "MISSION_ACK":
+    for _ in range(REQUESTS_PER_ITEM * len(items)):
+        if reply.get_type() == "MISSION_ACK":
+            return mission_result(reply.type)
         seq = reply.seq
         if not 0 <= seq < len(items):
             raise MissionError(f"vehicle {sysid} asked for mission item {seq} of {len(items)}")
         reply = link.request(sysid, item_message(items[seq], seq, (sysid, component), False),
                              lambda m, s=seq: wanted(m) and (m.get_type() == "MISSION_ACK" or m.seq != s), timeout)
-    return mission_result(reply.type)
+    if reply.get_type() == "MISSION_ACK":
+        return mission_result(reply.type)
+    raise MissionError(f"vehicle {sysid} asked for {REQUESTS_PER_ITEM * len(items)} items of a {len(items)}-item "
+                       "mission and did not accept it")
 
 
 def mission_result(code: int) -> str:
