@@ -243,8 +243,8 @@ def create_app(station: GroundStation) -> FastAPI:
         vehicles = {} if history is None else {str(key): {"sysid": key, **found.as_json(None, limit)}
                                                 for key, found in sorted(history.vehicles.items())
                                                 if sysid is None or key == sysid}
-        return {"ready": timeline.ready, "error": timeline.error, "start": replay.index.start,
-                "duration": replay.duration, "vehicles": vehicles}
+        return {"ready": timeline.ready, "error": timeline.error, "skipped": timeline.skipped,
+                "start": replay.index.start, "duration": replay.duration, "vehicles": vehicles}
 
     @app.get("/api/map2d/scene", tags=["map"])
     async def map2d_scene():

@@ -7,6 +7,7 @@ import json
 
 import pytest
 from harness import RunningStation, wait_wall
+from websockets.exceptions import ConnectionClosedError
 from websockets.sync.client import connect as ws_connect
 
 from groundstation.views import MAX_REQUEST, ViewRequestError, Views, parse
@@ -45,6 +46,8 @@ def test_good_requests_change_that_viewer_alone():
     json.dumps({"type": "zoom", "x": 2, "y": 0, "steps": 1}), '{"type": "zoom", "x": 0, "y": 0, "steps": Infinity}',
     json.dumps({"type": "zoom", "x": 0, "y": 0, "steps": 1e9}), json.dumps({"type": "zoom", "x": 0, "y": 0}),
     json.dumps({"type": "camera", "mode": "x" * MAX_REQUEST}),
+    json.dumps({"type": "zoom", "x": 0, "y": 10**400, "steps": 1}),  # no float: math.isfinite raised OverflowError
+    json.dumps({"type": "layers", "layers": {}, "opacity": -(10**400)}),
 ])
 def test_bad_requests_are_refused_without_echo(text):
     views = Views()
@@ -84,3 +87,30 @@ def test_over_the_stream_a_page_is_answered_alone(tmp_path):
                                          "detail": "this stream has no viewer id: open it with ?viewer=ID"}
         views = station.station.view.views
         wait_wall(lambda: views.get(VIEWER) is None, 10, "the page went: its settings go with it")
+
+
+def test_a_status_stream_that_fails_ends_saying_so_and_the_page_reconnects_to_a_working_one(tmp_path, caplog,
+                                                                                           monkeypatch):
+    """A status the station cannot build (a bug) must not leave the page connected to a stream that says
+    nothing more: the stream ends (1011), the log says why, and a new one streams again."""
+    with RunningStation(None, tmp_path, urls=[]) as station:
+        url = f"ws://127.0.0.1:{station.http_port}/ws"
+        status = station.station.status
+        failing = {"on": True}
+
+        def broken():
+            if failing["on"]:
+                raise KeyError("a status the station cannot build")
+            return status()
+
+        with ws_connect(url, origin=station.base) as stream:
+            assert json.loads(stream.recv(timeout=10))["type"] == "vehicles"
+            monkeypatch.setattr(station.station, "status", broken)
+            with pytest.raises(ConnectionClosedError) as ended:
+                while True:
+                    stream.recv(timeout=10)
+            assert ended.value.rcvd.code == 1011 and ended.value.rcvd.reason == "the status stream failed; reconnect"
+        assert "the status stream failed: KeyError('a status the station cannot build')" in caplog.text
+        failing["on"] = False
+        with ws_connect(url, origin=station.base) as again:
+            assert json.loads(again.recv(timeout=10))["type"] == "vehicles"
