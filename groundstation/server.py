@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 import secrets
 import socket
@@ -43,6 +44,8 @@ from vehicle.protocol.waypoints import positions
 from vehicle.world.bundled import scenes_dir
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
+
+log = logging.getLogger("groundstation")
 
 RECORDINGS_STREAMED = 200  # the newest recordings the status stream lists
 FAR_FROM_SCENE = 1000.0  # m outside the scene's edges: a vehicle there flies nowhere the scene shows
@@ -92,6 +95,7 @@ class GroundStation:
         self._replay_lock = threading.Lock()
         self._durations: dict[Path, tuple[tuple, float | None]] = {}  # path -> (its size and time, duration)
         self._indexing: set[Path] = set()  # recordings the indexer has yet to read
+        self._untold: set[str] = set()  # recordings not listed, their names no text: said once each
         self._indexer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recording-index")
         self._inboxes: dict[str | None, set[asyncio.Queue]] = {}  # viewer id -> its pages' /ws queues
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -190,6 +194,11 @@ class GroundStation:
             return []
         found = []
         for path in self.record_dir.glob("*.tlog"):
+            if not _is_text(path.name):  # JSON cannot carry it, and no request could name it
+                if path.name not in self._untold:
+                    self._untold.add(path.name)
+                    log.warning("the recording %r is not listed: its name is no UTF-8 text (rename it)", path.name)
+                continue
             try:
                 stat = path.stat()
             except OSError:  # gone since the listing
@@ -216,12 +225,18 @@ class GroundStation:
         return None
 
     def _index(self, path: Path, version: tuple) -> None:
+        """On the indexer's thread: a failure is a recording without a duration (and a line in the log if it is
+        no bad file but a bug), never a path left marked as being indexed, which would never be again."""
         try:
             duration = round(index_tlog(path, columns=False).duration, 1)
         except (ReplayError, OSError):
             duration = None
+        except Exception:
+            log.exception("could not index the recording %s", path.name)
+            duration = None
+        finally:
+            self._indexing.discard(path)
         self._durations[path] = (version, duration)  # a file that changed meanwhile is indexed again
-        self._indexing.discard(path)
 
     def recording_path(self, name: str) -> Path | None:
         """The recording called ``name`` in the record folder (no paths, only .tlog files), or None."""
@@ -359,6 +374,15 @@ class GroundStation:
         note = {"type": "target", "x": round(x, 2), "y": round(y, 2)}
         for inbox in list(self._inboxes.get(viewer, ())):
             self._loop.call_soon_threadsafe(_offer, inbox, note)
+
+
+def _is_text(name: str) -> bool:
+    """A file name that is text: not one with bytes no encoding decodes (Python keeps them as surrogates)."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _offer(inbox: asyncio.Queue, note: dict) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import math
 import os
 import random
@@ -230,6 +231,47 @@ def test_listing_recordings_reads_none_of_them_and_lists_only_files(flight, monk
         copy.unlink(missing_ok=True)
         pipe.unlink(missing_ok=True)
         folder.rmdir()
+
+
+def test_a_recording_whose_name_is_no_text_is_left_out_and_said_once(flight, caplog):
+    """A file named with bytes no encoding decodes (copied from another system, say) made the list a 500, and
+    the page's recordings list with it: JSON cannot carry such a name, and no request could name it."""
+    caplog.set_level(logging.WARNING, logger="groundstation")
+    odd = flight.record_dir / os.fsdecode(b"odd\xff.tlog")
+    shutil.copyfile(flight.session, odd)
+    try:
+        for _ in range(2):
+            listed = flight.api.get("/api/recordings")
+            assert listed.status_code == 200 and flight.session.name in [r["name"] for r in listed.json()]
+        assert caplog.text.count("its name is no UTF-8 text (rename it)") == 1
+    finally:
+        odd.unlink()
+
+
+def test_a_recording_the_indexer_fails_on_has_no_duration_and_is_indexed_again_once_it_changes(flight, monkeypatch,
+                                                                                               caplog):
+    """Not a bad file (that is a ReplayError) but a failure nobody foresaw: said in the log, and the file is
+    not left marked as being indexed, where it would never be indexed again."""
+    real = index_tlog
+
+    def failing(path, columns=True):
+        raise ValueError("mmap length is greater than file size")
+
+    monkeypatch.setattr("groundstation.server.index_tlog", failing)
+    copy = flight.record_dir / "failing-copy.tlog"
+    shutil.copyfile(flight.session, copy)
+
+    def duration():
+        return {r["name"]: r for r in flight.api.get("/api/recordings").json()}["failing-copy.tlog"]["duration_s"]
+
+    try:
+        wait_wall(lambda: copy not in flight.running.station._indexing and duration() is None
+                  and "could not index the recording failing-copy.tlog" in caplog.text, 10, "the failure said")
+        monkeypatch.setattr("groundstation.server.index_tlog", real)
+        os.utime(copy, (time.time() + 5, time.time() + 5))  # changed: indexed again
+        wait_wall(lambda: duration() == round(real(copy).duration, 1), 10, "the duration, once read again")
+    finally:
+        copy.unlink(missing_ok=True)
 
 
 def test_a_finished_recording_downloads_byte_for_byte(flight):
