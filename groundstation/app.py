@@ -20,6 +20,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
+from urllib.parse import quote
 
 import numpy as np
 from fastapi import Depends, FastAPI, Header, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
@@ -87,6 +88,15 @@ MAX_STREAMS = 256  # /ws connections at once
 EXCHANGES = 16  # commands and mission transfers under way at once (each waits on a vehicle, not on the CPU)
 DOCS_ASSETS = "/docs/assets"
 log = logging.getLogger("groundstation")
+
+
+def attachment(name: str) -> str:
+    """A Content-Disposition for a download called ``name`` (RFC 6266): the name itself percent-encoded as UTF-8
+    for browsers, and for older clients an ASCII one without quotes, backslashes or control characters. A file
+    in the record folder may be called anything: put in a header as it is, a non-ASCII name was a 500, and a
+    line break in it ended the response."""
+    plain = "".join(c if " " <= c < "\x7f" and c not in '"\\' else "_" for c in name)
+    return f"attachment; filename=\"{plain}\"; filename*=UTF-8''{quote(name, safe='')}"
 
 
 def _read_prefix(path: Path, size: int, chunk: int = 1 << 16):
@@ -348,7 +358,7 @@ def create_app(station: GroundStation) -> FastAPI:
         size = path.stat().st_size
         return StreamingResponse(_read_prefix(path, size), media_type="application/octet-stream",
                                  headers={"Content-Length": str(size),
-                                          "Content-Disposition": f'attachment; filename="{name}"'})
+                                          "Content-Disposition": attachment(name)})
 
     @app.delete("/api/recordings/{name}", tags=["recordings"], dependencies=[Depends(operator)])
     def delete_recording(name: str):
@@ -398,7 +408,7 @@ def create_app(station: GroundStation) -> FastAPI:
         html = await asyncio.to_thread(station.export_replay, replay)
         name = Path(replay.name).stem + ".html"
         return Response(html, media_type="text/html",
-                        headers={"Content-Disposition": f'attachment; filename="{name}"'})
+                        headers={"Content-Disposition": attachment(name)})
 
     # ---- the stream ----------------------------------------------------------------------------------
     @app.websocket("/ws")

@@ -24,6 +24,7 @@ import time
 from collections import Counter, deque
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import quote, unquote
 
 import numpy as np
 import pytest
@@ -287,6 +288,25 @@ def test_a_finished_recording_downloads_byte_for_byte(flight):
         assert "finished-copy.tlog" in response.headers["content-disposition"]
     finally:
         finished.unlink(missing_ok=True)
+
+
+@pytest.mark.parametrize("name", ["飞行.tlog", "cr\r\nX-Evil: 1.tlog", 'quote".tlog', "back\\slash ñ.tlog"])
+def test_a_recording_called_anything_downloads_under_its_own_name(flight, name):
+    """Its name went into the header as it was: a non-ASCII one was a 500, a line break ended the response
+    unanswered, a quote made a header that says another name."""
+    copy = flight.record_dir / name
+    shutil.copyfile(flight.session, copy)
+    try:
+        assert name in [r["name"] for r in flight.api.get("/api/recordings").json()]
+        response = flight.api.get(f"/api/recordings/{quote(name, safe='')}")
+        assert response.status_code == 200 and response.content == copy.read_bytes()
+        disposition = response.headers["content-disposition"]
+        assert "x-evil" not in response.headers
+        assert unquote(disposition.split("filename*=UTF-8''")[1]) == name  # what a browser saves it as
+        plain = disposition.split('filename="')[1].split('";')[0]
+        assert plain.isascii() and '"' not in plain and "\\" not in plain and plain.isprintable()
+    finally:
+        copy.unlink()
 
 
 def test_the_session_being_recorded_downloads_as_a_consistent_prefix(tmp_path):

@@ -37,7 +37,10 @@ def load_mission(path: str | Path, source: str | None = None) -> list[MissionIte
     except WaypointError:
         raise
     except Exception as error:  # mavwp raises MAVWPError and bare ValueErrors/IndexErrors on bad lines
-        raise WaypointError(f"{source}: not a QGC WPL 110 mission ({error})") from None
+        why = str(error)
+        if why.startswith("Unsupported waypoint format"):  # it quotes the whole first line, which may be megabytes
+            why = "its first line names no waypoint format mavwp reads"
+        raise WaypointError(f"{source}: not a QGC WPL 110 mission ({_shortened(why)})") from None
     items = [MissionItem(command=w.command, lat=w.x, lon=w.y, alt=w.z, param1=w.param1, param2=w.param2,
                          param3=w.param3, param4=w.param4, frame=w.frame, autocontinue=w.autocontinue)
              for w in (loader.wp(i) for i in range(loader.count()))]
@@ -54,6 +57,10 @@ def parse_mission(text: str) -> list[MissionItem]:
         return load_mission(handle.name, "the mission")
     finally:
         os.unlink(handle.name)
+
+
+def _shortened(text: str, most: int = 120) -> str:
+    return text if len(text) <= most else text[:most] + "..."
 
 
 MAX_ITEMS = 65535  # MAVLink numbers mission items with 16 bits
