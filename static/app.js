@@ -457,6 +457,8 @@ function positionText(p) {
   return `${part("x", p.x)}, ${part("y", p.y)}, ${part("alt", p.z)}`;
 }
 
+const BATTERY_LOW = 20;  // % left at or below which a vehicle's battery is shown as low
+
 function batteryText(b) {
   if (!b) return "–";
   const parts = [];
@@ -542,6 +544,9 @@ function renderCard(card, v) {
   const battery = card.querySelector(".battery");
   setText(battery, batteryText(v.battery));
   battery.title = v.battery && isNum(v.battery.current) ? `current ${fmt(v.battery.current)} A` : "";
+  // ArduPilot warns at its low level, and our simulator at 20 %: the card says so before the failsafe acts
+  battery.classList.toggle("low", !!v.battery && isNum(v.battery.remaining) && v.battery.remaining >= 0
+    && v.battery.remaining <= BATTERY_LOW);
 
   const link = v.link || {};
   const lost = link.state === "lost";

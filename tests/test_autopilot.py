@@ -780,6 +780,38 @@ def test_a_guided_target_does_not_lift_a_copter_off_the_ground(flat_scene):
     assert world.pose.xyz() == pytest.approx((0.0, 0.0, REST_Z), abs=1e-3) and not world.autopilot.flying
 
 
+# ---- the battery ----------------------------------------------------------------------------------------
+def test_a_low_battery_is_said_and_a_critical_one_lands_a_copter_as_the_failsafe(flat_scene):
+    world = Simulation(flat_scene, Kind.COPTER, start=(0.0, 0.0))
+    world.autopilot.arm()
+    world.autopilot.takeoff(ALTITUDE)
+    world.run_for(10.0)
+    battery = world.battery
+    battery.charge_mah = 0.2 * battery.capacity_mah + 1.0  # just above the low level
+    world.run_for(1.0)
+    assert texts(world)[-1] == "Battery 1 is low: 14.8 V, 20% left" and world.autopilot.mode == "GUIDED"
+    said = len(texts(world))
+    battery.charge_mah = 0.1 * battery.capacity_mah + 1.0
+    world.run_for(1.0)
+    assert texts(world)[said:] == ["Battery 1 is critical: 14.4 V, 10% left; battery failsafe: LAND"]  # once each
+    assert (world.autopilot.mode, world.autopilot.mode_source) == ("LAND", "failsafe")
+    step_until(world, lambda: not world.autopilot.armed, limit=30.0)  # landed, and disarmed
+    assert world.pose.z == pytest.approx(REST_Z, abs=0.05)
+
+
+def test_a_rover_holds_at_a_critical_battery_and_one_on_the_ground_is_only_warned(flat_scene):
+    rover = Simulation(flat_scene, Kind.ROVER)
+    rover.autopilot.arm()
+    rover.autopilot.set_mode("GUIDED")
+    rover.battery.charge_mah = 0.1 * rover.battery.capacity_mah  # past both levels at once: one alarm, critical
+    rover.step()
+    assert texts(rover)[-1].endswith("; battery failsafe: HOLD") and rover.autopilot.mode == "HOLD"
+    parked = Simulation(flat_scene, Kind.COPTER)
+    parked.battery.charge_mah = 0.05 * parked.battery.capacity_mah
+    parked.step()
+    assert texts(parked)[-1] == "Battery 1 is critical: 14.0 V, 5% left" and parked.autopilot.mode == "GUIDED"
+
+
 # ---- ground following, determinism, avoidance ----------------------------------------------------
 
 

@@ -355,3 +355,37 @@ def test_screenshots_of_the_operator_view(page, station):
     instruments.scroll_into_view_if_needed()
     instruments.screenshot(path=str(SCREENSHOTS / "operator-instruments.png"))
     assert json.loads(json.dumps(page.evaluate("window.map2d.view")))["scale"] > 0
+
+
+# ---- 8. the battery ------------------------------------------------------------------------------------------
+def test_a_low_battery_is_marked_on_its_card_and_its_warning_is_a_banner(browser, tmp_path):
+    """A vehicle at 15 %, as an ArduPilot reports it (SYS_STATUS) and warns (STATUSTEXT): on a station of its
+    own, so that the other tests' pictures show no low battery."""
+    from mavlink_peer import Peer, position, vehicle_heartbeat
+
+    with RunningStation(None, tmp_path, TOKEN) as running, \
+            Peer(("127.0.0.1", running.mavlink_port), sysid=9) as vehicle:
+        def report(remaining: int) -> None:
+            vehicle.send(vehicle_heartbeat(), position(),
+                         mavlink.MAVLink_sys_status_message(0, 0, 0, 0, 14500, 1400, remaining, 0, 0, 0, 0, 0, 0))
+
+        report(45)
+        wait_wall(lambda: running.http.get("/api/vehicles/9").status_code == 200, 10, "the vehicle heard")
+        context = browser.new_context(viewport={"width": 1400, "height": 900})
+        try:
+            page = context.new_page()
+            page.route("**/viz/**", lambda route: route.fulfill(body="<!doctype html>", content_type="text/html"))
+            page.goto(f"{running.base}/#token={TOKEN}")
+            battery = page.locator('.vehicle-card[data-sysid="9"] .battery')
+            expect(battery).to_have_text("14.5 V, 45 %")
+            expect(battery).not_to_have_class(re.compile(r"\blow\b"))
+            report(15)
+            vehicle.send(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_CRITICAL,
+                                                            b"Battery 1 is low: 14.5 V, 15% left", 0, 0))
+            expect(battery).to_have_text("14.5 V, 15 %")
+            expect(battery).to_have_class(re.compile(r"\blow\b"))
+            expect(page.locator("#warning-banner li", has_text="Battery 1 is low: 14.5 V, 15% left")).to_be_visible()
+            report(60)  # charged again (a swapped battery)
+            expect(battery).not_to_have_class(re.compile(r"\blow\b"))
+        finally:
+            context.close()

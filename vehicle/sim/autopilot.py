@@ -139,6 +139,18 @@ class Autopilot:
         self._hold = (pose.x, pose.y, pose.z)
         self._braking = True
 
+    def battery_failsafe(self, critical: bool, voltage: float, remaining: float) -> None:
+        """ArduPilot's battery monitor: at the low level a warning; at the critical one, flying, a copter lands
+        and a rover holds (BATT_FS_CRT_ACT Land; a rover's Hold), as the failsafe's mode change. Without it a
+        copter hovered on at 0 %, and nobody was told."""
+        text = f"Battery 1 is {'critical' if critical else 'low'}: {voltage:.1f} V, {remaining:.0%} left"
+        if not (critical and self.armed):
+            self.say(text, mav.MAV_SEVERITY_CRITICAL)
+            return
+        action = "LAND" if self.kind is Kind.COPTER else "HOLD"
+        self.say(f"{text}; battery failsafe: {action}", mav.MAV_SEVERITY_CRITICAL)
+        self.set_mode(action, source="failsafe")
+
     # ---- requests (each returns a MAV_RESULT) ------------------------------------------------
     def arm(self, force: bool = False) -> int:
         if self.armed:

@@ -32,6 +32,8 @@ from vehicle.world.suites import DEFAULT_SUITE, sensor_suite
 DEFAULT_STEP = 0.05  # s
 SONAR_RATE = 10.0  # Hz: readings per second, as long-range ultrasonic sensors manage
 STEP_HEIGHT = 0.5  # m: a rover climbs onto surfaces at most this far above its wheels
+BATTERY_LOW = 0.2  # share of the charge left when the autopilot warns (ArduPilot's BATT_LOW_MAH, as a share)
+BATTERY_CRITICAL = 0.1  # ... and when it lands a copter or holds a rover (BATT_FS_CRT_ACT)
 FARTHEST_START = 100_000.0  # m from the scene's origin: a scene is local metres, and telemetry's positions overflow
 
 
@@ -79,12 +81,20 @@ class Simulation:
                                    avoidance=self.avoidance)
         self.sonars = SonarArray(sensors if sensors is not None else sensor_suite(DEFAULT_SUITE), self.caster, seed)
         self.battery = Battery()
+        self._battery_alarm_mah = BATTERY_LOW * self.battery.capacity_mah  # the charge the next alarm comes at
         self.collision: Contact | None = None
         self.distance_travelled = 0.0
         self._ground = (ground, (0.0, 0.0, 1.0))
         self._ground_xy = (x, y)
         self.sonar_rate = sonar_rate
         self._next_reading = 0.0
+
+    def _battery_alarm(self) -> None:
+        """The battery crossed the low or the critical level: the autopilot says so, and at critical acts."""
+        battery = self.battery
+        critical = battery.remaining <= BATTERY_CRITICAL
+        self._battery_alarm_mah = -1.0 if critical else BATTERY_CRITICAL * battery.capacity_mah
+        self.autopilot.battery_failsafe(critical, battery.voltage, battery.remaining)
 
     @property
     def servo(self) -> Servo | None:
@@ -144,6 +154,8 @@ class Simulation:
         self.distance_travelled += math.dist(before, after)
         autopilot, body = self.autopilot, self.body
         self.battery.drain(self.dt, autopilot.armed, autopilot.flying, math.hypot(body.vx, body.vy), body.vz)
+        if self.battery.charge_mah <= self._battery_alarm_mah:
+            self._battery_alarm()
         if self.time + 1e-9 < self._next_reading:
             return []
         self._next_reading += 1.0 / self.sonar_rate
