@@ -155,6 +155,24 @@ def test_one_call_reads_a_bounded_number_of_datagrams(listening, monkeypatch):
     assert [m.text for m in got] == [f"number {i}" for i in range(1, 25)]  # in order, none lost
 
 
+def test_datagrams_packed_with_messages_wait_in_the_socket_while_many_are_parsed(listening, monkeypatch):
+    """A 64 KB datagram holds thousands of small messages: read by the thousand they filled hundreds of MB at
+    the station. No datagram is read while MAX_READY parsed messages wait; none is lost meanwhile."""
+    link, port = listening
+    monkeypatch.setattr(links, "MAX_READY", 50)
+    a = Sender(port, 1)
+    try:
+        for i in range(4):
+            a.send(b"".join(a.packet(f"datagram {i} message {k}") for k in range(40)))
+        wait_wall(lambda: link.recv_msg() is not None, 5, "the first datagram")
+        assert link.stats["datagrams"] == 2  # 80 parsed: the third waits
+        got = receive(link, 159, "the rest")
+    finally:
+        a.close()
+    assert link.stats["datagrams"] == 4
+    assert [m.text for m in got] == [f"datagram {i} message {k}" for i in range(4) for k in range(40)][1:]
+
+
 @pytest.mark.parametrize("url", ["udpin:127.0.0.1", "udpout::14550", "udp:host:port",
                                  "udpin:127.0.0.1:70000", "udpout:127.0.0.1:0",  # a socket's OverflowError before
                                  "tcp:127.0.0.1", "tcpin::5760", "tcp:host:port"])  # retried for ever before

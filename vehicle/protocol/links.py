@@ -45,6 +45,8 @@ from vehicle.protocol.mav import mavlink, mavutil
 MAX_SENDERS = 64  # UDP peers remembered (parsers, and where broadcasts go)
 SENDER_IDLE = 30.0  # s after which a silent UDP peer gets no more broadcasts and is forgotten
 MAX_DATAGRAMS = 2000  # read at most this many per call, so one flood cannot stall the caller's loop
+MAX_READY = 2000  # parsed messages waiting, at most, before another datagram is read: a datagram of 64 KB
+# holds thousands of small messages, and a flood of them would fill memory faster than they are handled
 RETRY = (0.5, 10.0)  # s: first and longest pause between attempts to open a stream
 UDP_KINDS = frozenset({"udpin", "udp", "udpout"})  # parsed here per datagram and per sender
 TCP_KINDS = frozenset({"tcp", "tcpin"})
@@ -200,6 +202,8 @@ class UdpLink(_Signed):
     def _read(self) -> None:
         now = time.monotonic()
         for _ in range(MAX_DATAGRAMS):
+            if len(self._ready) >= MAX_READY:
+                return  # the rest wait in the socket's buffer, where the kernel drops what does not fit
             try:
                 data, address = self.port.recvfrom(65535)
             except (BlockingIOError, InterruptedError):
