@@ -8,6 +8,7 @@ component.
 """
 
 import hashlib
+import json
 import os
 import signal
 import subprocess
@@ -30,6 +31,9 @@ Transform { translation 0 0 -0.05 children Shape { geometry Box { size 80 80 0.1
 Transform { translation 0 4 2 children Shape { geometry Box { size 4 0.2 6 } } }
 Transform { translation -7 -3 2 children Shape { geometry Box { size 2 2 6 } } }
 """
+FULL = "/dev/full"  # every write to it fails: No space left on device
+needs_a_full_disk = pytest.mark.skipif(not (sys.platform.startswith("linux") and os.path.exists(FULL)),
+                                       reason="a full disk is Linux's /dev/full, not on this system")
 
 
 @pytest.fixture(scope="module")
@@ -292,6 +296,92 @@ def test_ctrl_c_ends_a_logged_run_with_one_line_and_a_whole_log(tmp_path):
     while (message := connection.recv_match()) is not None:
         kinds[message.get_type()] += 1
     assert kinds["GLOBAL_POSITION_INT"] > 100 and kinds["DISTANCE_SENSOR"] > 100 and not kinds["BAD_DATA"], kinds
+
+
+@needs_a_full_disk
+def test_a_full_disk_loses_the_log_not_the_run(tmp_path):
+    """A write error killed the log's forked writer, then the thread sending it batches (two tracebacks); the
+    run queued batches for no one and ended on 'Connection reset by peer', exit code 2, its result lost. Now the
+    run's result is printed, the log's error said once, in one line, and the exit code is 2 (an OS error)."""
+    scene = tmp_path / "yard.wrl"
+    scene.write_text(SCENE)
+    done = subprocess.run([sys.executable, "-m", "vehicle.cli", "experiment", "--scene", str(scene), "--mission",
+                           "pathfind", "--time-limit", "150", "--json", "--log", FULL],
+                          capture_output=True, text=True, timeout=240)
+    assert done.stderr == f"vehicle experiment: log {FULL}: No space left on device\n"
+    assert done.returncode == 2
+    result = json.loads(done.stdout)
+    assert result["outcome"] == "finished" and result["detections"] > 0
+
+
+@needs_a_full_disk
+def test_a_full_disk_loses_the_log_not_the_run_without_fork(monkeypatch, capfd, tmp_path):
+    """The same where the log is written in the run's process (the write error ended the run as an 'error',
+    then closing the log raised it again): the result, one line, exit code 2; and no batch once it failed."""
+    from vehicle.lab import log
+
+    monkeypatch.setattr(log.multiprocessing, "get_all_start_methods", lambda: ["spawn"])
+    failed_before = []  # at each batch given to the writer: had it failed already?
+
+    def write(writer, batch, write=log._Writer.write):
+        failed_before.append(writer.error is not None)
+        write(writer, batch)
+
+    monkeypatch.setattr(log._Writer, "write", write)
+    scene = tmp_path / "yard.wrl"
+    scene.write_text(SCENE)
+    code = main(["experiment", "--scene", str(scene), "--mission", "pathfind", "--time-limit", "150", "--json",
+                 "--log", FULL])
+    out, err = capfd.readouterr()
+    assert err == f"vehicle experiment: log {FULL}: No space left on device\n"
+    assert code == 2
+    assert json.loads(out)["outcome"] == "finished"
+    assert failed_before and not any(failed_before)
+
+
+@needs_a_full_disk
+def test_a_failed_writer_is_sent_nothing_more(monkeypatch):
+    """Once the forked writer has failed, the run's batches go nowhere: it stops handing them over (it queued
+    them all for no one), soon after the first."""
+    from vehicle.agent.settings import Settings
+    from vehicle.lab import log as logs
+    from vehicle.lab.experiment import Experiment, run_experiment
+    from vehicle.world.scene import parse_scene
+
+    handed = []
+    write = logs._Forked.write
+    monkeypatch.setattr(logs._Forked, "write", lambda writer, batch: handed.append(write(writer, batch)))
+    log = logs.ExperimentLog(FULL)
+    settings = Settings().updated({"speed": 0.1})  # a slow flight: some forty batches
+    result = run_experiment(Experiment("yard.wrl", "pathfind", settings=settings, waypoints=[(-3.0, 6.0)]),
+                            scene=parse_scene(SCENE, "yard.wrl"), on_step=log)
+    with pytest.raises(logs.LogError) as error:
+        log.close()
+    assert str(error.value) == f"log {FULL}: No space left on device" and error.value.errno == 28
+    assert result["outcome"] == "finished"
+    batches = log._steps // logs.BATCH_STEPS
+    assert batches > 20 and len(handed) < batches / 2, (len(handed), batches)  # (the writer fails on its first)
+    assert log._writer.batches.qsize() <= 5  # close's end mark, and any handed over as the failure was heard
+
+
+@pytest.mark.parametrize(("where", "reason"), [
+    ("", "Is a directory"),
+    ("file/run.tlog", "{folder}/file: File exists"),  # Path.mkdir's word for a folder that is a file
+    ("file/deep/run.tlog", "{folder}/file/deep: Not a directory"),
+], ids=["a directory", "in a file", "deep in a file"])
+def test_a_log_that_cannot_be_opened_loses_nothing_but_the_log(tmp_path, capfd, where, reason):
+    """Said before the run ('[Errno 21] Is a directory: ...', exit code 2, no run); now as a failed write is: the
+    run's result, then the log's error in one line, exit code 2."""
+    scene = tmp_path / "yard.wrl"
+    scene.write_text(SCENE)
+    (tmp_path / "file").write_text("")
+    log = tmp_path / where
+    code = main(["experiment", "--scene", str(scene), "--mission", "pathfind", "--time-limit", "150", "--json",
+                 "--log", str(log)])
+    out, err = capfd.readouterr()
+    assert err == f"vehicle experiment: log {log}: {reason.format(folder=tmp_path)}\n"
+    assert code == 2
+    assert json.loads(out)["outcome"] == "finished"
 
 
 @pytest.mark.parametrize("message", [

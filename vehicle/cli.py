@@ -120,11 +120,15 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         from vehicle.lab.log import ExperimentLog
 
         log = ExperimentLog(args.log, scene=args.scene)
+    log_error = None
     try:
         result = run_experiment(experiment, scene=scene, map_out=args.map_out, on_step=log)
     finally:
         if log is not None:
-            log.close()
+            try:
+                log.close()
+            except OSError as error:  # the log failed, not the run: its result first, then the error (exit 2)
+                log_error = error
     if args.json:
         print(json.dumps(result))
     else:
@@ -135,8 +139,11 @@ def cmd_experiment(args: argparse.Namespace) -> int:
               f"{result['wall_time_s']:.2f} s; {result.get('distance_m', 0):.1f} m flown")
         if args.map_out:
             print(f"map written to {args.map_out}")
-        if log is not None:
+        if log is not None and log_error is None:
             print(f"log written to {args.log} ({log.messages} messages)")
+    if log_error is not None:
+        print(f"vehicle {args.command}: {log_error}", file=sys.stderr)
+        return 2
     return 0 if result["outcome"] != "error" else 1
 
 

@@ -26,6 +26,8 @@ note, and a writer process (forked, on the other core) makes the messages:
   framing is most of its cost.
 
 Where no process can be forked, the same writer works in the run's process.
+A log that cannot be written (not opened, the disk full) does not stop the run:
+its steps go nowhere from then on, and ``close`` raises ``LogError``.
 The log names the run's scene as a station's recording does
 (``vehicle.protocol.scene_note``), at its start and every simulated minute.
 """
@@ -91,12 +93,25 @@ _TUNNEL_HEAD = struct.Struct("<HBBB")  # payload_type, target system and compone
 assert _TUNNEL.unpacker.format == "<HBBB128B"
 
 
+class LogError(OSError):
+    """A log not (wholly) written, said as a command line says it: "log run.tlog: No space left on device"."""
+
+    def __str__(self) -> str:
+        where = f"{self.filename2}: " if self.filename2 else ""  # a folder the log's could not be made in
+        return f"log {self.filename}: {where}{self.strerror}"
+
+
 class ExperimentLog:
     """Pass it as ``on_step`` to ``run_experiment``; ``close`` writes the final state."""
 
     def __init__(self, path: str | Path, sysid: int = 1, scene: str | Path | None = None):
         """``scene``: the scene file the run flies in, named in the log."""
-        self.file = TlogWriter(path)
+        self.path = Path(path)
+        self._writer: _Forked | _Writer | _Unopened | None = None
+        try:
+            self.file: TlogWriter | None = TlogWriter(path)
+        except OSError as error:  # the run goes on all the same: its result matters more than its log
+            self.file, self._writer = None, _Unopened(error)
         text = note_text(scene) if scene else None
         self._notes = SceneNotes(text) if text else None
         self.sysid = sysid
@@ -105,7 +120,6 @@ class ExperimentLog:
         self.time = 0.0
         self.messages = 0
         self._batch = _Batch()
-        self._writer: _Forked | _Writer | None = None
         self._pose_due = self._hud_due = self._telemetry_due = self._agent_due = self._delta_due = 0.0
         self._pose_interval = self._hud_interval = self._delta_period = 0.0
         self._agent_status: agent_status.AgentStatus | None = None  # the last the companion was asked about
@@ -127,8 +141,9 @@ class ExperimentLog:
             memory = stepper.agent.map
             geometry = (memory.size, memory.resolution, memory.origin, companion.agent.ctx.home)
         _frame_nothing()  # loads the compiled framing once, not in every writer forked from here
-        setup = (self.file, self.sysid, simulation.home, simulation.datum, geometry)
-        self._writer = _Forked(setup) if "fork" in multiprocessing.get_all_start_methods() else _Writer(*setup)
+        if self._writer is None:  # (else the log could not be opened)
+            setup = (self.file, self.sysid, simulation.home, simulation.datum, geometry)
+            self._writer = _Forked(setup) if "fork" in multiprocessing.get_all_start_methods() else _Writer(*setup)
 
     def __call__(self, stepper: Stepper, readings: list[Reading]) -> None:
         if self.telemetry is None:
@@ -198,13 +213,31 @@ class ExperimentLog:
 
     def _send(self) -> None:
         batch, self._batch = self._batch, _Batch(self._batch.key)
-        self._writer.write(batch)
+        if self._writer.error is None:  # a writer that failed takes no more: the run goes on, unlogged
+            self._writer.write(batch)
+
+    @property
+    def error(self) -> LogError | None:
+        """Why the log is not (wholly) written: it could not be opened, or a write failed (None: all is well)."""
+        error = getattr(self._writer, "error", None)
+        if error is None:
+            return None
+        elsewhere = error.filename if error.filename is not None and Path(error.filename) != self.path else None
+        return LogError(error.errno, error.strerror or str(error), str(self.path), None, elsewhere)
 
     def close(self) -> None:
-        """Finish with heartbeats and a full map snapshot, so the log ends on the final state."""
+        """Finish with heartbeats and a full map snapshot, so the log ends on the final state. Raises
+        ``LogError`` if the log could not be written (the run's result stands: the caller says both)."""
         if self._writer is None:  # the run ended before its first step: an empty log
             self.file.close()
             return
+        if self.telemetry is not None:  # (else it ended before its first step, the log unopened)
+            self._finish()
+        self.messages = self._writer.close()
+        if (error := self.error) is not None:
+            raise error
+
+    def _finish(self) -> None:
         telemetry, now = self.telemetry, self.time
         stamp = int((LOG_EPOCH + now) * 1e6)
         self._add([telemetry.heartbeat(now), telemetry.global_position(now)] + telemetry.events(now), stamp, 0)
@@ -214,7 +247,6 @@ class ExperimentLog:
             self._add([companion.heartbeat(), *companion.texts(), status], stamp, 1)
             self._map(stamp, now, final=True)
         self._send()
-        self.messages = self._writer.close()
 
 
 class _LogCompanion(Companion):
@@ -267,14 +299,14 @@ class _Writer:
         self.datum = datum
         self.seqs = np.zeros(len(COMPONENTS), dtype=np.int64)  # the next sequence number of each component
         self.messages = 0
+        self.error: OSError | None = None  # the first write that failed: nothing is written after it
         self.map = _MapCopy(*geometry[:3]) if geometry else None
         self.streamer = MapStreamer(self.map, geometry[3]) if geometry else None
         self.next_snapshot = 0.0  # one at the start, as a live vehicle's
 
     def write(self, batch: _Batch) -> None:
         if batch.notes:
-            self.file.write_records(b"".join(batch.notes))
-            self.messages += len(batch.notes)
+            self._put(b"".join(batch.notes), len(batch.notes))
         rows = batch.rows
         for key, stamp, now, cells, values, final in batch.map_updates:
             payloads = self._map(now, cells, values, final or now >= self.next_snapshot)
@@ -306,10 +338,20 @@ class _Writer:
         stamps, components, ids, extras = (np.concatenate(column).astype(np.int64) for column in columns[1:])
         if len(keys):
             lengths = np.concatenate(lengths)
-            self.file.write_records(_frame(np.concatenate(data), np.cumsum(lengths) - lengths, lengths,
-                                           np.argsort(keys, kind="stable"), stamps, ids, extras, components,
-                                           self.seqs, self.sysid, np.array(COMPONENTS)).tobytes())
-            self.messages += len(keys)
+            self._put(_frame(np.concatenate(data), np.cumsum(lengths) - lengths, lengths,
+                             np.argsort(keys, kind="stable"), stamps, ids, extras, components, self.seqs,
+                             self.sysid, np.array(COMPONENTS)).tobytes(), len(keys))
+
+    def _put(self, records: bytes, count: int) -> None:
+        """Records into the file; a failed write is the log's error, not the run's (it goes on without)."""
+        if self.error is not None:  # (the rest of a batch after the failure)
+            return
+        try:
+            self.file.write_records(records)
+        except OSError as error:
+            self.error = error
+        else:
+            self.messages += count
 
     def _map(self, now: float, cells: np.ndarray, values: np.ndarray, snapshot: bool) -> list[tuple[int, bytes]]:
         self.map.update(cells, values)
@@ -378,8 +420,23 @@ class _Writer:
         return [out.view(np.uint8).reshape(len(ranges), -1)]
 
     def close(self) -> int:
-        self.file.close()
+        try:
+            self.file.close()  # flushes what is buffered: that can fail too
+        except OSError as error:
+            self.error = self.error or error
         return self.messages
+
+
+class _Unopened:
+    """Stands in for the writer of a log that could not be opened: it takes nothing, and says why."""
+
+    messages = 0
+
+    def __init__(self, error: OSError):
+        self.error = error
+
+    def close(self) -> int:
+        return 0
 
 
 class _MapCopy:
@@ -405,7 +462,8 @@ class _MapCopy:
 
 class _Forked:
     """A writer in a forked process: batches go to it through a pipe (sent by a thread, so that the run goes on
-    while the writer catches up), and at the end it says how many messages it wrote."""
+    while the writer catches up), and at the end it says how many messages it wrote, and the error that stopped
+    it if a write failed (it says so and ends at once, so that the run stops sending)."""
 
     def __init__(self, setup: tuple):
         """``setup``: the arguments of the ``_Writer``, made in the child (its copy of the map is the child's)."""
@@ -415,16 +473,25 @@ class _Forked:
         self.process.start()
         child.close()
         setup[0].close()  # this process's copy of the file: the child writes it
+        self.messages = 0
+        self.error: OSError | None = None  # set by the sender, when the writer has ended
         self.batches: queue.SimpleQueue[_Batch | None] = queue.SimpleQueue()
         self.sender = threading.Thread(target=self._send, daemon=True, name="log-sender")
         self.sender.start()
 
     def _send(self) -> None:
-        while True:
-            batch = self.batches.get()
-            self.connection.send(batch)
-            if batch is None:
-                return
+        """The batches in order, then the writer's last word: at the end, or as soon as a batch finds it gone."""
+        try:
+            while (batch := self.batches.get()) is not None:
+                self.connection.send(batch)
+            self.connection.send(None)
+        except OSError:  # a broken pipe: the writer ended, its last word waiting
+            pass
+        try:
+            self.messages, error = self.connection.recv()
+        except (EOFError, OSError):  # it ended without a word (killed)
+            error = OSError("its writer process ended")
+        self.error = error
 
     def write(self, batch: _Batch) -> None:
         self.batches.put(batch)
@@ -432,9 +499,8 @@ class _Forked:
     def close(self) -> int:
         self.batches.put(None)
         self.sender.join()
-        messages = self.connection.recv()
         self.process.join()
-        return messages
+        return self.messages
 
 
 def _serve(setup: tuple, connection) -> None:
@@ -443,9 +509,9 @@ def _serve(setup: tuple, connection) -> None:
     printed a traceback and the run a 'connection reset')."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     writer = _Writer(*setup)
-    while (batch := connection.recv()) is not None:
+    while writer.error is None and (batch := connection.recv()) is not None:
         writer.write(batch)
-    connection.send(writer.close())
+    connection.send((writer.close(), writer.error))
 
 
 def _payload(message) -> bytes:
