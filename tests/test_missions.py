@@ -418,6 +418,23 @@ def test_resume_hands_control_back_to_the_agent(scene_of):
     assert not flight.agent.paused  # its own mode change does not count as the operator's
 
 
+def test_time_the_operator_held_the_vehicle_does_not_count_against_the_missions_time_limit(scene_of):
+    """Held in BRAKE for longer than the whole time limit, then resumed: the mission flies on from where it
+    was, with the time it had left (it gave up at once, "time used", and went home)."""
+    flight = Flight(scene_of(), "pathfind", waypoints=[(15.0, 15.0), (-15.0, 15.0), (-15.0, -15.0)], time_limit=120)
+    assert flight.run(60, until=lambda: flight.agent.phase is Phase.MISSION)
+    flight.run(3)
+    left = flight.agent.ctx.time_left
+    flight.world.autopilot.set_mode("BRAKE", source="gcs")
+    flight.run(300)  # paused all along
+    assert flight.agent.paused
+    assert flight.agent.resume()
+    assert flight.agent.ctx.time_left == pytest.approx(left, abs=0.5)
+    flight.run(10)
+    assert flight.agent.phase is Phase.MISSION and not flight.agent.paused
+    assert flight.agent.ctx.time_left == pytest.approx(left - 10, abs=0.5)
+
+
 def test_an_auto_mission_resumes_when_the_operator_switches_back_to_auto_and_starts_it(scene_of):
     flight = Flight(scene_of(), "square")
     assert flight.run(30, until=lambda: flight.xy[1] > 2.0)  # on the first leg, to the north-west corner

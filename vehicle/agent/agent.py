@@ -62,6 +62,7 @@ class Agent:
         self.reason = ""
         self.paused = False
         self.pause_reason = ""
+        self._paused_since: float | None = None  # when the mission's clock stopped for a pause
         self._travel: Travel | None = None
         self._errand: Travel | None = None  # the operator's "Go here", flown while the mission is paused
         self._settling = False
@@ -87,6 +88,7 @@ class Agent:
         self.paused = False
         self.pause_reason = ""
         self._errand = None
+        self._paused_since = None
         self.ctx.started = self.ctx.time = self.fc.time
         self.phase = Phase.PREFLIGHT
         self.fc.took_over()  # what the operator did to get here (GUIDED, arm) is no takeover
@@ -98,6 +100,7 @@ class Agent:
             return False
         self.paused = False
         self.pause_reason = ""
+        self._restart_clock()
         if self._errand is not None:  # resumed on the way to the operator's target: the mission goes first
             self._errand = None
             self.ctx.planned_path = []
@@ -118,6 +121,17 @@ class Agent:
             self._travel.resume()
         return True
 
+    def _stop_clock(self) -> None:
+        """A pause stops the mission's clock: the time limit is for flying the mission, and an operator who
+        held the vehicle for twenty minutes, then resumed, saw it give up at once, its time used."""
+        if not self.paused:
+            self._paused_since = self.ctx.time
+
+    def _restart_clock(self) -> None:
+        if self._paused_since is not None:
+            self.ctx.started += self.ctx.time - self._paused_since
+            self._paused_since = None
+
     def _down_meanwhile(self) -> bool:
         return (self.phase in (Phase.MISSION, Phase.HOMING)
                 and not (self.fc.armed and (self.fc.kind is Kind.ROVER or self.fc.flying)))
@@ -127,6 +141,7 @@ class Agent:
         Said once: several requests sent before the pause may be refused for the same reason."""
         if self.paused and reason == self.pause_reason:
             return
+        self._stop_clock()
         self.paused = True
         self.pause_reason = reason
         self.say(f"Agent: paused, {reason}", mavlink.MAV_SEVERITY_WARNING)
@@ -144,6 +159,7 @@ class Agent:
             return "not flying: arm and take off first"
         self._errand = Travel(ctx, point, HOME_TOLERANCE)
         ctx.planned_path = []  # the way to where it was going is not the way there
+        self._stop_clock()
         self.paused = True
         self.pause_reason = f"going to {where} for the operator"
         if fc.mode != "GUIDED":
