@@ -36,8 +36,10 @@ def export_html(path: str | Path, scene: Scene | None, datum: Datum | None, grou
     try:
         serializer = view.server.get_scene_serializer()
         # no environment map in the file: viser hides the canvas until one is decoded, which in software WebGL
-        # often never ends (the exported page stayed blank in one headless run of two); its lights remain
+        # often never ends (the exported page stayed blank in one headless run of two); its lights remain, and an
+        # even light stands in for the map's (without either, every wall facing away from the sun was black)
         view.server.scene.configure_environment_map(None)
+        view.server.scene.add_light_ambient("/export/ambient", intensity=0.9)
         frame = max(MIN_FRAME, replay.duration / MAX_FRAMES)
         telemetry = TelemetryLabels(view, replay)
         view.draw()

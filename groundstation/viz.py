@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import math
+import struct
 import threading
 import time
 import warnings
@@ -90,7 +92,7 @@ class SceneView:
         # a dimmer environment than viser's default, so the scene's own colours show (not washed out)
         server.scene.configure_environment_map("city", environment_intensity=0.35)
         if self.scene is not None and len(self.scene.faces):
-            server.scene.add_mesh_trimesh("/layers/scene/mesh", self.scene.mesh)
+            server.scene.add_glb("/layers/scene/mesh", matte_glb(self.scene.mesh))
             low, high = self.scene.bounds
             size = float(max(high[0] - low[0], high[1] - low[1], 20))
             centre = ((low[0] + high[0]) / 2, (low[1] + high[1]) / 2, float(low[2]) - 0.02)
@@ -131,7 +133,7 @@ class SceneView:
             self.caster = RayCaster(scene) if scene is not None and len(scene.faces) else None
             self.server.scene.remove_by_name("/layers/scene/mesh")
             if self.caster is not None:
-                self.server.scene.add_mesh_trimesh("/layers/scene/mesh", scene.mesh)
+                self.server.scene.add_glb("/layers/scene/mesh", matte_glb(scene.mesh))
 
     def show(self, fleet: Fleet) -> None:
         """Draw this fleet from now on (the live one, or a replay's), starting from a clean slate."""
@@ -359,3 +361,26 @@ class SceneView:
 def _refuse_share(*args, **kwargs) -> None:
     """Replaces viser's share-tunnel request: this server is never exposed beyond the web app."""
     return None
+
+
+MATTE = {"pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0,
+                                  "roughnessFactor": 0.9}}
+
+
+def matte_glb(mesh) -> bytes:
+    """The scene mesh as binary glTF, its colours on a matte material. trimesh writes a mesh coloured per face
+    with no material, and a glTF viewer then takes the format's default, a metal (metallicFactor 1), which
+    shows only what it reflects: lit by the environment map, with none (an exported replay) every wall facing
+    away from the sun was black. Written by hand because trimesh's export has no say in the material."""
+    glb = mesh.export(file_type="glb")
+    json_length = struct.unpack_from("<I", glb, 12)[0]
+    document = json.loads(glb[20:20 + json_length])
+    document["materials"] = [*document.get("materials", []), MATTE]
+    for primitive in (p for m in document.get("meshes", []) for p in m["primitives"]):
+        primitive.setdefault("material", len(document["materials"]) - 1)
+    text = json.dumps(document, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)  # chunks are padded to 4 bytes, JSON's with spaces
+    rest = glb[20 + json_length:]  # the binary chunk, as it was
+    return struct.pack("<4sII", b"glTF", 2, 12 + 8 + len(text) + len(rest)) + \
+        struct.pack("<I4s", len(text), b"JSON") + text + rest
+
