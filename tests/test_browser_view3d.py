@@ -22,7 +22,7 @@ import msgspec
 import numpy as np
 import pytest
 import zstandard
-from harness import CHROMIUM, RunningStation, load_default_scene, start_sim, take_off, wait_wall
+from harness import CHROMIUM, RunningStation, command_ok, load_default_scene, start_sim, wait_wall
 from PIL import Image
 
 from groundstation import camera
@@ -59,11 +59,20 @@ def station(tmp_path_factory):
 @pytest.fixture(scope="module")
 def vehicles(station):
     scene = station.station.scene
-    sims = [start_sim(station, scene, GROUNDED).start(), start_sim(station, scene, HOVERING, start=HOVER_AT).start()]
+    # the hovering one taken up in simulated time: over the API, a loaded machine's late BRAKE let the mission
+    # the take-off started fly it on, and it still drifted as the tests looked where it was
+    sims = [start_sim(station, scene, GROUNDED).start(),
+            start_sim(station, scene, HOVERING, start=HOVER_AT, hovering=4.0).start()]
     try:
         for sysid in (GROUNDED, HOVERING):
             wait_wall(lambda sysid=sysid: station.http.vehicle(sysid), 20, f"vehicle {sysid} is heard")
-        take_off(station.http, HOVERING, 4.0)
+        station.http.wait_vehicle(HOVERING, lambda v: v["position"] is not None and v["position"]["alt"] > 3.5
+                                  and (v["agent"] or {}).get("paused"), 10, what="hovering, its mission paused")
+        # a metre east, for a trail to show; there it holds
+        x, y = HOVER_AT[0] + 1.0, HOVER_AT[1]
+        command_ok(station.http, HOVERING, action="goto", x=x, y=y)
+        station.http.wait_vehicle(HOVERING, lambda v: math.hypot(v["position"]["x"] - x, v["position"]["y"] - y)
+                                  < 0.3 and v["speed"] < 0.05, 30, what="holding a metre east")
         yield sims
     finally:
         for sim in sims:
