@@ -31,7 +31,7 @@ from vehicle.agent.settings import Settings
 from vehicle.lab.experiment import Experiment, run_experiment
 from vehicle.protocol import links
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import mavlink, mavutil
 from vehicle.protocol.modes import DISARMED
 from vehicle.protocol.signing import load_key
 from vehicle.world.scene import load_scene
@@ -722,3 +722,47 @@ def test_the_autopilot_is_heard_only_where_its_heartbeat_comes_from_while_it_com
 
         wait_wall(heard_there, 10, "the autopilot heard on its new link")
         assert fc.took_over() == "operator switched to RTL"
+
+
+def test_an_agent_that_fails_mid_flight_holds_the_vehicle_says_why_and_ends_in_error(castle_path, monkeypatch,
+                                                                                    capsys):
+    """A bug in the agent (here its step raises once the mission flies) ended the process with a traceback and
+    left the autopilot on its last target, nobody watching: now the vehicle is told to hold, the operator why."""
+    from vehicle import cli
+
+    real = Agent.step
+    steps = []
+
+    def failing(self) -> None:
+        if self.phase.value == "mission" and self.fc.speed > 1.0:  # on its way somewhere
+            steps.append(self.ctx.time)
+            if len(steps) > 2:
+                raise ZeroDivisionError("a bug in the agent")
+        real(self)
+
+    monkeypatch.setattr(Agent, "step", failing)
+    port, watching = free_udp_port(), free_udp_port()
+    watcher = mavutil.mavlink_connection(f"udpin:127.0.0.1:{watching}")
+    try:
+        with autopilot(castle_path, [f"udpout:127.0.0.1:{port}", f"udpout:127.0.0.1:{watching}"], CASTLE_START):
+            code = cli.main(agent_command(port, "search", castle_path)[3:])
+            printed = capsys.readouterr()
+            result = json.loads(printed.out.strip().splitlines()[-1])
+            assert code == 1 and result["outcome"] == "error"
+            assert result["reason"] == "the agent failed (ZeroDivisionError: a bug in the agent); the vehicle holds"
+            assert "Agent: failed (ZeroDivisionError: a bug in the agent); holding" in result["messages"]
+            assert "Traceback" in printed.err and "ZeroDivisionError: a bug in the agent" in printed.err
+            while watcher.recv_match(blocking=False) is not None:
+                pass  # what it sent during the flight
+            poses = []  # then on its own clock, watched from another port: it brakes and stays where it was
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline and (not poses or poses[-1][0] - poses[0][0] < 4.0):
+                message = watcher.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=1)
+                if message is not None:
+                    poses.append((message.time_boot_ms / 1000, message.lat / 1e7, message.lon / 1e7))
+            settled = [pose for pose in poses if pose[0] >= poses[0][0] + 1.5]
+            (_, lat0, lon0), (_, lat1, lon1) = settled[0], settled[-1]
+            moved = math.hypot((lat1 - lat0) * 111_320, (lon1 - lon0) * 111_320 * math.cos(math.radians(lat0)))
+            assert moved < 0.3, f"{moved:.2f} m in {settled[-1][0] - settled[0][0]:.1f} s after it failed"
+    finally:
+        watcher.close()

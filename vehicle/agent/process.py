@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import time
+import traceback
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -139,13 +140,17 @@ class OnboardAgent:
                     agent.start()
                 elif time.monotonic() - waiting_since > READY_TIMEOUT:
                     outcome, reason = "error", "the flight controller's pre-arm checks never passed"
-            if fc.time >= next_step:
-                next_step = max(next_step + period, fc.time)
-                agent.step()
-                if agent.done and not options.stay:
-                    outcome, reason = agent.outcome, agent.reason
-            if fc.lost and not agent.paused and agent.phase.value not in ("waiting", "done"):
-                agent.step()  # it reads the loss from took_over() and pauses, saying so
+            try:
+                if fc.time >= next_step:
+                    next_step = max(next_step + period, fc.time)
+                    agent.step()
+                    if agent.done and not options.stay:
+                        outcome, reason = agent.outcome, agent.reason
+                if fc.lost and not agent.paused and agent.phase.value not in ("waiting", "done"):
+                    agent.step()  # it reads the loss from took_over() and pauses, saying so
+            except Exception as error:  # noqa: BLE001 - a bug in the agent: the vehicle must not fly on unwatched
+                outcome, reason = "error", self._failed(error, say)
+                break
             self._broadcast(self.companion.tick(now), now)
             if fc.time - begun > options.settings.time_limit + 120 and not options.stay:
                 outcome, reason = "timeout", f"time limit of {options.settings.time_limit:g} s reached"
@@ -157,6 +162,15 @@ class OnboardAgent:
         result = self.result(outcome, reason, begun, time.monotonic() - started)
         self.close()
         return result
+
+    def _failed(self, error: Exception, say) -> str:
+        """The agent failed (a bug): the vehicle is told to hold, the operator why (and standard error the
+        traceback); the run ends with this reason. Its last target would otherwise run on with nobody watching."""
+        reason = f"the agent failed ({type(error).__name__}: {error}); the vehicle holds"
+        say("agent: " + "".join(traceback.format_exception(error)).rstrip())
+        self.fc.hold()
+        self.agent.say(f"Agent: failed ({type(error).__name__}: {error}); holding", mavlink.MAV_SEVERITY_CRITICAL)
+        return reason
 
     def _avoid_margin(self) -> float:
         """How far the autopilot's own obstacle avoidance keeps from echoes (AVOID_MARGIN when AVOID_ENABLE)."""
