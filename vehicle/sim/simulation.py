@@ -46,10 +46,10 @@ class Simulation:
                  heading: float | None = None, seed: int = 0, dt: float = DEFAULT_STEP,
                  sensors: list[Sonar] | None = None, datum: Datum | None = None, limits: Limits | None = None,
                  backend: str = "auto", sonar_rate: float = SONAR_RATE, cruise_speed: float = 2.5,
-                 wp_radius: float = 2.0):
+                 wp_radius: float = 2.0, battery: Battery | None = None):
         """``start`` is x, y (scene metres), or x, y, z: then the vehicle stands on the highest surface below
         z (a floor under a roof); without it, the scene's own start. ``cruise_speed`` and ``wp_radius`` are
-        the autopilot's (WPNAV_SPEED, WP_RADIUS)."""
+        the autopilot's (WPNAV_SPEED, WP_RADIUS); ``battery`` the flight battery (default: 5 Ah, 4 cells)."""
         self.scene = scene
         self.kind = Kind(kind)
         self.dt = dt
@@ -80,7 +80,7 @@ class Simulation:
                                    cruise_speed=cruise_speed, wp_radius=wp_radius,
                                    avoidance=self.avoidance)
         self.sonars = SonarArray(sensors if sensors is not None else sensor_suite(DEFAULT_SUITE), self.caster, seed)
-        self.battery = Battery()
+        self.battery = battery or Battery()
         self._battery_alarm_mah = BATTERY_LOW * self.battery.capacity_mah  # the charge the next alarm comes at
         self.collision: Contact | None = None
         self.distance_travelled = 0.0
