@@ -96,7 +96,7 @@ def attachment(name: str) -> str:
     in the record folder may be called anything: put in a header as it is, a non-ASCII name was a 500, and a
     line break in it ended the response."""
     plain = "".join(c if " " <= c < "\x7f" and c not in '"\\' else "_" for c in name)
-    return f"attachment; filename=\"{plain}\"; filename*=UTF-8''{quote(name, safe='')}"
+    return f"attachment; filename=\"{plain}\"; filename*=UTF-8''{quote(name, safe='', errors='surrogateescape')}"
 
 
 def _read_prefix(path: Path, size: int, chunk: int = 1 << 16):

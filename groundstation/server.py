@@ -234,9 +234,8 @@ class GroundStation:
         except Exception:
             log.exception("could not index the recording %s", path.name)
             duration = None
-        finally:
-            self._indexing.discard(path)
         self._durations[path] = (version, duration)  # a file that changed meanwhile is indexed again
+        self._indexing.discard(path)  # after: a listing between the two would index it once more
 
     def recording_path(self, name: str) -> Path | None:
         """The recording called ``name`` in the record folder (no paths, only .tlog files), or None."""

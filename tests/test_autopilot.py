@@ -797,6 +797,9 @@ def test_a_low_battery_is_said_and_a_critical_one_lands_a_copter_as_the_failsafe
     assert (world.autopilot.mode, world.autopilot.mode_source) == ("LAND", "failsafe")
     step_until(world, lambda: not world.autopilot.armed, limit=30.0)  # landed, and disarmed
     assert world.pose.z == pytest.approx(REST_Z, abs=0.05)
+    world.autopilot.set_mode("GUIDED")
+    assert world.autopilot.arm() == FAILED and texts(world)[-1] == "Arm: Battery 1 critical"  # not up again
+    assert world.autopilot.arm(force=True) == ACCEPTED  # but for a forced arm, as on ArduPilot
 
 
 def test_a_rover_holds_at_a_critical_battery_and_one_on_the_ground_is_only_warned(flat_scene):

@@ -309,6 +309,15 @@ def test_a_recording_called_anything_downloads_under_its_own_name(flight, name):
         copy.unlink()
 
 
+def test_a_name_that_is_no_text_is_named_by_its_bytes():
+    """A replay started from any path (``groundstation replay FILE``) exports under that file's name: one that
+    is no UTF-8 made quote() raise, and the export a 500."""
+    from groundstation.app import attachment
+
+    header = attachment(os.fsdecode(b"odd\xff.html"))
+    assert header == "attachment; filename=\"odd_.html\"; filename*=UTF-8''odd%FF.html"
+
+
 def test_the_session_being_recorded_downloads_as_a_consistent_prefix(tmp_path):
     """The session goes on growing while it downloads (a long one over a slow link): the download is the file
     as it was when asked for, whole, not a broken transfer."""

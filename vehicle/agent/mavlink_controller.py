@@ -199,8 +199,8 @@ class MavlinkController:
         messages = self._take_in()
         self._answer_requests()
         if self._speed_news:
-            self._speed_news = False
-            self.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, self._speed_wanted, -1)
+            self._speed_news = False  # applied: the next target need not send it again
+            self._speed_applied = self.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, self._speed_wanted, -1) == ACCEPTED
         return messages
 
     def _take_in(self) -> list:
@@ -251,8 +251,10 @@ class MavlinkController:
     def news(self) -> str | None:
         """A line on the messages dropped since the last line (why, and how many), at most every NEWS_EVERY s;
         None if there is nothing new to say yet."""
+        if time.monotonic() - self._news_at < NEWS_EVERY:  # first: the main loop asks hundreds of times a second
+            return None
         new = self.dropped - self._dropped_said
-        if not new or time.monotonic() - self._news_at < NEWS_EVERY:
+        if not new:
             return None
         self._dropped_said, self._news_at = self.dropped.copy(), time.monotonic()
         line = "dropped " + "; ".join(f"{why}: {count}" for why, count in new.items())

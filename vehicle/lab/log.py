@@ -107,11 +107,12 @@ class ExperimentLog:
     def __init__(self, path: str | Path, sysid: int = 1, scene: str | Path | None = None):
         """``scene``: the scene file the run flies in, named in the log."""
         self.path = Path(path)
+        self._lost = False  # the writer failed (or never opened): steps are noted no more
         self._writer: _Forked | _Writer | _Unopened | None = None
         try:
             self.file: TlogWriter | None = TlogWriter(path)
         except OSError as error:  # the run goes on all the same: its result matters more than its log
-            self.file, self._writer = None, _Unopened(error)
+            self.file, self._writer, self._lost = None, _Unopened(error), True
         text = note_text(scene) if scene else None
         self._notes = SceneNotes(text) if text else None
         self.sysid = sysid
@@ -146,6 +147,8 @@ class ExperimentLog:
             self._writer = _Forked(setup) if "fork" in multiprocessing.get_all_start_methods() else _Writer(*setup)
 
     def __call__(self, stepper: Stepper, readings: list[Reading]) -> None:
+        if self._lost:
+            return  # the log could not be written: the rest of the run goes unnoted
         if self.telemetry is None:
             self._start(stepper)
         simulation = self.simulation
@@ -215,6 +218,8 @@ class ExperimentLog:
         batch, self._batch = self._batch, _Batch(self._batch.key)
         if self._writer.error is None:  # a writer that failed takes no more: the run goes on, unlogged
             self._writer.write(batch)
+        else:
+            self._lost = True
 
     @property
     def error(self) -> LogError | None:

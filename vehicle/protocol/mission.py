@@ -156,18 +156,18 @@ def upload(link: Requester, sysid: int, items: list[MissionItem], component: int
 
     reply = link.request(sysid, mav.MAVLink_mission_count_message(sysid, component, len(items), MISSION), wanted,
                          timeout)
-    for _ in range(REQUESTS_PER_ITEM * len(items)):
+    most = REQUESTS_PER_ITEM * len(items)
+    for answered in range(most + 1):
         if reply.get_type() == "MISSION_ACK":
             return mission_result(reply.type)
+        if answered == most:
+            break
         seq = reply.seq
         if not 0 <= seq < len(items):
             raise MissionError(f"vehicle {sysid} asked for mission item {seq} of {len(items)}")
         reply = link.request(sysid, item_message(items[seq], seq, (sysid, component), False),
                              lambda m, s=seq: wanted(m) and (m.get_type() == "MISSION_ACK" or m.seq != s), timeout)
-    if reply.get_type() == "MISSION_ACK":
-        return mission_result(reply.type)
-    raise MissionError(f"vehicle {sysid} asked for {REQUESTS_PER_ITEM * len(items)} items of a {len(items)}-item "
-                       "mission and did not accept it")
+    raise MissionError(f"vehicle {sysid} asked for {most} items of a {len(items)}-item mission and did not accept it")
 
 
 def mission_result(code: int) -> str:

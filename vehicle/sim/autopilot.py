@@ -100,6 +100,7 @@ class Autopilot:
         self.wanted = (0.0, 0.0)  # horizontal velocity navigation asked for, before avoidance
         self.destination: tuple[float, float] | None = None  # where navigation is taking the vehicle now
         self.blocked = False  # avoidance holds the vehicle back from an obstacle
+        self.battery_critical = False  # the battery failsafe has acted: no arming again (as ArduPilot's)
         self.ground_now = home[2]  # ground height under the vehicle, set each step
         self.hold_here()
 
@@ -144,6 +145,7 @@ class Autopilot:
         and a rover holds (BATT_FS_CRT_ACT Land; a rover's Hold), as the failsafe's mode change. Without it a
         copter hovered on at 0 %, and nobody was told."""
         text = f"Battery 1 is {'critical' if critical else 'low'}: {voltage:.1f} V, {remaining:.0%} left"
+        self.battery_critical = critical
         if not (critical and self.armed):
             self.say(text, mav.MAV_SEVERITY_CRITICAL)
             return
@@ -157,6 +159,9 @@ class Autopilot:
             return ACCEPTED
         if not force and self.kind is Kind.COPTER and self.mode in ("RTL", "LAND"):
             self.say(f"Arm: mode {self.mode} not armable", mav.MAV_SEVERITY_CRITICAL)
+            return FAILED
+        if not force and self.battery_critical:
+            self.say("Arm: Battery 1 critical", mav.MAV_SEVERITY_CRITICAL)
             return FAILED
         self.armed = True
         self._altitude_goal = None
