@@ -349,9 +349,14 @@ def test_a_failed_writer_is_sent_nothing_more(monkeypatch):
     from vehicle.sim.simulation import DEFAULT_STEP
     from vehicle.world.scene import parse_scene
 
-    handed = []
+    handed = []  # per batch handed over, the writer's error as the run knew it then
     write = logs._Forked.write
-    monkeypatch.setattr(logs._Forked, "write", lambda writer, batch: handed.append(write(writer, batch)))
+
+    def handing(writer, batch) -> None:
+        handed.append(writer.error)
+        write(writer, batch)
+
+    monkeypatch.setattr(logs._Forked, "write", handing)
     log = logs.ExperimentLog(FULL)
     settings = Settings().updated({"speed": 0.1})  # a slow flight: some forty batches
     result = run_experiment(Experiment("yard.wrl", "pathfind", settings=settings, waypoints=[(-3.0, 6.0)]),
@@ -361,8 +366,10 @@ def test_a_failed_writer_is_sent_nothing_more(monkeypatch):
     assert str(error.value) == f"log {FULL}: No space left on device" and error.value.errno == 28
     assert result["outcome"] == "finished"
     batches = round(result["sim_time_s"] / DEFAULT_STEP) // logs.BATCH_STEPS  # the run's, had all been noted
-    assert batches > 20 and len(handed) < batches / 2, (len(handed), batches)  # (the writer fails on its first)
-    assert log._steps < batches * logs.BATCH_STEPS / 2  # nor are the steps after noted
+    # the writer fails on its first batch; when the run hears of it depends on the machine's load, but once it
+    # has, it hands over nothing more and notes no more steps
+    assert batches > 20 and all(error is None for error in handed), handed
+    assert log._steps <= (len(handed) + 1) * logs.BATCH_STEPS
     assert log._writer.batches.qsize() <= 5  # close's end mark, and any handed over as the failure was heard
 
 
