@@ -8,9 +8,10 @@ only and is reached through here. Three things keep a hostile party out:
   loader unpacks), WebAssembly, and websockets to this origin only; a
   ``?websocket=`` query (viser's client would connect wherever it names) is
   refused outright. Script that a viser server might send (HTML elements,
-  ``RunJavascriptMessage``) cannot run. Nor can viser's Gaussian-splat sorter
-  (Emscripten's embind makes functions from strings): it fails once, with an
-  EvalError in the console, as the page loads; the station draws no splats.
+  ``RunJavascriptMessage``) cannot run, nor can viser's Gaussian-splat sorter
+  (Emscripten's embind makes functions from strings); the page we serve starts
+  that sorter only for the first splats, which the station never draws
+  (``groundstation.viewerpage``), so it loads without an error.
 - The operator page opens its view at ``/viz/v/VIEWER/``, and viser's client
   connects to the socket of the same path: the viewer id travels with that
   one connection. Only the first live connection may claim an id.
@@ -24,20 +25,16 @@ only and is reached through here. Three things keep a hostile party out:
 from __future__ import annotations
 
 import asyncio
-import base64
-import hashlib
 import logging
 import re
-from pathlib import Path
 
 import msgspec
-import numpy as np
-import viser
 import websockets
 import zstandard
 from fastapi import WebSocket, WebSocketDisconnect
 from fastapi.responses import Response
 
+from groundstation.viewerpage import ViewerPage
 from groundstation.viz import CLIENT_MARKER
 
 VIEWER_ID = re.compile(r"[A-Za-z0-9_-]{8,64}")
@@ -168,48 +165,3 @@ async def _relay(client: WebSocket, upstream, tie: _Tie) -> None:
             await client.close()
         except (RuntimeError, WebSocketDisconnect):
             pass  # the page already went
-
-
-class ViewerPage:
-    """viser's client page and the policy that lets exactly its own scripts run."""
-
-    def __init__(self, html: str):
-        self.html = html
-        loader, bundle = _scripts(html)
-        hashes = " ".join(f"'sha256-{base64.b64encode(hashlib.sha256(s).digest()).decode()}'"
-                          for s in (loader, bundle))
-        self.policy = (f"default-src 'none'; script-src {hashes} 'wasm-unsafe-eval'; worker-src blob:; "
-                       "style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; font-src 'self' data:; "
-                       "connect-src 'self' data: blob:; frame-ancestors 'self'; base-uri 'none'; form-action 'none'")
-
-    @classmethod
-    def of_installed_viser(cls) -> ViewerPage:
-        return cls((Path(viser.__file__).parent / "client" / "build" / "index.html").read_text(encoding="utf-8"))
-
-
-_LOADER = re.compile(r'<script data-p="([^"]*)" data-ss="(\d+)" data-cs="(\d+)">(.*?)</script>', re.S)
-_BASE88 = "".join(chr(c) for c in range(0x21, 0x7F) if chr(c) not in "\"&<>'`")
-
-
-def _scripts(html: str) -> tuple[bytes, bytes]:
-    """viser's page is one loader script whose ``data-p`` attribute holds its style and its bundle, zstd-compressed
-    in base-88 (viser's vite-plugin-compress-html); the loader adds the bundle as an inline module script, which
-    the policy must name by hash too."""
-    found = _LOADER.search(html)
-    if found is None:
-        raise RuntimeError("viser's client page is not laid out as expected (a loader script with data-p)")
-    packed, style_size, code_size, loader = found.group(1), int(found.group(2)), int(found.group(3)), found.group(4)
-    lookup = np.zeros(128, dtype=np.uint64)
-    lookup[np.frombuffer(_BASE88.encode(), dtype=np.uint8)] = np.arange(88, dtype=np.uint64)
-    digits = lookup[np.frombuffer(packed.encode("ascii"), dtype=np.uint8)]
-    whole = len(digits) // 5
-    groups = (digits[:whole * 5].reshape(whole, 5) * np.uint64(88) ** np.arange(4, -1, -1, dtype=np.uint64)).sum(1)
-    data = groups.astype(">u4").tobytes()
-    rest = digits[whole * 5:]
-    if len(rest):
-        value = 0
-        for digit in rest:
-            value = value * 88 + int(digit)
-        data += value.to_bytes(len(rest) - 1, "big")
-    unpacked = zstandard.ZstdDecompressor().decompress(data, max_output_size=style_size + code_size)
-    return loader.encode("utf-8"), unpacked[style_size:style_size + code_size]
