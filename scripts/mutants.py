@@ -148,7 +148,7 @@ MODULES = [
     Module(
         "autopilot modes",
         ["vehicle/sim/autopilot.py"],
-        ["tests/test_autopilot.py", "tests/test_regressions_autopilot.py"],
+        ["tests/test_autopilot.py"],
         focus={
             "vehicle/sim/autopilot.py": [
                 f"Autopilot.{name}"

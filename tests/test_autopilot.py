@@ -59,6 +59,22 @@ def vehicle(kind: Kind, scene, **kwargs) -> Simulation:
     return armed_copter(scene, **kwargs) if kind is Kind.COPTER else armed_rover(scene, **kwargs)
 
 
+def taking_off(scene) -> Simulation:
+    world = Simulation(scene, Kind.COPTER)
+    world.autopilot.arm()
+    world.autopilot.takeoff(10.0)
+    world.run_for(1.0)  # climbing, at about 1.85 m
+    return world
+
+
+def bare_autopilot(kind: Kind, ground: float = 0.0) -> Autopilot:
+    """An Autopilot on its own (no Simulation, no obstacle database), its body resting at the origin on flat
+    ground at height ``ground``, which is also home's; step it with ``autopilot.step(dt, ground)``."""
+    body = Body(kind, pose=Pose(0.0, 0.0, 0.0))
+    body.pose.z = body.rest_height(ground)
+    return Autopilot(kind, body, (0.0, 0.0, ground), Datum())
+
+
 def step_until(world: Simulation, condition, limit: float) -> float:
     """Step until ``condition()`` holds; returns the simulated time it took (fails past ``limit`` seconds)."""
     start = world.time
@@ -79,6 +95,10 @@ def reached(world: Simulation) -> list[int]:
 
 def texts(world: Simulation) -> list[str]:
     return [event.text for event in world.autopilot.events if event.kind == "text"]
+
+
+def said(world: Simulation) -> list[tuple[str, int]]:
+    return [(event.text, event.severity) for event in world.autopilot.events if event.kind == "text"]
 
 
 # ---- arming and take-off ----------------------------------------------------------------------
@@ -109,6 +129,15 @@ def test_copter_takes_off_to_altitude_in_guided(flat_scene):
     assert world.autopilot.altitude == pytest.approx(ALTITUDE, abs=0.2)
     world.run_for(10.0)
     assert world.pose.xyz() == pytest.approx((0.0, 0.0, ALTITUDE), abs=0.2)  # and holds there
+
+
+def test_takeoff_to_one_metre_is_accepted_and_flown(flat_scene):
+    """A low take-off to 1 m is flown."""
+    world = Simulation(flat_scene, Kind.COPTER)
+    world.autopilot.arm()
+    assert world.autopilot.takeoff(1.0) == ACCEPTED
+    world.run_for(5.0)
+    assert world.autopilot.altitude == pytest.approx(1.0, abs=0.1) and world.autopilot.flying
 
 
 def test_takeoff_altitude_is_above_the_start_ground(make_scene, box):
@@ -192,6 +221,43 @@ def test_arming_refused_in_land_unless_forced(flat_scene):
     assert world.autopilot.arm(force=True) == ACCEPTED
 
 
+@pytest.mark.parametrize("mode", ["RTL", "LAND"])
+def test_arming_a_copter_in_rtl_or_land_is_refused_with_a_critical_message_naming_the_mode(flat_scene, mode):
+    """A copter cannot be armed in RTL or LAND; the operator is told which mode, as a critical message."""
+    world = Simulation(flat_scene, Kind.COPTER)
+    assert world.autopilot.set_mode(mode) == ACCEPTED
+    assert world.autopilot.arm() == FAILED
+    assert world.autopilot.armed is False
+    assert said(world) == [(f"Arm: mode {mode} not armable", 2)]  # MAV_SEVERITY_CRITICAL
+
+
+def test_the_operator_hears_what_arming_disarming_and_missions_do_with_their_severity(flat_scene):
+    """The texts a ground station shows (STATUSTEXT) are part of the behaviour: wording and severity."""
+    info, notice, warning, critical = 6, 5, 4, 2
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    assert autopilot.disarm() == FAILED
+    assert autopilot.start_mission() == DENIED  # not in AUTO: refused quietly
+    assert autopilot.set_mode("AUTO") == FAILED  # no items
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
+    assert autopilot.set_mode("AUTO") == ACCEPTED
+    assert autopilot.start_mission() == ACCEPTED
+    assert autopilot.disarm(force=True) == ACCEPTED
+    ground = Simulation(flat_scene, Kind.ROVER)
+    ground.autopilot.arm()
+    assert ground.autopilot.disarm() == ACCEPTED
+    assert said(world) == [
+        ("Arming motors", info),
+        ("Takeoff to 4.0 m", info),
+        ("Disarm: vehicle is flying", critical),
+        ("No Mission. Can't set AUTO.", notice),
+        ("Flight mode change failed", warning),
+        ("Mission: 1 started", info),
+        ("Disarming motors (forced)", info),
+    ]
+    assert said(ground)[-1] == ("Disarming motors", info)
+
+
 # ---- modes ------------------------------------------------------------------------------------
 
 
@@ -212,6 +278,21 @@ def test_mode_names_are_case_insensitive(flat_scene):
     autopilot = Simulation(flat_scene, Kind.COPTER).autopilot
     assert autopilot.set_mode("brake") == ACCEPTED
     assert autopilot.mode == "BRAKE"
+
+
+def test_mode_changes_are_counted_and_the_source_of_each_request_is_kept(flat_scene):
+    """Each change of mode counts once; a request for the mode it is already in only records its source;
+    a request without a source comes from the ground station ("gcs")."""
+    autopilot = Simulation(flat_scene, Kind.COPTER).autopilot
+    assert (autopilot.mode_changes, autopilot.mode_source) == (0, "boot")
+    assert autopilot.set_mode("LOITER") == ACCEPTED
+    assert (autopilot.mode_changes, autopilot.mode_source) == (1, "gcs")
+    assert autopilot.set_mode("LOITER", source="failsafe") == ACCEPTED  # no change of mode
+    assert (autopilot.mode_changes, autopilot.mode_source) == (1, "failsafe")
+    assert autopilot.set_mode("BRAKE", source="agent") == ACCEPTED
+    assert (autopilot.mode_changes, autopilot.mode_source) == (2, "agent")
+    assert autopilot.set_mode("GUIDED") == ACCEPTED
+    assert (autopilot.mode, autopilot.mode_changes, autopilot.mode_source) == ("GUIDED", 3, "gcs")
 
 
 def test_mode_numbers_are_ardupilots():
@@ -325,6 +406,19 @@ def test_velocity_command_moves_the_vehicle_until_it_expires_after_3_s(flat_scen
     assert max(speeds[-40:]) < 0.01  # and at rest for good
 
 
+def test_copter_stops_where_a_velocity_command_expires_without_flying_back(flat_scene):
+    world = Simulation(flat_scene, Kind.COPTER)
+    world.autopilot.arm()
+    world.autopilot.takeoff(4.0)
+    world.run_for(6.0)
+    world.autopilot.set_velocity(0.0, 2.0)
+    furthest = 0.0
+    for _ in range(200):
+        world.step()
+        furthest = max(furthest, world.pose.y)
+    assert world.pose.y == pytest.approx(furthest, abs=0.05)  # it used to fly back to the expiry point
+
+
 def test_velocity_command_turns_first_towards_its_direction(flat_scene):
     world = armed_copter(flat_scene)  # facing north
     world.autopilot.set_velocity(2.0, 0.0)  # east
@@ -333,6 +427,26 @@ def test_velocity_command_turns_first_towards_its_direction(flat_scene):
     world.run_for(1.5)
     assert world.pose.yaw == pytest.approx(math.pi / 2, abs=1e-6)
     assert world.body.vx > 1.0
+
+
+def test_a_velocity_without_a_vertical_part_keeps_the_height(flat_scene):
+    world = armed_copter(flat_scene)
+    assert world.autopilot.set_velocity(1.0, 0.0) == ACCEPTED
+    world.run_for(2.0)
+    assert world.pose.x > 0.5 and world.autopilot.altitude == pytest.approx(ALTITUDE, abs=0.1)
+
+
+def test_a_vehicle_steered_by_velocity_has_no_destination_and_on_open_ground_is_not_held_back(flat_scene):
+    """Under a velocity command there is no place the vehicle is going to (unlike a goto); nothing holds it back."""
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    autopilot.goto(0.0, 10.0)
+    world.step()
+    assert autopilot.destination == (0.0, 10.0) and autopilot.blocked is False
+    autopilot.set_velocity(0.0, 2.0)
+    world.run_for(1.0)
+    assert world.body.vy > 1.0
+    assert autopilot.destination is None and autopilot.blocked is False
 
 
 @pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
@@ -354,6 +468,22 @@ def test_set_yaw_relative_turns_by_that_angle(flat_scene):
     world.autopilot.set_yaw(math.radians(-30), relative=True)
     world.run_for(1.0)
     assert math.degrees(world.pose.yaw) == pytest.approx(60.0, abs=1e-4)
+
+
+def test_a_yaw_is_a_compass_heading_unless_relative_and_never_cancels_a_target(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    assert autopilot.set_yaw(math.radians(90)) == ACCEPTED  # absolute by default
+    world.run_for(5.0)
+    assert world.pose.yaw == pytest.approx(math.radians(90), abs=0.02)
+    assert autopilot.set_yaw(math.radians(300), relative=True) == ACCEPTED  # 90 + 300 = 390: 30 degrees
+    world.run_for(6.0)
+    assert world.pose.yaw == pytest.approx(math.radians(30), abs=0.02)
+    assert autopilot.goto(8.0, 0.0) == ACCEPTED
+    world.run_for(0.2)
+    assert autopilot.set_yaw(math.radians(90)) == ACCEPTED  # while going there
+    world.run_for(15.0)
+    assert (world.pose.x, world.pose.y) == pytest.approx((8.0, 0.0), abs=0.15)
 
 
 def test_set_speed_changes_cruise_and_refuses_out_of_range(flat_scene):
@@ -429,6 +559,24 @@ def test_auto_nav_land_lands_at_its_position_and_disarms(flat_scene):
     assert world.collision is None
 
 
+def test_a_copter_landing_at_the_end_of_its_mission_disarms_with_the_mission_over(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    autopilot.set_mission(
+        [
+            autopilot.home_item(),
+            position_item(world, NAV_WAYPOINT, 4.0, 0.0),
+            position_item(world, NAV_LAND, 4.0, 0.0, alt=0.0),
+        ]
+    )
+    autopilot.set_mode("AUTO")
+    assert autopilot.start_mission() == ACCEPTED
+    step_until(world, lambda: not autopilot.armed, 60.0)
+    assert autopilot.mission_running is False and reached(world) == [1, 2]
+    assert autopilot.current == len(autopilot.mission)
+    assert texts(world)[-2:] == ["Mission complete", "Landed; disarming"]
+
+
 def test_auto_return_to_launch_brings_a_copter_home_and_lands(flat_scene):
     world = Simulation(flat_scene, Kind.COPTER, start=(3.0, 4.0))
     autopilot = world.autopilot
@@ -473,6 +621,18 @@ def test_auto_rover_starts_on_entering_auto_and_returns_home_to_hold(flat_scene)
     assert autopilot.armed  # a rover holds at home
 
 
+def test_a_finished_mission_is_no_longer_running(flat_scene):
+    """After its last item the mission is over: not running, current past the end, and it says so."""
+    world = Simulation(flat_scene, Kind.ROVER)
+    autopilot = world.autopilot
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 0.0, 4.0)])
+    autopilot.arm()
+    autopilot.set_mode("AUTO")
+    step_until(world, lambda: autopilot.current == len(autopilot.mission), limit=20.0)
+    assert autopilot.mission_running is False
+    assert texts(world)[-1] == "Mission complete"
+
+
 def test_auto_loiter_unlimited_holds_forever(flat_scene):
     world = Simulation(flat_scene, Kind.COPTER)
     autopilot = world.autopilot
@@ -510,6 +670,60 @@ def test_auto_and_start_mission_are_refused_without_items(flat_scene):
     assert rover.autopilot.set_mode("AUTO") == FAILED and rover.autopilot.mode == mode  # disarmed too
     rover.autopilot.set_mission([MissionItem(NAV_WAYPOINT), position_item(rover, NAV_WAYPOINT, 0.0, 8.0)])
     assert rover.autopilot.set_mode("AUTO") == ACCEPTED
+
+
+def test_a_new_mission_waits_to_be_started_at_its_first_item(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    autopilot.set_mode("AUTO")
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
+    assert autopilot.mission_running is False and autopilot.current == 1
+    autopilot.set_mission([])  # cleared: home only
+    assert len(autopilot.mission) == 1 and autopilot.current == 1 and autopilot.mission_running is False
+
+
+def test_mission_start_resumes_restarts_or_jumps_to_an_item(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    items = [position_item(world, NAV_WAYPOINT, 2.0 * k, 0.0) for k in range(1, 5)]
+    autopilot.set_mission([autopilot.home_item(), *items])
+    autopilot.set_mode("AUTO")
+    assert autopilot.set_current(3) is True
+    assert autopilot.start_mission() == ACCEPTED and autopilot.current == 3  # 0: resume at the current item
+    assert autopilot.start_mission(1) == ACCEPTED and autopilot.current == 1  # from the first
+    assert autopilot.start_mission(2) == ACCEPTED and autopilot.current == 2
+    autopilot.current = len(autopilot.mission)  # finished
+    assert autopilot.start_mission() == ACCEPTED and autopilot.current == 1  # starts over
+    one = Simulation(flat_scene, Kind.ROVER).autopilot
+    one.arm()
+    one.set_mission([one.home_item(), MissionItem(NAV_WAYPOINT, *one.datum.to_global(3.0, 0.0), 0.0)])
+    assert one.set_mode("AUTO") == ACCEPTED
+    assert one.start_mission() == ACCEPTED  # a mission of one item
+
+
+def test_set_current_takes_only_the_items_after_home_and_says_so(flat_scene):
+    world = armed_copter(flat_scene)
+    autopilot = world.autopilot
+    autopilot.set_mission([autopilot.home_item(), *[position_item(world, NAV_WAYPOINT, k, 0.0) for k in (2, 4)]])
+    before = list(autopilot.events)
+    assert autopilot.set_current(0) is False and autopilot.set_current(3) is False
+    assert list(autopilot.events) == before and autopilot.current == 1
+    assert autopilot.set_current(2) is True and autopilot.current == 2
+    assert autopilot.set_current(1) is True and autopilot.current == 1
+    assert [(e.kind, e.seq) for e in list(autopilot.events)[len(before) :]] == [("current", 2), ("current", 1)]
+
+
+@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
+def test_leaving_auto_stops_the_mission(flat_scene, kind):
+    """A running mission stops when the vehicle is switched out of AUTO."""
+    world = vehicle(kind, flat_scene)
+    autopilot = world.autopilot
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 0.0, 30.0)])
+    autopilot.set_mode("AUTO")
+    assert autopilot.start_mission() == ACCEPTED and autopilot.mission_running is True
+    world.run_for(1.0)
+    assert autopilot.set_mode("GUIDED") == ACCEPTED
+    assert autopilot.mission_running is False
 
 
 def test_unsupported_mission_items_are_skipped_with_a_warning(flat_scene):
@@ -568,6 +782,53 @@ def test_rtl_copter_climbs_to_rtl_altitude_where_it_is_before_flying_home(flat_s
     assert highest < 15.5
 
 
+def test_rtl_climbs_straight_up_to_within_0_2_m_of_its_height_even_when_facing_home(flat_scene):
+    """RTL's climb goes on (straight up) until within 0.2 m of the RTL height, even when the copter already
+    faces home and need not turn: only then does it fly home."""
+    world = armed_copter(flat_scene)
+    world.autopilot.goto(0.0, -10.0)
+    world.run_for(10.0)
+    assert world.autopilot.set_yaw(0.0) == ACCEPTED  # face north, towards home
+    world.run_for(3.0)
+    spot = (world.pose.x, world.pose.y)
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    while world.pose.z < 14.79:
+        assert world.time < 60.0
+        world.step()
+        assert math.dist((world.pose.x, world.pose.y), spot) < 0.01, f"moving off at {world.pose.z:.2f} m"
+    step_until(world, lambda: not world.autopilot.armed, limit=40.0)
+    assert math.hypot(world.pose.x, world.pose.y) < 0.3
+
+
+def test_rtl_ends_its_climb_at_exactly_0_2_m_below_the_rtl_height():
+    """The climb ends once the copter is no more than 0.2 m below the RTL height: from exactly 0.2 m below,
+    RTL goes straight on to home (here right where the copter stands: it is reached at the first step)."""
+    autopilot = bare_autopilot(Kind.COPTER, ground=-0.05)  # resting at z = 0.3
+    autopilot.rtl_altitude = 0.55  # the RTL height: z = 0.5, exactly 0.2 m above the copter
+    autopilot.arm()
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    assert autopilot.home[2] + autopilot.rtl_altitude - autopilot.body.pose.z == 0.2
+    autopilot.step(0.05, -0.05)
+    assert [event.text for event in autopilot.events][-1] == "Reached home"
+
+
+def test_a_copter_knocked_off_its_spot_during_the_rtl_climb_goes_back_to_it(flat_scene):
+    """While RTL climbs, the copter holds its spot: pushed off it by a gust it flies back, then goes home."""
+    world = armed_copter(flat_scene, start=(2.0, -3.0))
+    world.autopilot.goto(12.0, -3.0)
+    world.run_for(10.0)
+    spot = (world.pose.x, world.pose.y)
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    world.run_for(1.0)
+    world.body.vx = 3.0  # a gust
+    world.run_for(1.0)
+    assert math.dist((world.pose.x, world.pose.y), spot) > 1.0
+    step_until(world, lambda: math.dist((world.pose.x, world.pose.y), spot) < 0.1, limit=5.0)
+    assert world.pose.z < 14.0  # still climbing
+    step_until(world, lambda: not world.autopilot.armed, limit=60.0)
+    assert math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 0.3
+
+
 def test_rtl_above_rtl_altitude_keeps_its_height_and_rtl_alt_can_be_set(flat_scene):
     world = armed_copter(flat_scene, altitude=6.0)
     world.autopilot.rtl_altitude = 3.0
@@ -577,6 +838,74 @@ def test_rtl_above_rtl_altitude_keeps_its_height_and_rtl_alt_can_be_set(flat_sce
     world.run_for(2.0)
     assert world.pose.z == pytest.approx(6.0, abs=0.3)  # no climb (nor a descent before home)
     assert not any(text.startswith("RTL: climbing") for text in texts(world))
+
+
+def test_rtl_announces_its_climb_only_when_more_than_half_a_metre_below_the_rtl_height(make_scene, box):
+    """Entering RTL, a copter says it climbs only when the RTL height is more than 0.5 m above it."""
+    world = armed_copter(make_scene(box(0, 0, -0.5, 200, 200, 1)))  # its top exactly at 0
+    autopilot = world.autopilot
+    assert autopilot.home[2] == 0.0
+    autopilot.rtl_altitude = world.pose.z + 0.5
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    assert not any(text.startswith("RTL: climbing") for text in texts(world))
+    autopilot.set_mode("GUIDED")
+    autopilot.rtl_altitude = world.pose.z + 1.0
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    assert texts(world)[-1] == f"RTL: climbing to {world.pose.z + 1.0:.0f} m, then home"
+
+
+def test_rtl_tells_the_height_it_climbs_to_above_the_start_ground(make_scene, box):
+    """The climb RTL announces is to RTL_ALT above the start's ground, here on top of a 2 m plinth."""
+    scene = make_scene(box(0, 0, -0.05, 100, 100, 0.1), box(0, 0, 1, 6, 6, 2))
+    world = armed_copter(scene)
+    assert world.home[2] == pytest.approx(2.0)
+    assert world.autopilot.set_mode("RTL") == ACCEPTED
+    assert texts(world)[-1] == "RTL: climbing to 15 m, then home"
+    highest = world.pose.z
+    for _ in range(round(12.0 / world.dt)):
+        world.step()
+        highest = max(highest, world.pose.z)
+    assert highest == pytest.approx(17.0, abs=0.3)
+
+
+@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
+def test_rtl_goes_home_when_home_is_not_the_scene_origin(flat_scene, kind):
+    """Home at (-6, 5): RTL flies there, says so once, and (copter) lands or (rover) holds there."""
+    world = vehicle(kind, flat_scene, start=(-6.0, 5.0))
+    autopilot = world.autopilot
+    assert autopilot.goto(4.0, -3.0) == ACCEPTED
+    world.run_for(20.0)
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    world.run_for(40.0)
+    assert (world.pose.x, world.pose.y) == pytest.approx((-6.0, 5.0), abs=0.3)
+    assert texts(world).count("Reached home") == 1
+    if kind is Kind.COPTER:
+        assert not autopilot.armed and texts(world)[-1] == "Landed; disarming"
+    else:
+        assert autopilot.armed and world.body.speed < 0.01
+
+
+@pytest.mark.parametrize(
+    ("start", "home", "reached_at_once"),
+    [
+        ((0.0, 0.0), (0.2, 0.0), True),  # within 0.3 m: home
+        ((0.0, 0.0), (0.3, 0.0), False),  # exactly 0.3 m: not yet
+        ((6.0, 5.0), (-6.0, 5.0), False),  # 12 m west of home
+        ((-6.0, -5.0), (-6.0, 5.0), False),  # 10 m south of home
+    ],
+)
+def test_rtl_counts_home_as_reached_within_less_than_0_3_m_of_it(flat_scene, start, home, reached_at_once):
+    """RTL takes home as reached as soon as the vehicle is less than 0.3 m from it (x and y), and not before."""
+    world = armed_copter(flat_scene, start=start)
+    autopilot = world.autopilot
+    autopilot.rtl_altitude = 3.0  # below the copter: no climb first
+    autopilot.home = (*home, 0.0)
+    assert autopilot.set_mode("RTL") == ACCEPTED
+    world.step()
+    assert ("Reached home" in texts(world)) is reached_at_once
+    if not reached_at_once:
+        step_until(world, lambda: "Reached home" in texts(world), limit=20.0)
+        assert math.dist((world.pose.x, world.pose.y), home) < 0.3
 
 
 def test_a_stop_before_an_obstacle_is_told_once_with_where(wall_scene):
@@ -687,6 +1016,21 @@ def test_rtl_rover_returns_home_and_holds(flat_scene):
     assert world.autopilot.armed
 
 
+def test_a_rover_knocked_off_home_after_rtl_stops_near_it_and_stays_armed(flat_scene):
+    """A rover that reached home holds there: pushed on past it, it stops (it cannot back up) and stays armed."""
+    world = armed_rover(flat_scene, start=(2.0, -3.0))
+    world.autopilot.goto(2.0, 10.0)
+    world.run_for(10.0)
+    world.autopilot.set_mode("RTL")
+    step_until(world, lambda: "Reached home" in texts(world), limit=30.0)
+    world.run_for(3.0)
+    heading = world.pose.yaw
+    world.body.vx, world.body.vy = 2.0 * math.sin(heading), 2.0 * math.cos(heading)  # a shove forwards
+    world.run_for(5.0)
+    assert world.body.speed < 0.01 and world.autopilot.armed
+    assert 0.15 < math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 1.0
+
+
 def test_land_mode_lands_in_place_and_disarms(flat_scene):
     world = armed_copter(flat_scene)
     world.autopilot.goto(5.0, 5.0)
@@ -698,6 +1042,28 @@ def test_land_mode_lands_in_place_and_disarms(flat_scene):
     assert took == pytest.approx((ALTITUDE - REST_Z) / 0.7, abs=0.5)  # at the landing speed
     assert (world.pose.x, world.pose.y) == pytest.approx(here, abs=0.05)
     assert world.pose.z == pytest.approx(REST_Z, abs=0.01)
+
+
+def test_land_during_takeoff_descends_at_once(flat_scene):
+    world = taking_off(flat_scene)
+    z = world.pose.z
+    world.autopilot.set_mode("LAND")
+    world.run_for(1.0)
+    assert world.pose.z < z  # it used to climb on to 10 m first
+
+
+def test_land_engaged_at_speed_comes_back_to_where_it_was_engaged_and_lands_there(flat_scene):
+    """LAND holds the spot where it was engaged: a copter still braking from cruise speed flies back to it
+    (without turning round first) while it descends, and is disarmed on touching down."""
+    world = armed_copter(flat_scene)
+    world.autopilot.goto(0.0, 60.0)
+    world.run_for(10.0)
+    assert world.body.speed == pytest.approx(2.5)
+    here = (world.pose.x, world.pose.y)
+    assert world.autopilot.set_mode("LAND") == ACCEPTED
+    step_until(world, lambda: not world.autopilot.armed, limit=15.0)
+    assert math.dist((world.pose.x, world.pose.y), here) < 0.1  # braking had carried it 1.2 m on
+    assert world.autopilot.armed is False and texts(world)[-1] == "Landed; disarming"
 
 
 @pytest.mark.parametrize(
@@ -722,6 +1088,40 @@ def test_stop_modes_stop_in_place(kind, mode, flat_scene):
     assert world.autopilot.armed
 
 
+def test_brake_during_takeoff_stops_the_climb(flat_scene):
+    world = taking_off(flat_scene)
+    z = world.pose.z
+    world.autopilot.set_mode("BRAKE")
+    world.run_for(5.0)
+    assert world.pose.z < z + 1.0  # it used to climb on to the take-off altitude
+
+
+def test_rover_hold_stops_without_turning_around(flat_scene):
+    world = Simulation(flat_scene, Kind.ROVER)
+    world.autopilot.arm()
+    world.autopilot.set_mode("GUIDED")
+    world.autopilot.goto(0.0, 60.0)
+    world.run_for(10.0)
+    world.autopilot.set_mode("HOLD")
+    world.run_for(10.0)
+    assert abs(math.degrees(world.pose.yaw) % 360 - 0.0) < 10  # it used to U-turn back to the hold point
+
+
+def test_copter_brake_holds_where_it_came_to_rest(flat_scene):
+    world = Simulation(flat_scene, Kind.COPTER, sensors=[Sonar(mount_yaw=180)])
+    world.autopilot.arm()
+    world.autopilot.takeoff(4.0)
+    world.run_for(6.0)
+    world.autopilot.goto(0.0, 60.0)
+    world.run_for(10.0)
+    world.autopilot.set_mode("BRAKE")
+    furthest = 0.0
+    for _ in range(200):
+        world.step()
+        furthest = max(furthest, world.pose.y)
+    assert world.pose.y == pytest.approx(furthest, abs=0.05)  # it used to fly back to where BRAKE was engaged
+
+
 def test_disarm_refused_in_the_air_unless_forced(flat_scene):
     world = armed_copter(flat_scene)
     assert world.autopilot.disarm() == FAILED
@@ -734,6 +1134,36 @@ def test_disarm_on_the_ground_is_accepted(flat_scene):
     world = armed_rover(flat_scene)
     assert world.autopilot.disarm() == ACCEPTED
     assert not world.autopilot.armed
+
+
+def test_disarming_ends_the_mission_and_the_take_off_it_was_in(flat_scene):
+    world = Simulation(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.arm()
+    autopilot.takeoff(4.0)
+    world.run_for(0.5)  # climbing
+    autopilot.set_mode("AUTO")
+    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
+    autopilot.start_mission()
+    assert autopilot.disarm(force=True) == ACCEPTED
+    assert autopilot.armed is False and autopilot.mission_running is False
+    world.run_for(3.0)  # falls to the ground
+    autopilot.set_mode("GUIDED")
+    assert autopilot.arm() == ACCEPTED
+    world.run_for(5.0)
+    assert world.pose.z == pytest.approx(REST_Z, abs=0.01)  # armed again, it does not resume the old take-off
+
+
+def test_a_forced_disarm_ends_the_take_off(flat_scene):
+    """Disarmed during a GUIDED take-off, a copter no longer counts as taking off."""
+    world = Simulation(flat_scene, Kind.COPTER)
+    autopilot = world.autopilot
+    autopilot.arm()
+    autopilot.takeoff(4.0)
+    world.run_for(0.5)
+    assert autopilot.taking_off is True
+    assert autopilot.disarm(force=True) == ACCEPTED
+    assert autopilot.taking_off is False
 
 
 def test_forced_disarm_in_the_air_makes_a_copter_fall_to_the_ground(flat_scene):
@@ -749,6 +1179,21 @@ def test_forced_disarm_in_the_air_makes_a_copter_fall_to_the_ground(flat_scene):
     assert landed == pytest.approx(fall_time, abs=0.1)
     assert heights[-1] == pytest.approx(REST_Z)
     assert not world.autopilot.flying
+
+
+def test_a_disarmed_copter_within_a_micrometre_of_its_resting_height_is_left_resting():
+    """A disarmed copter falls only when more than 1 micrometre above its resting height (that tolerance
+    absorbs rounding); at exactly 1 micrometre it is not dropped, at 2 it falls onto the ground."""
+    autopilot = bare_autopilot(Kind.COPTER)
+    body = autopilot.body
+    rest = body.rest_height(0.0)
+    body.pose.z = rest + 1e-6
+    for _ in range(20):
+        autopilot.step(0.05, 0.0)
+    assert body.pose.z == rest + 1e-6 and body.vz == 0.0
+    body.pose.z = rest + 2e-6
+    autopilot.step(0.05, 0.0)
+    assert body.pose.z == rest
 
 
 def test_a_copter_killed_on_its_way_and_armed_again_stays_on_the_ground_until_a_take_off(flat_scene):
@@ -767,6 +1212,15 @@ def test_a_copter_killed_on_its_way_and_armed_again_stays_on_the_ground_until_a_
     assert world.autopilot.takeoff(ALTITUDE) == ACCEPTED
     world.run_for(ALTITUDE / world.limits.climb_rate + 3.0)
     assert world.pose.z == pytest.approx(ALTITUDE, abs=0.15) and world.pose.x == pytest.approx(fallen[0])
+
+
+def test_rearming_after_a_forced_disarm_during_takeoff_stays_on_the_ground(flat_scene):
+    world = taking_off(flat_scene)
+    world.autopilot.disarm(force=True)
+    world.run_for(3.0)  # falls back to the ground
+    world.autopilot.arm()  # no take-off command
+    world.run_for(5.0)
+    assert world.pose.z == pytest.approx(0.35, abs=0.01)  # it used to take off by itself
 
 
 def test_a_guided_target_does_not_lift_a_copter_off_the_ground(flat_scene):
@@ -815,6 +1269,38 @@ def test_a_rover_holds_at_a_critical_battery_and_one_on_the_ground_is_only_warne
     assert texts(parked)[-1] == "Battery 1 is critical: 14.0 V, 5% left" and parked.autopilot.mode == "GUIDED"
 
 
+# ---- servos and a ground station's direct steering ---------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("channel", "pwm", "result"),
+    [
+        (1, 500, ACCEPTED),
+        (32, 2500, ACCEPTED),
+        (9, 1500, ACCEPTED),
+        (0, 1500, DENIED),
+        (33, 1500, DENIED),
+        (1, 499, DENIED),
+        (1, 2501, DENIED),
+    ],
+)
+def test_a_servo_takes_channels_1_to_32_and_pulses_of_500_to_2500_microseconds(flat_scene, channel, pwm, result):
+    autopilot = Simulation(flat_scene, Kind.ROVER).autopilot
+    assert autopilot.set_servo(channel, pwm) == result
+    assert autopilot.servos.get(channel) == (pwm if result == ACCEPTED else None)
+    assert type(autopilot.servos.get(channel)) is (int if result == ACCEPTED else type(None))
+
+
+def test_direct_steering_by_a_ground_station_is_counted(flat_scene):
+    autopilot = Simulation(flat_scene, Kind.ROVER).autopilot
+    assert (autopilot.overrides, autopilot.override) == (0, "")
+    autopilot.overridden("goto")
+    autopilot.overridden("yaw")
+    assert (autopilot.overrides, autopilot.override) == (2, "yaw")
+    autopilot.clear_targets()
+    assert (autopilot._target, autopilot._velocity, autopilot._yaw) == (None, None, None)
+
+
 # ---- ground following, determinism, avoidance ----------------------------------------------------
 
 
@@ -855,6 +1341,15 @@ def test_rover_follows_uneven_ground(hill_scene):
     assert world.pose.z == pytest.approx(REST_Z, abs=0.01)
 
 
+def test_a_disarmed_rover_rests_tilted_with_the_slope_it_stands_on(hill_scene):
+    """Disarmed, a rover still settles on the ground under it: on a 0.2 slope it is pitched nose up."""
+    world = Simulation(hill_scene, Kind.ROVER, start=(5.0, 0.0), heading=90.0)  # facing up the slope
+    world.step()
+    assert not world.autopilot.armed
+    assert world.pose.pitch == pytest.approx(math.atan(0.2), abs=1e-3)
+    assert world.pose.roll == pytest.approx(0.0, abs=1e-3)
+
+
 def test_copter_holds_height_above_the_start_ground_over_a_hill(hill_scene):
     world = armed_copter(hill_scene, start=(-8.0, 0.0))
     world.autopilot.goto(16.0, 0.0)
@@ -892,6 +1387,11 @@ def test_two_identical_runs_give_identical_trajectories(wall_scene):
     assert any(d is not None for *_, distances in first for d in distances)  # the sonars saw the wall
 
 
+def test_a_world_without_sensors_steps(flat_scene):
+    world = Simulation(flat_scene, Kind.COPTER, sensors=[])
+    assert world.step() == []  # ValueError: need at least one array to concatenate (vehicle/sensors.py:124)
+
+
 def test_a_copter_flown_at_a_wall_stops_short_of_it_with_the_default_sensors(wall_scene):
     world = armed_copter(wall_scene)
     world.autopilot.goto(0.0, 20.0)  # behind the wall
@@ -900,337 +1400,6 @@ def test_a_copter_flown_at_a_wall_stops_short_of_it_with_the_default_sensors(wal
     assert world.autopilot.blocked
     assert world.body.speed < 0.01
     assert 8.0 < world.pose.y < 9.9 - world.limits.radius
-
-
-def test_a_copter_flown_diagonally_at_a_wall_stops_short_of_it(wall_scene):
-    world = armed_copter(wall_scene, start=(-6.0, 0.0))
-    world.autopilot.set_speed(4.0)
-    world.autopilot.goto(6.0, 16.0)
-    world.run_for(30.0)
-    assert world.collision is None
-    assert world.pose.y < 9.9 - world.limits.radius
-
-
-# ---- against the surviving mutants of issue 14 ------------------------------------------------------------
-def said(world: Simulation) -> list[tuple[str, int]]:
-    return [(event.text, event.severity) for event in world.autopilot.events if event.kind == "text"]
-
-
-def test_the_operator_hears_what_arming_disarming_and_missions_do_with_their_severity(flat_scene):
-    """The texts a ground station shows (STATUSTEXT) are part of the behaviour: wording and severity."""
-    info, notice, warning, critical = 6, 5, 4, 2
-    world = armed_copter(flat_scene)
-    autopilot = world.autopilot
-    assert autopilot.disarm() == FAILED
-    assert autopilot.start_mission() == DENIED  # not in AUTO: refused quietly
-    assert autopilot.set_mode("AUTO") == FAILED  # no items
-    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
-    assert autopilot.set_mode("AUTO") == ACCEPTED
-    assert autopilot.start_mission() == ACCEPTED
-    assert autopilot.disarm(force=True) == ACCEPTED
-    ground = Simulation(flat_scene, Kind.ROVER)
-    ground.autopilot.arm()
-    assert ground.autopilot.disarm() == ACCEPTED
-    assert said(world) == [
-        ("Arming motors", info),
-        ("Takeoff to 4.0 m", info),
-        ("Disarm: vehicle is flying", critical),
-        ("No Mission. Can't set AUTO.", notice),
-        ("Flight mode change failed", warning),
-        ("Mission: 1 started", info),
-        ("Disarming motors (forced)", info),
-    ]
-    assert said(ground)[-1] == ("Disarming motors", info)
-
-
-def test_disarming_ends_the_mission_and_the_take_off_it_was_in(flat_scene):
-    world = Simulation(flat_scene, Kind.COPTER)
-    autopilot = world.autopilot
-    autopilot.arm()
-    autopilot.takeoff(4.0)
-    world.run_for(0.5)  # climbing
-    autopilot.set_mode("AUTO")
-    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
-    autopilot.start_mission()
-    assert autopilot.disarm(force=True) == ACCEPTED
-    assert autopilot.armed is False and autopilot.mission_running is False
-    world.run_for(3.0)  # falls to the ground
-    autopilot.set_mode("GUIDED")
-    assert autopilot.arm() == ACCEPTED
-    world.run_for(5.0)
-    assert world.pose.z == pytest.approx(REST_Z, abs=0.01)  # armed again, it does not resume the old take-off
-
-
-@pytest.mark.parametrize(
-    ("channel", "pwm", "result"),
-    [
-        (1, 500, ACCEPTED),
-        (32, 2500, ACCEPTED),
-        (9, 1500, ACCEPTED),
-        (0, 1500, DENIED),
-        (33, 1500, DENIED),
-        (1, 499, DENIED),
-        (1, 2501, DENIED),
-    ],
-)
-def test_a_servo_takes_channels_1_to_32_and_pulses_of_500_to_2500_microseconds(flat_scene, channel, pwm, result):
-    autopilot = Simulation(flat_scene, Kind.ROVER).autopilot
-    assert autopilot.set_servo(channel, pwm) == result
-    assert autopilot.servos.get(channel) == (pwm if result == ACCEPTED else None)
-    assert type(autopilot.servos.get(channel)) is (int if result == ACCEPTED else type(None))
-
-
-def test_direct_steering_by_a_ground_station_is_counted(flat_scene):
-    autopilot = Simulation(flat_scene, Kind.ROVER).autopilot
-    assert (autopilot.overrides, autopilot.override) == (0, "")
-    autopilot.overridden("goto")
-    autopilot.overridden("yaw")
-    assert (autopilot.overrides, autopilot.override) == (2, "yaw")
-    autopilot.clear_targets()
-    assert (autopilot._target, autopilot._velocity, autopilot._yaw) == (None, None, None)
-
-
-def test_a_yaw_is_a_compass_heading_unless_relative_and_never_cancels_a_target(flat_scene):
-    world = armed_copter(flat_scene)
-    autopilot = world.autopilot
-    assert autopilot.set_yaw(math.radians(90)) == ACCEPTED  # absolute by default
-    world.run_for(5.0)
-    assert world.pose.yaw == pytest.approx(math.radians(90), abs=0.02)
-    assert autopilot.set_yaw(math.radians(300), relative=True) == ACCEPTED  # 90 + 300 = 390: 30 degrees
-    world.run_for(6.0)
-    assert world.pose.yaw == pytest.approx(math.radians(30), abs=0.02)
-    assert autopilot.goto(8.0, 0.0) == ACCEPTED
-    world.run_for(0.2)
-    assert autopilot.set_yaw(math.radians(90)) == ACCEPTED  # while going there
-    world.run_for(15.0)
-    assert (world.pose.x, world.pose.y) == pytest.approx((8.0, 0.0), abs=0.15)
-
-
-def test_a_velocity_without_a_vertical_part_keeps_the_height(flat_scene):
-    world = armed_copter(flat_scene)
-    assert world.autopilot.set_velocity(1.0, 0.0) == ACCEPTED
-    world.run_for(2.0)
-    assert world.pose.x > 0.5 and world.autopilot.altitude == pytest.approx(ALTITUDE, abs=0.1)
-
-
-def test_a_new_mission_waits_to_be_started_at_its_first_item(flat_scene):
-    world = armed_copter(flat_scene)
-    autopilot = world.autopilot
-    autopilot.set_mode("AUTO")
-    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 3.0, 0.0)])
-    assert autopilot.mission_running is False and autopilot.current == 1
-    autopilot.set_mission([])  # cleared: home only
-    assert len(autopilot.mission) == 1 and autopilot.current == 1 and autopilot.mission_running is False
-
-
-def test_mission_start_resumes_restarts_or_jumps_to_an_item(flat_scene):
-    world = armed_copter(flat_scene)
-    autopilot = world.autopilot
-    items = [position_item(world, NAV_WAYPOINT, 2.0 * k, 0.0) for k in range(1, 5)]
-    autopilot.set_mission([autopilot.home_item(), *items])
-    autopilot.set_mode("AUTO")
-    assert autopilot.set_current(3) is True
-    assert autopilot.start_mission() == ACCEPTED and autopilot.current == 3  # 0: resume at the current item
-    assert autopilot.start_mission(1) == ACCEPTED and autopilot.current == 1  # from the first
-    assert autopilot.start_mission(2) == ACCEPTED and autopilot.current == 2
-    autopilot.current = len(autopilot.mission)  # finished
-    assert autopilot.start_mission() == ACCEPTED and autopilot.current == 1  # starts over
-    one = Simulation(flat_scene, Kind.ROVER).autopilot
-    one.arm()
-    one.set_mission([one.home_item(), MissionItem(NAV_WAYPOINT, *one.datum.to_global(3.0, 0.0), 0.0)])
-    assert one.set_mode("AUTO") == ACCEPTED
-    assert one.start_mission() == ACCEPTED  # a mission of one item
-
-
-def test_set_current_takes_only_the_items_after_home_and_says_so(flat_scene):
-    world = armed_copter(flat_scene)
-    autopilot = world.autopilot
-    autopilot.set_mission([autopilot.home_item(), *[position_item(world, NAV_WAYPOINT, k, 0.0) for k in (2, 4)]])
-    before = list(autopilot.events)
-    assert autopilot.set_current(0) is False and autopilot.set_current(3) is False
-    assert list(autopilot.events) == before and autopilot.current == 1
-    assert autopilot.set_current(2) is True and autopilot.current == 2
-    assert autopilot.set_current(1) is True and autopilot.current == 1
-    assert [(e.kind, e.seq) for e in list(autopilot.events)[len(before) :]] == [("current", 2), ("current", 1)]
-
-
-@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
-def test_rtl_goes_home_when_home_is_not_the_scene_origin(flat_scene, kind):
-    """Home at (-6, 5): RTL flies there, says so once, and (copter) lands or (rover) holds there."""
-    world = vehicle(kind, flat_scene, start=(-6.0, 5.0))
-    autopilot = world.autopilot
-    assert autopilot.goto(4.0, -3.0) == ACCEPTED
-    world.run_for(20.0)
-    assert autopilot.set_mode("RTL") == ACCEPTED
-    world.run_for(40.0)
-    assert (world.pose.x, world.pose.y) == pytest.approx((-6.0, 5.0), abs=0.3)
-    assert texts(world).count("Reached home") == 1
-    if kind is Kind.COPTER:
-        assert not autopilot.armed and texts(world)[-1] == "Landed; disarming"
-    else:
-        assert autopilot.armed and world.body.speed < 0.01
-
-
-def test_a_copter_landing_at_the_end_of_its_mission_disarms_with_the_mission_over(flat_scene):
-    world = armed_copter(flat_scene)
-    autopilot = world.autopilot
-    autopilot.set_mission(
-        [
-            autopilot.home_item(),
-            position_item(world, NAV_WAYPOINT, 4.0, 0.0),
-            position_item(world, NAV_LAND, 4.0, 0.0, alt=0.0),
-        ]
-    )
-    autopilot.set_mode("AUTO")
-    assert autopilot.start_mission() == ACCEPTED
-    step_until(world, lambda: not autopilot.armed, 60.0)
-    assert autopilot.mission_running is False and reached(world) == [1, 2]
-    assert autopilot.current == len(autopilot.mission)
-    assert texts(world)[-2:] == ["Mission complete", "Landed; disarming"]
-
-
-# ---- against the surviving mutants of the autopilot modes ------------------------------------------------
-def test_takeoff_to_one_metre_is_accepted_and_flown(flat_scene):
-    """A low take-off to 1 m is flown."""
-    world = Simulation(flat_scene, Kind.COPTER)
-    world.autopilot.arm()
-    assert world.autopilot.takeoff(1.0) == ACCEPTED
-    world.run_for(5.0)
-    assert world.autopilot.altitude == pytest.approx(1.0, abs=0.1) and world.autopilot.flying
-
-
-@pytest.mark.parametrize("mode", ["RTL", "LAND"])
-def test_arming_a_copter_in_rtl_or_land_is_refused_with_a_critical_message_naming_the_mode(flat_scene, mode):
-    """A copter cannot be armed in RTL or LAND; the operator is told which mode, as a critical message."""
-    world = Simulation(flat_scene, Kind.COPTER)
-    assert world.autopilot.set_mode(mode) == ACCEPTED
-    assert world.autopilot.arm() == FAILED
-    assert world.autopilot.armed is False
-    assert said(world) == [(f"Arm: mode {mode} not armable", 2)]  # MAV_SEVERITY_CRITICAL
-
-
-def test_a_forced_disarm_ends_the_take_off(flat_scene):
-    """Disarmed during a GUIDED take-off, a copter no longer counts as taking off."""
-    world = Simulation(flat_scene, Kind.COPTER)
-    autopilot = world.autopilot
-    autopilot.arm()
-    autopilot.takeoff(4.0)
-    world.run_for(0.5)
-    assert autopilot.taking_off is True
-    assert autopilot.disarm(force=True) == ACCEPTED
-    assert autopilot.taking_off is False
-
-
-def test_mode_changes_are_counted_and_the_source_of_each_request_is_kept(flat_scene):
-    """Each change of mode counts once; a request for the mode it is already in only records its source;
-    a request without a source comes from the ground station ("gcs")."""
-    autopilot = Simulation(flat_scene, Kind.COPTER).autopilot
-    assert (autopilot.mode_changes, autopilot.mode_source) == (0, "boot")
-    assert autopilot.set_mode("LOITER") == ACCEPTED
-    assert (autopilot.mode_changes, autopilot.mode_source) == (1, "gcs")
-    assert autopilot.set_mode("LOITER", source="failsafe") == ACCEPTED  # no change of mode
-    assert (autopilot.mode_changes, autopilot.mode_source) == (1, "failsafe")
-    assert autopilot.set_mode("BRAKE", source="agent") == ACCEPTED
-    assert (autopilot.mode_changes, autopilot.mode_source) == (2, "agent")
-    assert autopilot.set_mode("GUIDED") == ACCEPTED
-    assert (autopilot.mode, autopilot.mode_changes, autopilot.mode_source) == ("GUIDED", 3, "gcs")
-
-
-@pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
-def test_leaving_auto_stops_the_mission(flat_scene, kind):
-    """A running mission stops when the vehicle is switched out of AUTO."""
-    world = vehicle(kind, flat_scene)
-    autopilot = world.autopilot
-    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 0.0, 30.0)])
-    autopilot.set_mode("AUTO")
-    assert autopilot.start_mission() == ACCEPTED and autopilot.mission_running is True
-    world.run_for(1.0)
-    assert autopilot.set_mode("GUIDED") == ACCEPTED
-    assert autopilot.mission_running is False
-
-
-def test_a_finished_mission_is_no_longer_running(flat_scene):
-    """After its last item the mission is over: not running, current past the end, and it says so."""
-    world = Simulation(flat_scene, Kind.ROVER)
-    autopilot = world.autopilot
-    autopilot.set_mission([autopilot.home_item(), position_item(world, NAV_WAYPOINT, 0.0, 4.0)])
-    autopilot.arm()
-    autopilot.set_mode("AUTO")
-    step_until(world, lambda: autopilot.current == len(autopilot.mission), limit=20.0)
-    assert autopilot.mission_running is False
-    assert texts(world)[-1] == "Mission complete"
-
-
-def test_land_engaged_at_speed_comes_back_to_where_it_was_engaged_and_lands_there(flat_scene):
-    """LAND holds the spot where it was engaged: a copter still braking from cruise speed flies back to it
-    (without turning round first) while it descends, and is disarmed on touching down."""
-    world = armed_copter(flat_scene)
-    world.autopilot.goto(0.0, 60.0)
-    world.run_for(10.0)
-    assert world.body.speed == pytest.approx(2.5)
-    here = (world.pose.x, world.pose.y)
-    assert world.autopilot.set_mode("LAND") == ACCEPTED
-    step_until(world, lambda: not world.autopilot.armed, limit=15.0)
-    assert math.dist((world.pose.x, world.pose.y), here) < 0.1  # braking had carried it 1.2 m on
-    assert world.autopilot.armed is False and texts(world)[-1] == "Landed; disarming"
-
-
-def test_a_vehicle_steered_by_velocity_has_no_destination_and_on_open_ground_is_not_held_back(flat_scene):
-    """Under a velocity command there is no place the vehicle is going to (unlike a goto); nothing holds it back."""
-    world = armed_copter(flat_scene)
-    autopilot = world.autopilot
-    autopilot.goto(0.0, 10.0)
-    world.step()
-    assert autopilot.destination == (0.0, 10.0) and autopilot.blocked is False
-    autopilot.set_velocity(0.0, 2.0)
-    world.run_for(1.0)
-    assert world.body.vy > 1.0
-    assert autopilot.destination is None and autopilot.blocked is False
-
-
-def bare_autopilot(kind: Kind, ground: float = 0.0) -> Autopilot:
-    """An Autopilot on its own (no Simulation, no obstacle database), its body resting at the origin on flat
-    ground at height ``ground``, which is also home's; step it with ``autopilot.step(dt, ground)``."""
-    body = Body(kind, pose=Pose(0.0, 0.0, 0.0))
-    body.pose.z = body.rest_height(ground)
-    return Autopilot(kind, body, (0.0, 0.0, ground), Datum())
-
-
-def test_an_autopilot_without_an_obstacle_database_drives_unhindered():
-    """An Autopilot built without ``avoidance`` (its default) steers without any speed limit from obstacles."""
-    autopilot = bare_autopilot(Kind.ROVER)
-    assert autopilot.avoidance is None
-    autopilot.arm()
-    autopilot.set_mode("GUIDED")
-    assert autopilot.goto(0.0, 10.0) == ACCEPTED
-    for _ in range(400):  # 20 s
-        autopilot.step(0.05, 0.0)
-    assert (autopilot.body.pose.x, autopilot.body.pose.y) == pytest.approx((0.0, 10.0), abs=0.15)
-    assert autopilot.blocked is False
-
-
-def test_a_disarmed_rover_rests_tilted_with_the_slope_it_stands_on(hill_scene):
-    """Disarmed, a rover still settles on the ground under it: on a 0.2 slope it is pitched nose up."""
-    world = Simulation(hill_scene, Kind.ROVER, start=(5.0, 0.0), heading=90.0)  # facing up the slope
-    world.step()
-    assert not world.autopilot.armed
-    assert world.pose.pitch == pytest.approx(math.atan(0.2), abs=1e-3)
-    assert world.pose.roll == pytest.approx(0.0, abs=1e-3)
-
-
-def test_a_disarmed_copter_within_a_micrometre_of_its_resting_height_is_left_resting():
-    """A disarmed copter falls only when more than 1 micrometre above its resting height (that tolerance
-    absorbs rounding); at exactly 1 micrometre it is not dropped, at 2 it falls onto the ground."""
-    autopilot = bare_autopilot(Kind.COPTER)
-    body = autopilot.body
-    rest = body.rest_height(0.0)
-    body.pose.z = rest + 1e-6
-    for _ in range(20):
-        autopilot.step(0.05, 0.0)
-    assert body.pose.z == rest + 1e-6 and body.vz == 0.0
-    body.pose.z = rest + 2e-6
-    autopilot.step(0.05, 0.0)
-    assert body.pose.z == rest
 
 
 def test_a_copter_flown_at_a_wall_keeps_cruise_speed_until_it_must_brake_and_is_blocked_only_once_stopped(
@@ -1252,6 +1421,15 @@ def test_a_copter_flown_at_a_wall_keeps_cruise_speed_until_it_must_brake_and_is_
     assert world.pose.y > 9.3
 
 
+def test_a_copter_flown_diagonally_at_a_wall_stops_short_of_it(wall_scene):
+    world = armed_copter(wall_scene, start=(-6.0, 0.0))
+    world.autopilot.set_speed(4.0)
+    world.autopilot.goto(6.0, 16.0)
+    world.run_for(30.0)
+    assert world.collision is None
+    assert world.pose.y < 9.9 - world.limits.radius
+
+
 @pytest.mark.parametrize(
     ("wall", "target"), [((0, 10, 2, 20, 0.2, 6), (0.0, 20.0)), ((10, 0, 2, 0.2, 20, 6), (20.0, 0.0))]
 )
@@ -1267,6 +1445,19 @@ def test_a_fast_head_on_approach_stops_the_avoidance_margin_short_of_the_wall(ma
         nearest = min(nearest, 9.9 - max(world.pose.x, world.pose.y) - world.limits.radius)
     assert world.collision is None
     assert MARGIN <= nearest < MARGIN + 0.1
+
+
+def test_an_autopilot_without_an_obstacle_database_drives_unhindered():
+    """An Autopilot built without ``avoidance`` (its default) steers without any speed limit from obstacles."""
+    autopilot = bare_autopilot(Kind.ROVER)
+    assert autopilot.avoidance is None
+    autopilot.arm()
+    autopilot.set_mode("GUIDED")
+    assert autopilot.goto(0.0, 10.0) == ACCEPTED
+    for _ in range(400):  # 20 s
+        autopilot.step(0.05, 0.0)
+    assert (autopilot.body.pose.x, autopilot.body.pose.y) == pytest.approx((0.0, 10.0), abs=0.15)
+    assert autopilot.blocked is False
 
 
 def creeping_rover(flat_scene, speed: float) -> Simulation:
@@ -1301,116 +1492,3 @@ def test_a_vehicle_held_back_to_0_05_m_s_is_not_yet_blocked(flat_scene):
     world.step()
     assert world.autopilot.blocked is False
     assert world.body.vy == pytest.approx(0.05)
-
-
-@pytest.mark.parametrize(
-    ("start", "home", "reached_at_once"),
-    [
-        ((0.0, 0.0), (0.2, 0.0), True),  # within 0.3 m: home
-        ((0.0, 0.0), (0.3, 0.0), False),  # exactly 0.3 m: not yet
-        ((6.0, 5.0), (-6.0, 5.0), False),  # 12 m west of home
-        ((-6.0, -5.0), (-6.0, 5.0), False),  # 10 m south of home
-    ],
-)
-def test_rtl_counts_home_as_reached_within_less_than_0_3_m_of_it(flat_scene, start, home, reached_at_once):
-    """RTL takes home as reached as soon as the vehicle is less than 0.3 m from it (x and y), and not before."""
-    world = armed_copter(flat_scene, start=start)
-    autopilot = world.autopilot
-    autopilot.rtl_altitude = 3.0  # below the copter: no climb first
-    autopilot.home = (*home, 0.0)
-    assert autopilot.set_mode("RTL") == ACCEPTED
-    world.step()
-    assert ("Reached home" in texts(world)) is reached_at_once
-    if not reached_at_once:
-        step_until(world, lambda: "Reached home" in texts(world), limit=20.0)
-        assert math.dist((world.pose.x, world.pose.y), home) < 0.3
-
-
-def test_rtl_climbs_straight_up_to_within_0_2_m_of_its_height_even_when_facing_home(flat_scene):
-    """RTL's climb goes on (straight up) until within 0.2 m of the RTL height, even when the copter already
-    faces home and need not turn: only then does it fly home."""
-    world = armed_copter(flat_scene)
-    world.autopilot.goto(0.0, -10.0)
-    world.run_for(10.0)
-    assert world.autopilot.set_yaw(0.0) == ACCEPTED  # face north, towards home
-    world.run_for(3.0)
-    spot = (world.pose.x, world.pose.y)
-    assert world.autopilot.set_mode("RTL") == ACCEPTED
-    while world.pose.z < 14.79:
-        assert world.time < 60.0
-        world.step()
-        assert math.dist((world.pose.x, world.pose.y), spot) < 0.01, f"moving off at {world.pose.z:.2f} m"
-    step_until(world, lambda: not world.autopilot.armed, limit=40.0)
-    assert math.hypot(world.pose.x, world.pose.y) < 0.3
-
-
-def test_rtl_ends_its_climb_at_exactly_0_2_m_below_the_rtl_height():
-    """The climb ends once the copter is no more than 0.2 m below the RTL height: from exactly 0.2 m below,
-    RTL goes straight on to home (here right where the copter stands: it is reached at the first step)."""
-    autopilot = bare_autopilot(Kind.COPTER, ground=-0.05)  # resting at z = 0.3
-    autopilot.rtl_altitude = 0.55  # the RTL height: z = 0.5, exactly 0.2 m above the copter
-    autopilot.arm()
-    assert autopilot.set_mode("RTL") == ACCEPTED
-    assert autopilot.home[2] + autopilot.rtl_altitude - autopilot.body.pose.z == 0.2
-    autopilot.step(0.05, -0.05)
-    assert [event.text for event in autopilot.events][-1] == "Reached home"
-
-
-def test_a_copter_knocked_off_its_spot_during_the_rtl_climb_goes_back_to_it(flat_scene):
-    """While RTL climbs, the copter holds its spot: pushed off it by a gust it flies back, then goes home."""
-    world = armed_copter(flat_scene, start=(2.0, -3.0))
-    world.autopilot.goto(12.0, -3.0)
-    world.run_for(10.0)
-    spot = (world.pose.x, world.pose.y)
-    assert world.autopilot.set_mode("RTL") == ACCEPTED
-    world.run_for(1.0)
-    world.body.vx = 3.0  # a gust
-    world.run_for(1.0)
-    assert math.dist((world.pose.x, world.pose.y), spot) > 1.0
-    step_until(world, lambda: math.dist((world.pose.x, world.pose.y), spot) < 0.1, limit=5.0)
-    assert world.pose.z < 14.0  # still climbing
-    step_until(world, lambda: not world.autopilot.armed, limit=60.0)
-    assert math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 0.3
-
-
-def test_a_rover_knocked_off_home_after_rtl_stops_near_it_and_stays_armed(flat_scene):
-    """A rover that reached home holds there: pushed on past it, it stops (it cannot back up) and stays armed."""
-    world = armed_rover(flat_scene, start=(2.0, -3.0))
-    world.autopilot.goto(2.0, 10.0)
-    world.run_for(10.0)
-    world.autopilot.set_mode("RTL")
-    step_until(world, lambda: "Reached home" in texts(world), limit=30.0)
-    world.run_for(3.0)
-    heading = world.pose.yaw
-    world.body.vx, world.body.vy = 2.0 * math.sin(heading), 2.0 * math.cos(heading)  # a shove forwards
-    world.run_for(5.0)
-    assert world.body.speed < 0.01 and world.autopilot.armed
-    assert 0.15 < math.hypot(world.pose.x - 2.0, world.pose.y + 3.0) < 1.0
-
-
-def test_rtl_announces_its_climb_only_when_more_than_half_a_metre_below_the_rtl_height(make_scene, box):
-    """Entering RTL, a copter says it climbs only when the RTL height is more than 0.5 m above it."""
-    world = armed_copter(make_scene(box(0, 0, -0.5, 200, 200, 1)))  # its top exactly at 0
-    autopilot = world.autopilot
-    assert autopilot.home[2] == 0.0
-    autopilot.rtl_altitude = world.pose.z + 0.5
-    assert autopilot.set_mode("RTL") == ACCEPTED
-    assert not any(text.startswith("RTL: climbing") for text in texts(world))
-    autopilot.set_mode("GUIDED")
-    autopilot.rtl_altitude = world.pose.z + 1.0
-    assert autopilot.set_mode("RTL") == ACCEPTED
-    assert texts(world)[-1] == f"RTL: climbing to {world.pose.z + 1.0:.0f} m, then home"
-
-
-def test_rtl_tells_the_height_it_climbs_to_above_the_start_ground(make_scene, box):
-    """The climb RTL announces is to RTL_ALT above the start's ground, here on top of a 2 m plinth."""
-    scene = make_scene(box(0, 0, -0.05, 100, 100, 0.1), box(0, 0, 1, 6, 6, 2))
-    world = armed_copter(scene)
-    assert world.home[2] == pytest.approx(2.0)
-    assert world.autopilot.set_mode("RTL") == ACCEPTED
-    assert texts(world)[-1] == "RTL: climbing to 15 m, then home"
-    highest = world.pose.z
-    for _ in range(round(12.0 / world.dt)):
-        world.step()
-        highest = max(highest, world.pose.z)
-    assert highest == pytest.approx(17.0, abs=0.3)
