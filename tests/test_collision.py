@@ -54,10 +54,38 @@ def test_a_fast_step_through_a_thin_wall_is_caught(wall_scene):
     assert collider.sweep((0.0, 8.0, 4.0), (0.0, 12.0, 4.0)) is not None
 
 
+def test_contact_is_found_to_a_millionth_of_the_step(wall_scene):
+    """Bisection over the step, from its start to its end, 20 times: the contact lies at most 2**-20 of the
+    step before the fraction reported (here just past a half, where 19 halvings would be twice as coarse)."""
+    collider = Collider(wall_scene.mesh, RADIUS)
+    touch_y = WALL_FACE_Y - RADIUS
+    exact = 0.5 + 1e-7
+    start = touch_y - 0.5
+    contact = collider.sweep((0.0, start, 4.0), (0.0, start + 0.5 / exact, 4.0))
+    assert contact is not None
+    assert 0.0 <= contact.fraction - exact <= 2.0**-20
+
+
+def test_contact_is_found_within_a_millionth_of_the_step_past_the_first_touch(wall_scene):
+    """20 halvings of the step: the contact returned touches, and lies at most 2**-20 of the step past the
+    exact first touching position (here 9.6 m along a 12 m step, a fraction of 0.8)."""
+    collider = Collider(wall_scene.mesh, RADIUS)
+    contact = collider.sweep((0.0, 0.0, 4.0), (0.0, 12.0, 4.0))
+    exact = (WALL_FACE_Y - RADIUS) / 12.0
+    assert 0.0 <= contact.fraction - exact <= 2**-20 + 1e-12
+
+
 def test_clearance_is_the_distance_to_the_nearest_surface(wall_scene):
     collider = Collider(wall_scene.mesh, RADIUS)
     assert collider.clearance(np.array([0.0, 8.0, 4.0])) == pytest.approx(1.9, abs=1e-6)
     assert collider.clearance(np.array([0.0, 0.0, 50.0])) == collider.search  # nothing near
+
+
+@pytest.mark.parametrize(("radius", "search"), [(0.5, 4.0), (3.0, 6.0)])
+def test_clearance_looks_as_far_as_search_and_at_least_twice_the_radius(flat_scene, radius, search):
+    collider = Collider(flat_scene.mesh, radius, ignore_walkable=True)  # a rover: the ground is nothing to hit
+    assert collider.search == search
+    assert collider.clearance((0.0, 0.0, 50.0)) == search  # nothing within reach
 
 
 @pytest.mark.parametrize(("point", "expected"), [
@@ -100,6 +128,27 @@ def test_point_triangle_distance_agrees_with_trimesh_in_all_seven_voronoi_region
         regions[voronoi_region(closest, triangle)] += 1
     assert set(regions) == {"a", "b", "c", "ab", "bc", "ac", "face"}
     assert min(regions.values()) >= 100, regions
+
+
+def test_a_point_beyond_b_whose_closest_point_is_on_edge_bc_not_on_the_line_through_ab():
+    """c lies beyond b along ab (an obtuse corner at b): a point just past b below ab is nearest to edge bc,
+    where the line through ab, extended past b, would be nearer."""
+    triangle = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 1.0, 0.0]]])
+    assert point_triangle_distance(np.array([1.5, -0.25, 0.0]), triangle)[0] == pytest.approx(0.375 * math.sqrt(2))
+
+
+def test_a_point_past_b_of_a_triangle_leaning_past_b_is_nearest_to_edge_bc():
+    """Ericson's edge-ab region needs the point on a's side of b (d3 <= 0). Where c leans past b along ab (an
+    obtuse angle at b), a point just past b lies in edge bc's region, and its true distance is larger than
+    its distance to the line through a and b: taking edge ab there would report the body too close."""
+    from trimesh.triangles import closest_point
+
+    triangle = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [3.0, 1.0, 0.0]])
+    points = np.array([[1.5, -0.5, 0.0], [1.2, -0.1, 0.3], [1.9, -0.2, -0.4], [1.05, -0.9, 0.0]])
+    for point in points:
+        expected = np.linalg.norm(point - closest_point(triangle[None], point[None])[0])
+        assert point_triangle_distance(point, triangle[None])[0] == pytest.approx(expected, rel=1e-12)
+    assert point_triangle_distance(points[0], triangle[None])[0] == pytest.approx(math.sqrt(0.45))
 
 
 def segment_triangle_reference(p0: np.ndarray, p1: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -146,6 +195,13 @@ def test_a_point_over_the_face_is_as_far_as_its_height_whichever_plane_the_trian
     triangle = np.array([a, b, c])[:, axes]
     above = np.array([1.2, 0.3, 0.7])[list(axes)]
     assert point_triangle_distance(above, triangle[None])[0] == pytest.approx(0.7)
+
+
+def test_a_point_over_a_triangle_whose_edges_mix_x_and_y_is_as_far_as_its_height():
+    """The face's normal has all three parts of the cross product: with one wrong, this triangle in the ground
+    plane (edges (1, 1, 0) and (1, 0, 0)) would look like one without area and be measured by its edges."""
+    triangle = np.array([[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, 0.0]]])
+    assert point_triangle_distance(np.array([0.7, 0.3, 0.5]), triangle)[0] == pytest.approx(0.5)
 
 
 @pytest.fixture
@@ -202,6 +258,15 @@ def test_a_rover_ignores_only_the_faces_it_can_drive_on(clutter):
     contact = collider.sweep((0.0, 0.0, 4.0), (0.0, 10.0, 4.0))  # into the wall at y = 5, not the ground
     assert contact is not None and contact.face in (len(normals) - 2, len(normals) - 1)
     assert contact.point[1] == pytest.approx(5.0 - RADIUS, abs=1e-3)
+
+
+def test_colliders_share_the_grid_they_are_given_and_a_grid_keeps_walkable_faces_by_default(flat_scene):
+    from vehicle.world.collision import TriangleGrid
+
+    grid = TriangleGrid(flat_scene.mesh)
+    assert len(grid.triangles) == len(flat_scene.mesh.faces)  # the ground too, unless told to leave it out
+    assert Collider(grid, RADIUS).grid is grid
+    assert len(TriangleGrid(flat_scene.mesh, ignore_walkable=True).triangles) < len(grid.triangles)
 
 
 def test_the_distance_between_two_segments_is_exact_on_its_own():
@@ -474,69 +539,3 @@ def test_stepping_towards_a_wall_finds_contact_at_wall_minus_radius_despite_the_
         y += step
     assert skipped > 100  # the shortcut was in use all along the way
     assert contact.point[1] == pytest.approx(WALL_FACE_Y - RADIUS, abs=1e-3)
-
-
-# ---- against the surviving mutants of issue 14 ------------------------------------------------------------
-def test_a_point_over_a_triangle_whose_edges_mix_x_and_y_is_as_far_as_its_height():
-    """The face's normal has all three parts of the cross product: with one wrong, this triangle in the ground
-    plane (edges (1, 1, 0) and (1, 0, 0)) would look like one without area and be measured by its edges."""
-    triangle = np.array([[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, 0.0]]])
-    assert point_triangle_distance(np.array([0.7, 0.3, 0.5]), triangle)[0] == pytest.approx(0.5)
-
-
-def test_a_point_beyond_b_whose_closest_point_is_on_edge_bc_not_on_the_line_through_ab():
-    """c lies beyond b along ab (an obtuse corner at b): a point just past b below ab is nearest to edge bc,
-    where the line through ab, extended past b, would be nearer."""
-    triangle = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 1.0, 0.0]]])
-    assert point_triangle_distance(np.array([1.5, -0.25, 0.0]), triangle)[0] == pytest.approx(0.375 * math.sqrt(2))
-
-
-def test_colliders_share_the_grid_they_are_given_and_a_grid_keeps_walkable_faces_by_default(flat_scene):
-    from vehicle.world.collision import TriangleGrid
-
-    grid = TriangleGrid(flat_scene.mesh)
-    assert len(grid.triangles) == len(flat_scene.mesh.faces)  # the ground too, unless told to leave it out
-    assert Collider(grid, RADIUS).grid is grid
-    assert len(TriangleGrid(flat_scene.mesh, ignore_walkable=True).triangles) < len(grid.triangles)
-
-
-@pytest.mark.parametrize(("radius", "search"), [(0.5, 4.0), (3.0, 6.0)])
-def test_clearance_looks_as_far_as_search_and_at_least_twice_the_radius(flat_scene, radius, search):
-    collider = Collider(flat_scene.mesh, radius, ignore_walkable=True)  # a rover: the ground is nothing to hit
-    assert collider.search == search
-    assert collider.clearance((0.0, 0.0, 50.0)) == search  # nothing within reach
-
-
-def test_contact_is_found_to_a_millionth_of_the_step(wall_scene):
-    """Bisection over the step, from its start to its end, 20 times: the contact lies at most 2**-20 of the
-    step before the fraction reported (here just past a half, where 19 halvings would be twice as coarse)."""
-    collider = Collider(wall_scene.mesh, RADIUS)
-    touch_y = WALL_FACE_Y - RADIUS
-    exact = 0.5 + 1e-7
-    start = touch_y - 0.5
-    contact = collider.sweep((0.0, start, 4.0), (0.0, start + 0.5 / exact, 4.0))
-    assert contact is not None
-    assert 0.0 <= contact.fraction - exact <= 2.0**-20
-
-
-def test_a_point_past_b_of_a_triangle_leaning_past_b_is_nearest_to_edge_bc():
-    """Ericson's edge-ab region needs the point on a's side of b (d3 <= 0). Where c leans past b along ab (an
-    obtuse angle at b), a point just past b lies in edge bc's region, and its true distance is larger than
-    its distance to the line through a and b: taking edge ab there would report the body too close."""
-    from trimesh.triangles import closest_point
-
-    triangle = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [3.0, 1.0, 0.0]])
-    points = np.array([[1.5, -0.5, 0.0], [1.2, -0.1, 0.3], [1.9, -0.2, -0.4], [1.05, -0.9, 0.0]])
-    for point in points:
-        expected = np.linalg.norm(point - closest_point(triangle[None], point[None])[0])
-        assert point_triangle_distance(point, triangle[None])[0] == pytest.approx(expected, rel=1e-12)
-    assert point_triangle_distance(points[0], triangle[None])[0] == pytest.approx(math.sqrt(0.45))
-
-
-def test_contact_is_found_within_a_millionth_of_the_step_past_the_first_touch(wall_scene):
-    """20 halvings of the step: the contact returned touches, and lies at most 2**-20 of the step past the
-    exact first touching position (here 9.6 m along a 12 m step, a fraction of 0.8)."""
-    collider = Collider(wall_scene.mesh, RADIUS)
-    contact = collider.sweep((0.0, 0.0, 4.0), (0.0, 12.0, 4.0))
-    exact = (WALL_FACE_Y - RADIUS) / 12.0
-    assert 0.0 <= contact.fraction - exact <= 2**-20 + 1e-12
