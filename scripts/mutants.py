@@ -106,7 +106,7 @@ MODULES = [
     Module(
         "map stream",
         ["vehicle/protocol/mapstream.py"],
-        ["tests/test_mapstream.py", "tests/test_regressions_mapstream.py"],
+        ["tests/test_mapstream.py"],
         focus={
             "vehicle/protocol/mapstream.py": [
                 "MapStreamer.tick",

@@ -65,6 +65,42 @@ def assert_equal_maps(receiver, memory):
     assert np.array_equal(receiver.grid, memory.grid)
 
 
+def synced_receiver(stream: Stream) -> MapReceiver:
+    receiver = MapReceiver()
+    feed(receiver, stream.run(1) + stream.streamer.snapshot())
+    assert receiver.synced
+    return receiver
+
+
+def zlib_raw(data: bytes) -> bytes:
+    import zlib
+
+    packer = zlib.compressobj(9, zlib.DEFLATED, -15)
+    return packer.compress(data) + packer.flush()
+
+
+def _snapshot(size=4, resolution=1.0, origin=(0.0, 0.0), last=0, box=(0, 0, 1, 1), cells=b"\x05", ident=1):
+    from vehicle.protocol.mapstream import _SNAPSHOT, snapshot_chunks
+
+    head = _SNAPSHOT.pack(1, size, resolution, *origin, last, *box)
+    return snapshot_chunks(ident, head + zlib.compress(cells, 6))
+
+
+def _delta(seq, indices, values):
+    from vehicle.protocol.mapstream import _DELTA, _deflate, _varints
+
+    gaps = np.diff(np.asarray(indices, dtype=np.int64), prepend=0)
+    return MAP_DELTA, _DELTA.pack(seq, len(indices)) + _deflate(_varints(gaps) + bytes(np.int8(values).tobytes()))
+
+
+def _fed(*payloads) -> MapReceiver:
+    receiver = MapReceiver()
+    for kind, payload in payloads:
+        assert receiver.feed(kind, payload)
+    return receiver
+
+
+# ---- snapshots and deltas: the copy equals the map -------------------------------------------
 def test_a_receiver_fed_everything_equals_the_map_cell_for_cell():
     stream = Stream()
     receiver = MapReceiver()
@@ -96,6 +132,27 @@ def test_snapshots_come_now_and_then_and_deltas_in_between():
     delta_ticks = [i for i, out in enumerate(ticks) if any(k == MAP_DELTA for k, _ in out)]
     assert len(snapshot_ticks) in (2, 3)  # at about 0, 5 and 10 s
     assert len(delta_ticks) >= 12 / 0.5 - 2
+
+
+def test_deltas_go_out_every_delta_period_and_snapshots_keep_within_their_budget():
+    """Deltas every half second (not at every tick); a big map's snapshots are spaced so that they use at most
+    snapshot_budget bytes a second on average."""
+    stream = Stream(seed=8, snapshot_period=1.0, snapshot_budget=2000.0)
+    times = {MAP_DELTA: [], MAP_SNAPSHOT: []}
+    sizes = []
+    for _ in range(round(30 / STEP)):
+        out = stream.tick(scans=3)
+        snapshot = [p for k, p in out if k == MAP_SNAPSHOT]
+        if snapshot:  # a snapshot sends the changes pending before it as deltas too
+            times[MAP_SNAPSHOT].append(stream.time)
+            sizes.append(len(snapshot) * PAYLOAD)
+        elif any(k == MAP_DELTA for k, _ in out):
+            times[MAP_DELTA].append(stream.time)
+    assert len(times[MAP_DELTA]) > 30 and np.diff(times[MAP_DELTA]).min() == pytest.approx(0.5)
+    gaps = np.diff(times[MAP_SNAPSHOT])
+    assert len(gaps) >= 3 and max(sizes) > 2000  # bigger than a second of the budget: spaced further apart
+    for gap, size in zip(gaps, sizes[:-1], strict=False):
+        assert gap >= max(1.0, size / 2000.0) - 1e-9
 
 
 def test_a_receiver_that_joins_late_catches_up_at_the_next_snapshot():
@@ -131,6 +188,19 @@ def test_a_receiver_that_loses_a_tenth_of_the_deltas_resyncs_at_the_next_snapsho
     assert_equal_maps(receiver, stream.map)
 
 
+def test_snapshots_that_lost_a_chunk_are_dropped_once_a_newer_one_gets_further():
+    """Parts of snapshots that will never complete are kept only until a newer snapshot gets further."""
+    stream = Stream(seed=14, space_size=40.0)
+    stream.run(10)
+    receiver = MapReceiver()
+    for _ in range(5):
+        snapshot = [(k, p) for k, p in stream.streamer.snapshot() if k == MAP_SNAPSHOT]
+        feed(receiver, snapshot[:-1])  # the last chunk of each is lost
+    assert len(receiver._parts) == 5 and not receiver.synced
+    feed(receiver, [(k, p) for k, p in stream.streamer.snapshot() if k == MAP_SNAPSHOT])
+    assert receiver._parts == {} and receiver.synced
+
+
 def test_deltas_that_arrive_before_the_snapshot_they_follow_are_applied():
     stream = Stream(seed=5)
     stream.run(2)
@@ -152,6 +222,91 @@ def test_a_delta_applied_twice_does_no_harm():
     assert_equal_maps(receiver, stream.map)
 
 
+# ---- sequence numbers, gaps and versions -----------------------------------------------------
+def test_an_empty_delta_advances_the_sequence():
+    """A delta of no cells is still a step in the sequence: the one after it is no gap."""
+    stream = Stream(seed=10)
+    receiver = synced_receiver(stream)
+    first = receiver.applied + 1
+    feed(receiver, [(MAP_DELTA, struct.pack("<IH", first, 0) + zlib_raw(b""))])
+    assert receiver.synced and receiver.applied == first and receiver.gaps == 0
+    stream.streamer.delta_seq = first
+    feed(receiver, stream.run(2) + stream.streamer.deltas())
+    assert_equal_maps(receiver, stream.map)
+    assert receiver.gaps == 0
+
+
+def test_the_receiver_counts_payloads_snapshots_gaps_and_versions():
+    stream = Stream(seed=12)
+    receiver = MapReceiver()
+    payloads = stream.run(6)
+    feed(receiver, payloads)
+    assert receiver.payloads == len(payloads)
+    assert receiver.snapshots == sum(struct.unpack_from("<HHH", p)[1] == 0 for k, p in payloads if k == MAP_SNAPSHOT)
+    assert receiver.snapshots >= 2
+    version = receiver.version
+    deltas = [(k, p) for k, p in stream.run(2) if k == MAP_DELTA]
+    assert len(deltas) >= 3
+    feed(receiver, deltas[:1])
+    assert receiver.version == version + 1  # each change shows as a new version (the views redraw on it)
+    feed(receiver, deltas[2:])  # the second one lost
+    assert receiver.gaps == 1 and not receiver.synced  # a gap: no longer in sync
+    assert receiver.version == version + 1  # nothing applied after the gap
+    feed(receiver, stream.streamer.snapshot())
+    assert receiver.synced and receiver.version > version + 1 and receiver.gaps == 1
+
+
+def test_versions_and_gaps_count_one_by_one_and_an_empty_delta_is_applied():
+    receiver = _fed(*_snapshot(last=10))
+    assert (receiver.version, receiver.applied) == (1, 10)
+    receiver.feed(*_delta(11, [], []))  # nothing changed in that period: still the next number
+    assert (receiver.applied, receiver.synced) == (11, True)
+    receiver.feed(*_delta(12, [1, 2], [3, 4]))
+    assert receiver.version == 3 and receiver.grid[0, 1:3].tolist() == [3, 4]
+    receiver.feed(*_delta(14, [1], [1]))  # 13 lost
+    for chunk in _snapshot(last=20, ident=2):
+        receiver.feed(*chunk)
+    receiver.feed(*_delta(22, [1], [1]))  # 21 lost
+    assert receiver.gaps == 2 and receiver.version == 4 and not receiver.synced
+
+
+def _stream():
+    rng = np.random.default_rng(1)
+    memory = MemoryMap((0.0, 0.0), 20, 10)
+    streamer = MapStreamer(memory, (0.0, 0.0))
+    clock = [0.0]
+
+    def run(seconds):
+        out = []
+        for _ in range(round(seconds / 0.25)):
+            origin = np.array([rng.uniform(-8, 8), rng.uniform(-8, 8), 4.0])
+            a = rng.uniform(0, 2 * math.pi, 40)
+            memory.add_readings(np.repeat(origin[None], 40, axis=0), np.column_stack([np.sin(a), np.cos(a),
+                                np.zeros(40)]), rng.uniform(1, 12, 40), np.full(40, 40.0), np.full(40, 0.13))
+            clock[0] += 0.25
+            out += streamer.tick(clock[0])
+        return out
+
+    return memory, streamer, run
+
+
+def test_bug5_one_stray_delta_with_a_far_sequence_number_desyncs_the_receiver_for_good():
+    # The stray delta is kept in _pending; at every later snapshot the pending deltas are replayed,
+    # the stray one is a "gap" again (synced = False, _pending = {stray}), so the receiver never
+    # stays in sync: after 24 s and 5 snapshots its copy still differs from the map.
+    memory, streamer, run = _stream()
+    receiver = MapReceiver()
+    for kind, payload in run(3):
+        receiver.feed(kind, payload)
+    assert receiver.synced
+    receiver.feed(MAP_DELTA, struct.pack("<IH", 10**6, 3) + b"\x01\x02\x03")  # one corrupted/stray packet
+    for kind, payload in run(24) + streamer.deltas():
+        receiver.feed(kind, payload)
+    assert receiver.synced
+    assert np.array_equal(receiver.grid, memory.grid)
+
+
+# ---- damaged and hostile payloads ------------------------------------------------------------
 def test_garbage_payloads_are_ignored_without_exceptions():
     stream = Stream(seed=7)
     receiver = MapReceiver()
@@ -198,148 +353,6 @@ def test_a_snapshot_chunk_from_an_unknown_format_version_is_ignored():
     assert not receiver.synced
 
 
-# ---- the planned path ------------------------------------------------------------------------
-@pytest.mark.parametrize("count", [0, 1, 15, 16, 40])
-def test_a_path_round_trips_relative_to_home(count):
-    memory = MemoryMap(HOME, 20, 10)
-    streamer = MapStreamer(memory, HOME)
-    points = [(HOME[0] + 0.37 * k, HOME[1] - 1.29 * k + 0.004) for k in range(count)]
-    payloads = streamer.path(points)
-    assert all(kind == PATH and len(p) <= PAYLOAD for kind, p in payloads)
-    receiver = MapReceiver()
-    receiver.path = [(99.0, 99.0)]
-    feed(receiver, payloads)
-    assert len(receiver.path) == count
-    for (x, y), (east, north) in zip(points, receiver.path, strict=True):
-        assert east == pytest.approx(x - HOME[0], abs=0.006)
-        assert north == pytest.approx(y - HOME[1], abs=0.006)
-
-
-def test_an_unchanged_path_is_not_sent_again_unless_forced():
-    streamer = MapStreamer(MemoryMap(HOME, 20, 10), HOME)
-    points = [(13.0, -6.0), (15.0, -2.0)]
-    assert streamer.path(points)
-    assert streamer.path(points) == []
-    assert streamer.path(points, force=True)
-    assert streamer.path([*points, (16.0, 0.0)])
-
-
-def test_a_newer_path_replaces_one_half_received():
-    streamer = MapStreamer(MemoryMap(HOME, 20, 10), HOME)
-    old = streamer.path([(HOME[0] + k, HOME[1]) for k in range(30)])
-    new = streamer.path([(HOME[0], HOME[1] + 1.0)])
-    receiver = MapReceiver()
-    feed(receiver, old[:1] + new + old[1:])
-    assert receiver.path == [(0.0, 1.0)]
-
-
-# ---- size ---------------------------------------------------------------------------------------
-def test_a_full_2000_by_2000_map_snapshot_chunks_into_128_byte_payloads():
-    memory = MemoryMap((0.0, 0.0), 100, 10)
-    assert memory.grid.shape == (2000, 2000)
-    rng = np.random.default_rng(11)
-    memory.grid[:] = rng.integers(-3, 31, memory.grid.shape, dtype=np.int8)  # nothing compresses well
-    memory.grid[0, 0] = memory.grid[-1, -1] = 30  # the whole extent is in use
-    chunks = MapStreamer(memory, (0.0, 0.0)).snapshot()
-    assert all(kind == MAP_SNAPSHOT and len(payload) <= PAYLOAD for kind, payload in chunks)
-    receiver = MapReceiver()
-    feed(receiver, chunks)
-    assert_equal_maps(receiver, memory)
-
-
-def test_an_empty_map_streams_and_is_received_as_empty():
-    memory = MemoryMap(HOME, 20, 10)
-    receiver = MapReceiver()
-    feed(receiver, MapStreamer(memory, HOME).tick(0.0))
-    assert_equal_maps(receiver, memory)
-    assert not receiver.grid.any()
-
-
-# ---- against the surviving mutants of issue 14 ------------------------------------------------------------
-def synced_receiver(stream: Stream) -> MapReceiver:
-    receiver = MapReceiver()
-    feed(receiver, stream.run(1) + stream.streamer.snapshot())
-    assert receiver.synced
-    return receiver
-
-
-def test_deltas_go_out_every_delta_period_and_snapshots_keep_within_their_budget():
-    """Deltas every half second (not at every tick); a big map's snapshots are spaced so that they use at most
-    snapshot_budget bytes a second on average."""
-    stream = Stream(seed=8, snapshot_period=1.0, snapshot_budget=2000.0)
-    times = {MAP_DELTA: [], MAP_SNAPSHOT: []}
-    sizes = []
-    for _ in range(round(30 / STEP)):
-        out = stream.tick(scans=3)
-        snapshot = [p for k, p in out if k == MAP_SNAPSHOT]
-        if snapshot:  # a snapshot sends the changes pending before it as deltas too
-            times[MAP_SNAPSHOT].append(stream.time)
-            sizes.append(len(snapshot) * PAYLOAD)
-        elif any(k == MAP_DELTA for k, _ in out):
-            times[MAP_DELTA].append(stream.time)
-    assert len(times[MAP_DELTA]) > 30 and np.diff(times[MAP_DELTA]).min() == pytest.approx(0.5)
-    gaps = np.diff(times[MAP_SNAPSHOT])
-    assert len(gaps) >= 3 and max(sizes) > 2000  # bigger than a second of the budget: spaced further apart
-    for gap, size in zip(gaps, sizes[:-1], strict=False):
-        assert gap >= max(1.0, size / 2000.0) - 1e-9
-
-
-def test_deltas_pack_dozens_of_cells_into_each_payload():
-    """Changed cells lie along beams: a payload carries some 60 to 100 of them (at least 40 here), which keeps
-    the stream small."""
-    stream = Stream(seed=9)
-    deltas = [p for k, p in stream.run(10) if k == MAP_DELTA]
-    cells = [struct.unpack_from("<IH", p)[1] for p in deltas]
-    assert sum(cells) / len(deltas) >= 40, cells
-    assert all(len(p) <= PAYLOAD for p in deltas)
-
-
-def test_cells_far_apart_on_a_full_size_map_travel_in_one_delta():
-    """Index gaps of millions of cells (a 2000 x 2000 map) take 4-byte varints, which the receiver reads."""
-    memory = MemoryMap((0.0, 0.0), 100.0, 10.0)
-    streamer = MapStreamer(memory, (0.0, 0.0))
-    receiver = MapReceiver()
-    feed(receiver, streamer.snapshot())
-    memory.grid[0, 0] = 9
-    memory.grid[1999, 1999] = -3
-    memory._note_changes(np.array([0, 1999 * 2000 + 1999]))
-    payloads = streamer.deltas()
-    assert len(payloads) == 1
-    feed(receiver, payloads)
-    assert receiver.synced and receiver.applied == 1 and np.array_equal(receiver.grid, memory.grid)
-    assert receiver.grid.dtype == np.int8  # the copy holds int8 log-odds like the onboard map
-
-
-def test_the_path_goes_out_to_the_centimetre_and_its_id_wraps_round():
-    streamer = MapStreamer(MemoryMap((0.0, 0.0), 10.0, 1.0), (1.0, 2.0))
-    streamer.path_id = 65535
-    ((kind, payload),) = streamer.path([(4.123456, 5.987654)])
-    ident, index, count = struct.unpack_from("<HBB", payload)
-    assert (kind, ident, index, count) == (PATH, 0, 0, 1)
-    x, y = struct.unpack_from("<ff", payload, 4)
-    assert (x, y) == (pytest.approx(3.12, abs=1e-6), pytest.approx(3.99, abs=1e-6))
-
-
-def test_an_empty_delta_advances_the_sequence():
-    """A delta of no cells is still a step in the sequence: the one after it is no gap."""
-    stream = Stream(seed=10)
-    receiver = synced_receiver(stream)
-    first = receiver.applied + 1
-    feed(receiver, [(MAP_DELTA, struct.pack("<IH", first, 0) + zlib_raw(b""))])
-    assert receiver.synced and receiver.applied == first and receiver.gaps == 0
-    stream.streamer.delta_seq = first
-    feed(receiver, stream.run(2) + stream.streamer.deltas())
-    assert_equal_maps(receiver, stream.map)
-    assert receiver.gaps == 0
-
-
-def zlib_raw(data: bytes) -> bytes:
-    import zlib
-
-    packer = zlib.compressobj(9, zlib.DEFLATED, -15)
-    return packer.compress(data) + packer.flush()
-
-
 def test_a_delta_with_bytes_after_its_values_applies_its_count_of_cells():
     stream = Stream(seed=11)
     receiver = synced_receiver(stream)
@@ -347,26 +360,6 @@ def test_a_delta_with_bytes_after_its_values_applies_its_count_of_cells():
     body = bytes([5, 1]) + bytes([7, 8]) + b"\x09\x09\x09"  # cells 5 and 6 get 7 and 8; three bytes too many
     feed(receiver, [(MAP_DELTA, struct.pack("<IH", seq, 2) + zlib_raw(body))])
     assert receiver.applied == seq and receiver.grid.reshape(-1)[5:7].tolist() == [7, 8]
-
-
-def test_the_receiver_counts_payloads_snapshots_gaps_and_versions():
-    stream = Stream(seed=12)
-    receiver = MapReceiver()
-    payloads = stream.run(6)
-    feed(receiver, payloads)
-    assert receiver.payloads == len(payloads)
-    assert receiver.snapshots == sum(struct.unpack_from("<HHH", p)[1] == 0 for k, p in payloads if k == MAP_SNAPSHOT)
-    assert receiver.snapshots >= 2
-    version = receiver.version
-    deltas = [(k, p) for k, p in stream.run(2) if k == MAP_DELTA]
-    assert len(deltas) >= 3
-    feed(receiver, deltas[:1])
-    assert receiver.version == version + 1  # each change shows as a new version (the views redraw on it)
-    feed(receiver, deltas[2:])  # the second one lost
-    assert receiver.gaps == 1 and not receiver.synced  # a gap: no longer in sync
-    assert receiver.version == version + 1  # nothing applied after the gap
-    feed(receiver, stream.streamer.snapshot())
-    assert receiver.synced and receiver.version > version + 1 and receiver.gaps == 1
 
 
 def test_a_receiver_without_a_snapshot_keeps_only_the_latest_4096_deltas():
@@ -396,47 +389,26 @@ def test_a_stray_chunk_numbered_past_its_count_spoils_no_snapshot_or_path():
     assert len(receiver.path) == 20
 
 
-def test_snapshots_that_lost_a_chunk_are_dropped_once_a_newer_one_gets_further():
-    """Parts of snapshots that will never complete are kept only until a newer snapshot gets further."""
-    stream = Stream(seed=14, space_size=40.0)
-    stream.run(10)
+def test_bug4_a_path_chunk_with_an_index_past_its_count_is_dropped_and_the_next_path_still_arrives():
+    """MapReceiver._path_chunk once stored {5: []}, saw len(parts) == count == 1 and read parts[0]: a KeyError
+    that feed() did not catch, so one hostile packet ended the link thread."""
     receiver = MapReceiver()
-    for _ in range(5):
-        snapshot = [(k, p) for k, p in stream.streamer.snapshot() if k == MAP_SNAPSHOT]
-        feed(receiver, snapshot[:-1])  # the last chunk of each is lost
-    assert len(receiver._parts) == 5 and not receiver.synced
-    feed(receiver, [(k, p) for k, p in stream.streamer.snapshot() if k == MAP_SNAPSHOT])
-    assert receiver._parts == {} and receiver.synced
+    assert receiver.feed(PATH, struct.pack("<HBB", 1, 5, 1))  # ours, but damaged: dropped
+    assert receiver.path == [] and receiver.payloads == 1
+    assert receiver.feed(PATH, struct.pack("<HBBff", 2, 0, 1, 1.5, -2.0))
+    assert receiver.path == [(1.5, -2.0)]
 
 
-# ---- against the surviving mutants of issue 14, after the merge ---------------------------------------------
-def _snapshot(size=4, resolution=1.0, origin=(0.0, 0.0), last=0, box=(0, 0, 1, 1), cells=b"\x05", ident=1):
-    from vehicle.protocol.mapstream import _SNAPSHOT, snapshot_chunks
-
-    head = _SNAPSHOT.pack(1, size, resolution, *origin, last, *box)
-    return snapshot_chunks(ident, head + zlib.compress(cells, 6))
-
-
-def _delta(seq, indices, values):
-    from vehicle.protocol.mapstream import _DELTA, _deflate, _varints
-
-    gaps = np.diff(np.asarray(indices, dtype=np.int64), prepend=0)
-    return MAP_DELTA, _DELTA.pack(seq, len(indices)) + _deflate(_varints(gaps) + bytes(np.int8(values).tobytes()))
-
-
-def _fed(*payloads) -> MapReceiver:
+def test_bug4_a_snapshot_chunk_with_an_index_past_its_count_is_dropped_and_the_next_snapshot_still_applies():
+    """MapReceiver._snapshot_chunk: the same pattern, b"".join(parts[i] for i in range(count)) -> KeyError."""
     receiver = MapReceiver()
-    for kind, payload in payloads:
-        assert receiver.feed(kind, payload)
-    return receiver
-
-
-@pytest.mark.parametrize("number", [0, 1, 127, 128, 129, 255, 16383, 16384, 2**28 - 1, 2**28, 2**35 - 1])
-def test_one_varint_reads_back_as_its_number_at_every_length_boundary(number):
-    from vehicle.protocol.mapstream import _read_varints, _varint, _varints
-
-    assert _varint(number) == _varints(np.array([number]))
-    assert _read_varints(_varint(number) + b"\x07", 1) == (np.array([number]), len(_varint(number)))
+    assert receiver.feed(MAP_SNAPSHOT, struct.pack("<HHH", 1, 3, 1) + b"x")
+    assert receiver.grid is None and not receiver.synced and receiver.snapshots == 0 and receiver.payloads == 1
+    memory = MemoryMap((0.0, 0.0), 5, 2)
+    memory.add_reading(np.array([0.0, 0.0, 4.0]), np.array([1.0, 0.0, 0.0]), 3.0, 40.0)
+    for kind, payload in MapStreamer(memory, (0.0, 0.0)).snapshot():
+        receiver.feed(kind, payload)
+    assert receiver.synced and receiver.snapshots == 1 and np.array_equal(receiver.grid, memory.grid)
 
 
 @pytest.mark.parametrize(
@@ -479,20 +451,6 @@ def test_a_snapshot_part_reaching_past_the_map_is_refused(box):
     assert not _fed(*_snapshot(box=box, cells=b"\x05\x05")).synced
 
 
-def test_versions_and_gaps_count_one_by_one_and_an_empty_delta_is_applied():
-    receiver = _fed(*_snapshot(last=10))
-    assert (receiver.version, receiver.applied) == (1, 10)
-    receiver.feed(*_delta(11, [], []))  # nothing changed in that period: still the next number
-    assert (receiver.applied, receiver.synced) == (11, True)
-    receiver.feed(*_delta(12, [1, 2], [3, 4]))
-    assert receiver.version == 3 and receiver.grid[0, 1:3].tolist() == [3, 4]
-    receiver.feed(*_delta(14, [1], [1]))  # 13 lost
-    for chunk in _snapshot(last=20, ident=2):
-        receiver.feed(*chunk)
-    receiver.feed(*_delta(22, [1], [1]))  # 21 lost
-    assert receiver.gaps == 2 and receiver.version == 4 and not receiver.synced
-
-
 def test_a_delta_may_change_every_cell_but_not_one_more_nor_go_back():
     whole = _fed(*_snapshot(size=2, box=(0, 0, 2, 2), cells=b"\x00" * 4))
     whole.feed(*_delta(1, [0, 1, 2, 3], [1, 2, 3, 4]))
@@ -502,14 +460,6 @@ def test_a_delta_may_change_every_cell_but_not_one_more_nor_go_back():
 
     back.feed(MAP_DELTA, _DELTA.pack(1, 2) + _deflate(_varints(np.array([3, 0])) + b"\x01\x02"))  # 3, then 3 again
     assert back.applied == 0 and not back.grid.any()
-
-
-def test_a_path_point_with_either_coordinate_not_finite_is_dropped():
-    from vehicle.protocol.mapstream import _POINT, PATH_CHUNK
-
-    points = [(1.0, 2.0), (float("nan"), 3.0), (4.0, float("inf")), (5.0, 6.0)]
-    receiver = _fed((PATH, PATH_CHUNK.pack(1, 0, 1) + b"".join(_POINT.pack(*p) for p in points)))
-    assert receiver.path == [(1.0, 2.0), (5.0, 6.0)]
 
 
 def test_a_snapshot_that_inflates_past_its_box_is_refused_without_inflating_it():
@@ -526,31 +476,6 @@ def test_a_snapshot_that_inflates_past_its_box_is_refused_without_inflating_it()
     assert not receiver.synced and peak < 5_000_000
 
 
-def test_delta_payloads_are_filled_before_another_is_started():
-    from vehicle.protocol.mapstream import DELTA_ROOM
-
-    grid = MemoryMap((0.0, 0.0), space_size=50.0, resolution=1.0)
-    streamer = MapStreamer(grid, (0.0, 0.0))
-    rng = np.random.default_rng(4)
-    cells = np.sort(rng.choice(grid.grid.size, 3000, replace=False))
-    grid.grid.reshape(-1)[cells] = rng.integers(-8, 8, 3000)
-    grid._note_changes(cells)
-    payloads = streamer.deltas()
-    sizes = [len(p) - 6 for _, p in payloads]
-    assert len(payloads) > 5 and max(sizes) <= DELTA_ROOM
-    assert min(sizes[1:-1]) >= 0.8 * DELTA_ROOM  # from a first guess on, all but the last nearly full
-
-
-def test_a_snapshot_is_cut_into_at_most_65535_chunks():
-    from vehicle.protocol.mapstream import SNAPSHOT_CHUNK, snapshot_chunks
-
-    room = PAYLOAD - SNAPSHOT_CHUNK.size
-    assert len(snapshot_chunks(1, bytes(65535 * room))) == 65535
-    with pytest.raises(ValueError, match="^map snapshot too large to chunk$"):
-        snapshot_chunks(1, bytes(65535 * room + 1))
-
-
-# ---- against the mutants still open after the focus (issue 14) ------------------------------------------------
 def test_a_snapshot_whose_compressed_part_lacks_its_checksum_is_refused():
     """A zlib stream ends with the Adler-32 of what it holds: a snapshot part without it is cut short, and is
     refused even though every cell it claims inflates (nothing vouches for them); whole, it is taken."""
@@ -581,6 +506,68 @@ def test_a_delta_whose_deflate_stream_never_ends_is_dropped():
     assert (receiver.applied, receiver.version) == (11, 2) and receiver.grid[0, 1:3].tolist() == [3, 4]
 
 
+# ---- the planned path ------------------------------------------------------------------------
+@pytest.mark.parametrize("count", [0, 1, 15, 16, 40])
+def test_a_path_round_trips_relative_to_home(count):
+    memory = MemoryMap(HOME, 20, 10)
+    streamer = MapStreamer(memory, HOME)
+    points = [(HOME[0] + 0.37 * k, HOME[1] - 1.29 * k + 0.004) for k in range(count)]
+    payloads = streamer.path(points)
+    assert all(kind == PATH and len(p) <= PAYLOAD for kind, p in payloads)
+    receiver = MapReceiver()
+    receiver.path = [(99.0, 99.0)]
+    feed(receiver, payloads)
+    assert len(receiver.path) == count
+    for (x, y), (east, north) in zip(points, receiver.path, strict=True):
+        assert east == pytest.approx(x - HOME[0], abs=0.006)
+        assert north == pytest.approx(y - HOME[1], abs=0.006)
+
+
+def test_an_unchanged_path_is_not_sent_again_unless_forced():
+    streamer = MapStreamer(MemoryMap(HOME, 20, 10), HOME)
+    points = [(13.0, -6.0), (15.0, -2.0)]
+    assert streamer.path(points)
+    assert streamer.path(points) == []
+    assert streamer.path(points, force=True)
+    assert streamer.path([*points, (16.0, 0.0)])
+
+
+def test_a_newer_path_replaces_one_half_received():
+    streamer = MapStreamer(MemoryMap(HOME, 20, 10), HOME)
+    old = streamer.path([(HOME[0] + k, HOME[1]) for k in range(30)])
+    new = streamer.path([(HOME[0], HOME[1] + 1.0)])
+    receiver = MapReceiver()
+    feed(receiver, old[:1] + new + old[1:])
+    assert receiver.path == [(0.0, 1.0)]
+
+
+def test_the_path_goes_out_to_the_centimetre_and_its_id_wraps_round():
+    streamer = MapStreamer(MemoryMap((0.0, 0.0), 10.0, 1.0), (1.0, 2.0))
+    streamer.path_id = 65535
+    ((kind, payload),) = streamer.path([(4.123456, 5.987654)])
+    ident, index, count = struct.unpack_from("<HBB", payload)
+    assert (kind, ident, index, count) == (PATH, 0, 0, 1)
+    x, y = struct.unpack_from("<ff", payload, 4)
+    assert (x, y) == (pytest.approx(3.12, abs=1e-6), pytest.approx(3.99, abs=1e-6))
+
+
+def test_a_path_point_with_either_coordinate_not_finite_is_dropped():
+    from vehicle.protocol.mapstream import _POINT, PATH_CHUNK
+
+    points = [(1.0, 2.0), (float("nan"), 3.0), (4.0, float("inf")), (5.0, 6.0)]
+    receiver = _fed((PATH, PATH_CHUNK.pack(1, 0, 1) + b"".join(_POINT.pack(*p) for p in points)))
+    assert receiver.path == [(1.0, 2.0), (5.0, 6.0)]
+
+
+# ---- the wire format -------------------------------------------------------------------------
+@pytest.mark.parametrize("number", [0, 1, 127, 128, 129, 255, 16383, 16384, 2**28 - 1, 2**28, 2**35 - 1])
+def test_one_varint_reads_back_as_its_number_at_every_length_boundary(number):
+    from vehicle.protocol.mapstream import _read_varints, _varint, _varints
+
+    assert _varint(number) == _varints(np.array([number]))
+    assert _read_varints(_varint(number) + b"\x07", 1) == (np.array([number]), len(_varint(number)))
+
+
 @pytest.mark.parametrize("space_size", [4.5, 8.5])
 def test_a_map_whose_side_is_no_multiple_of_8_cells_is_snapshot_cell_for_cell(space_size):
     """Rows are read 8 cells to a machine word only where they hold whole words: a map 9 or 17 cells a side is
@@ -608,3 +595,75 @@ def test_the_snapshot_of_an_empty_map_names_an_empty_part_at_the_first_cell(spac
     memory = MemoryMap((0.0, 0.0), space_size, 1.0)
     ident, head, part = MapStreamer(memory, (0.0, 0.0)).snapshot_parts()
     assert _SNAPSHOT.unpack(head)[-4:] == (0, 0, 0, 0) and part == b""
+
+
+# ---- size ---------------------------------------------------------------------------------------
+def test_a_full_2000_by_2000_map_snapshot_chunks_into_128_byte_payloads():
+    memory = MemoryMap((0.0, 0.0), 100, 10)
+    assert memory.grid.shape == (2000, 2000)
+    rng = np.random.default_rng(11)
+    memory.grid[:] = rng.integers(-3, 31, memory.grid.shape, dtype=np.int8)  # nothing compresses well
+    memory.grid[0, 0] = memory.grid[-1, -1] = 30  # the whole extent is in use
+    chunks = MapStreamer(memory, (0.0, 0.0)).snapshot()
+    assert all(kind == MAP_SNAPSHOT and len(payload) <= PAYLOAD for kind, payload in chunks)
+    receiver = MapReceiver()
+    feed(receiver, chunks)
+    assert_equal_maps(receiver, memory)
+
+
+def test_an_empty_map_streams_and_is_received_as_empty():
+    memory = MemoryMap(HOME, 20, 10)
+    receiver = MapReceiver()
+    feed(receiver, MapStreamer(memory, HOME).tick(0.0))
+    assert_equal_maps(receiver, memory)
+    assert not receiver.grid.any()
+
+
+def test_deltas_pack_dozens_of_cells_into_each_payload():
+    """Changed cells lie along beams: a payload carries some 60 to 100 of them (at least 40 here), which keeps
+    the stream small."""
+    stream = Stream(seed=9)
+    deltas = [p for k, p in stream.run(10) if k == MAP_DELTA]
+    cells = [struct.unpack_from("<IH", p)[1] for p in deltas]
+    assert sum(cells) / len(deltas) >= 40, cells
+    assert all(len(p) <= PAYLOAD for p in deltas)
+
+
+def test_cells_far_apart_on_a_full_size_map_travel_in_one_delta():
+    """Index gaps of millions of cells (a 2000 x 2000 map) take 4-byte varints, which the receiver reads."""
+    memory = MemoryMap((0.0, 0.0), 100.0, 10.0)
+    streamer = MapStreamer(memory, (0.0, 0.0))
+    receiver = MapReceiver()
+    feed(receiver, streamer.snapshot())
+    memory.grid[0, 0] = 9
+    memory.grid[1999, 1999] = -3
+    memory._note_changes(np.array([0, 1999 * 2000 + 1999]))
+    payloads = streamer.deltas()
+    assert len(payloads) == 1
+    feed(receiver, payloads)
+    assert receiver.synced and receiver.applied == 1 and np.array_equal(receiver.grid, memory.grid)
+    assert receiver.grid.dtype == np.int8  # the copy holds int8 log-odds like the onboard map
+
+
+def test_delta_payloads_are_filled_before_another_is_started():
+    from vehicle.protocol.mapstream import DELTA_ROOM
+
+    grid = MemoryMap((0.0, 0.0), space_size=50.0, resolution=1.0)
+    streamer = MapStreamer(grid, (0.0, 0.0))
+    rng = np.random.default_rng(4)
+    cells = np.sort(rng.choice(grid.grid.size, 3000, replace=False))
+    grid.grid.reshape(-1)[cells] = rng.integers(-8, 8, 3000)
+    grid._note_changes(cells)
+    payloads = streamer.deltas()
+    sizes = [len(p) - 6 for _, p in payloads]
+    assert len(payloads) > 5 and max(sizes) <= DELTA_ROOM
+    assert min(sizes[1:-1]) >= 0.8 * DELTA_ROOM  # from a first guess on, all but the last nearly full
+
+
+def test_a_snapshot_is_cut_into_at_most_65535_chunks():
+    from vehicle.protocol.mapstream import SNAPSHOT_CHUNK, snapshot_chunks
+
+    room = PAYLOAD - SNAPSHOT_CHUNK.size
+    assert len(snapshot_chunks(1, bytes(65535 * room))) == 65535
+    with pytest.raises(ValueError, match="^map snapshot too large to chunk$"):
+        snapshot_chunks(1, bytes(65535 * room + 1))
