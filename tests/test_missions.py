@@ -27,6 +27,7 @@ from vehicle.protocol.modes import DISARMED
 from vehicle.sim.onboard import SimController
 from vehicle.sim.physics import Limits
 from vehicle.sim.simulation import Simulation
+from vehicle.world.scene import parse_scene
 
 GROUND = (0, 0, -0.05, 80, 80, 0.1)
 SMALL = {"space_size": 20, "time_limit": 200}
@@ -48,6 +49,16 @@ def enclosure(cx, cy, side):
 def scene_of(make_scene, box):
     """A Scene of the ground and the given boxes (tuples for ``box``)."""
     return lambda *boxes: make_scene(*(box(*b) for b in (GROUND, *boxes)))
+
+
+def box(x, y, z, sx, sy, sz):
+    """The VRML text of a Box, as the ``box`` fixture gives it, for helpers that build a scene without fixtures."""
+    return f"Transform {{ translation {x} {y} {z} children Shape {{ geometry Box {{ size {sx} {sy} {sz} }} }} }}\n"
+
+
+def scene(*walls):
+    """A Scene of the ground and the given boxes (tuples for ``box``), built without fixtures."""
+    return parse_scene("#VRML V2.0 utf8\n" + box(0, 0, -0.05, 80, 80, 0.1) + "".join(box(*w) for w in walls))
 
 
 class Track:
@@ -130,6 +141,16 @@ def test_browse_in_an_empty_scene_finishes_with_nothing_detected(scene_of):
     assert result["distance_m"] == 0
 
 
+def test_browse_with_a_servo_sweeps_the_sonar_and_turns_the_vehicle_only_between_sweeps(scene_of):
+    track = Track()
+    experiment = Experiment("test.wrl", "browse", "copter", settings=Settings(**SMALL), sensors="servo")
+    result = run_experiment(experiment, scene=scene_of(wall(0, 4, 8, 0.2)), on_step=track)
+    assert result["outcome"] == "finished", result["reason"]
+    assert result["detections"] >= 10
+    assert math.radians(150) < track.turned < math.radians(200)  # two sweeps with about a half-turn between them
+    assert track.world.servo.angle() == pytest.approx(0.0, abs=1.0)  # centred again
+
+
 # ---- square -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("vehicle", ["copter", "rover"])
 def test_square_flies_its_corners_and_finishes_home(scene_of, vehicle):
@@ -153,6 +174,42 @@ def test_square_with_a_wall_across_a_leg_stops_safely_and_gets_home(scene_of, ve
     assert track.world.collision is None
     assert home_distance(result) < 0.5
     assert result["detections"] > 0
+
+
+def test_bug1_square_without_avoidance_collides_on_the_way_home():
+    # the monitor stops the square in front of a wall across its east leg; homing then plans a
+    # straight line home that grazes the wall end (path_clear skips the margin) and, with the
+    # autopilot's avoidance off, creeps into it scan after scan
+    def no_avoidance(stepper, readings):
+        stepper.simulation.autopilot.avoidance = None
+
+    result = run_experiment(Experiment("x", "square", settings=Settings(space_size=20, time_limit=200)),
+                            scene=scene((5, 0, 2, 4, 0.2, 6)), on_step=no_avoidance)
+    assert result["outcome"] != "collision", result["reason"]
+
+
+def test_bug3_the_monitor_lets_the_vehicle_get_well_inside_the_safety_distance():
+    # The monitor must stop the vehicle before it gets closer than the safety distance. With closeness 2 m
+    # and the autopilot's avoidance off, a copter on the square's east leg was flagged at 1.7 m and came
+    # to rest 0.51 m (centre) from the wall face: the monitor only reacted once inside `closeness`,
+    # ignoring the braking distance (v^2 / 2a = 1.25 m at 2.5 m/s) and the monitor period (0.25 s = 0.6 m).
+    settings = Settings(space_size=20, time_limit=200)
+    stepper = simulate(scene((5, 0, 2, 4, 0.2, 6)), "square", "copter", settings)
+    world, agent = stepper.simulation, stepper.agent
+    world.autopilot.avoidance = None
+    closest = math.inf
+    while world.time < 60 and agent.phase.value in ("preflight", "takeoff", "mission"):
+        stepper.step()
+        if 3 < world.pose.x < 7:
+            closest = min(closest, abs(world.pose.y - 0.1))
+    for _ in range(100):  # and while it brakes after the stop (not the trip home past the wall's end)
+        if world.body.speed < 0.7:
+            break
+        stepper.step()
+        if 3 < world.pose.x < 7:
+            closest = min(closest, abs(world.pose.y - 0.1))
+    assert agent.outcome == "stopped"
+    assert closest >= settings.closeness - world.limits.radius, closest
 
 
 # ---- pathfind ---------------------------------------------------------------------------------
@@ -190,6 +247,16 @@ def test_pathfind_flies_the_waypoints_it_is_given(scene_of):
     assert min(track.closest[2:]) > 1.0  # not the default square
     reached = [m for m in result["messages"] if "reached waypoint" in m]
     assert reached == ["Pathfind: reached waypoint 1", "Pathfind: reached waypoint 2"]
+
+
+def test_bug1_pathfind_livelocks_at_a_wall_end():
+    # a 4 m wall between home and a waypoint 14 m north; closeness 1 m. Straightforward detour, yet
+    # the copter stops/scans/replans at (2.2, 4.15) every ~9.5 s until its time budget runs out
+    result = run_experiment(Experiment("x", "pathfind", settings=Settings(space_size=20, time_limit=300,
+                                                                           closeness=1.0),
+                                       waypoints=[(0.0, 14.0)]), scene=scene((0, 5, 2, 4, 0.2, 6)))
+    assert result["outcome"] == "finished", result["reason"]
+    assert result["sim_time_s"] < 120
 
 
 # ---- search -----------------------------------------------------------------------------------
@@ -418,6 +485,28 @@ def test_resume_hands_control_back_to_the_agent(scene_of):
     assert not flight.agent.paused  # its own mode change does not count as the operator's
 
 
+def _pause_and_resume(flight, stop_mode="BRAKE"):
+    flight.run(30, until=lambda: flight.agent.phase.value == "mission")
+    flight.run(3)
+    flight.world.autopilot.set_mode(stop_mode, source="gcs")
+    flight.run(5)
+    assert flight.agent.paused
+    assert flight.agent.resume()
+    flight.run(120, until=lambda: flight.agent.done)
+
+
+def test_bug2_resumed_pathfind_continues_to_its_waypoints():
+    flight = Flight(scene((0, 6, 2, 8, 0.2, 6)), "pathfind", waypoints=[(0.0, 3.0), (5.0, 3.0)])
+    _pause_and_resume(flight)
+    assert flight.agent.done and flight.agent.outcome == "finished", (flight.agent.outcome, flight.agent.reason)
+
+
+def test_bug2_resumed_browse_finishes_its_turn():
+    flight = Flight(scene((0, 6, 2, 8, 0.2, 6)), "browse")
+    _pause_and_resume(flight)
+    assert flight.agent.done and flight.agent.outcome == "finished", (flight.agent.outcome, flight.agent.reason)
+
+
 def test_time_the_operator_held_the_vehicle_does_not_count_against_the_missions_time_limit(scene_of):
     """Held in BRAKE for longer than the whole time limit, then resumed: the mission flies on from where it
     was, with the time it had left (it gave up at once, "time used", and went home)."""
@@ -451,6 +540,23 @@ def test_an_auto_mission_resumes_when_the_operator_switches_back_to_auto_and_sta
     assert flight.run(120, until=lambda: flight.agent.done)
     assert flight.agent.outcome == "finished", flight.agent.reason
     assert math.dist(flight.xy, (0.0, 0.0)) < 0.5
+
+
+def test_bug2_auto_and_mission_start_within_one_monitor_period_pause_the_agent_again():
+    # The endpoint's AUTO (set_mode source "gcs") + MISSION_START (agent.resume()) arriving in the same
+    # 0.25 s monitor period: resume() does not take the operator's AUTO as seen (_mode_changes), so the
+    # next Agent.step() treats it as a new takeover and pauses again ("paused, operator switched to AUTO").
+    # The square then flies on unmonitored and the agent never finishes.
+    flight = Flight(scene((0, 6, 2, 8, 0.2, 6)), "square")
+    flight.run(8)
+    flight.world.autopilot.set_mode("BRAKE", source="gcs")
+    flight.run(3)
+    assert flight.agent.paused
+    flight.world.autopilot.set_mode("AUTO", source="gcs")
+    flight.world.autopilot.start_mission()
+    assert flight.agent.resume()
+    flight.run(1)
+    assert not flight.agent.paused, flight.agent.messages[-2:]
 
 
 # ---- planning through the Context -------------------------------------------------------------
@@ -494,6 +600,27 @@ def crossing_x(path, start, y):
     return None
 
 
+def context_near_wall(position):
+    settings = Settings(space_size=20)
+    world = Simulation(scene(), "copter")
+    grid = MemoryMap((0.0, 0.0), 20, 10)
+    (r0, c0), (r1, c1) = grid.cell_of(-5, 4.9), grid.cell_of(5, 5.1)
+    grid.grid[:r0, :] = MemoryMap.FREE_AT  # the sonar saw the space south of the wall free
+    grid.grid[r0:r1 + 1, c0:c1 + 1] = MemoryMap.LIMIT  # a known wall, y 4.9..5.1, x -5..5
+    ctx = Context(SimController(world), grid, Monitor(settings, grid, (0, 0), 0.3), settings, say=lambda t: None)
+    world.body.pose.x, world.body.pose.y = position
+    return ctx
+
+
+def crosses_wall(chain):
+    for (ax, ay), (bx, by) in zip(chain[:-1], chain[1:], strict=False):
+        for t in np.linspace(0, 1, 400):
+            x, y = ax + (bx - ax) * t, ay + (by - ay) * t
+            if abs(x) <= 5 + 0.3 and 4.9 - 0.3 <= y <= 5.1 + 0.3:
+                return True
+    return False
+
+
 def test_a_star_plans_around_a_wall(flat_scene):
     planner = Planner(flat_scene)
     planner.mark(-2, 2, 4.9, 5.1)
@@ -524,6 +651,19 @@ def test_a_star_from_right_next_to_a_wall_plans_away_from_it(flat_scene):
     assert planner.clearance(path) >= planner.world.limits.radius
 
 
+def test_bug1_path_clear_says_a_line_through_a_known_wall_is_clear_when_starting_within_the_margin():
+    # vehicle 0.6 m in front of the wall (inside radius + padding = 0.8 m), goal straight behind it
+    ctx = context_near_wall((0.0, 4.3))
+    assert not ctx.path_clear([(0.0, 14.0)], horizon=math.inf, padding=0.5)
+
+
+def test_bug1_plan_from_next_to_a_wall_goes_straight_through_it():
+    ctx = context_near_wall((0.0, 4.4))
+    path, _ = ctx.plan((-8.0, 8.0))
+    assert path is not None
+    assert not crosses_wall([ctx.position, *path]), path
+
+
 def test_a_star_presumes_the_unseen_continuation_of_a_wall(flat_scene):
     seen = Planner(flat_scene)
     seen.mark(-2, 2, 4.9, 5.1)  # the face the sonar saw; what lies beyond its ends is unknown
@@ -536,13 +676,3 @@ def test_a_star_presumes_the_unseen_continuation_of_a_wall(flat_scene):
     known.mark(-2, 2, 4.9, 5.1)
     path, _ = known.ctx.plan((0.0, 10.0))
     assert abs(crossing_x(path, known.ctx.position, 5.0)) < keep - 0.25  # now it may pass closer
-
-
-def test_browse_with_a_servo_sweeps_the_sonar_and_turns_the_vehicle_only_between_sweeps(scene_of):
-    track = Track()
-    experiment = Experiment("test.wrl", "browse", "copter", settings=Settings(**SMALL), sensors="servo")
-    result = run_experiment(experiment, scene=scene_of(wall(0, 4, 8, 0.2)), on_step=track)
-    assert result["outcome"] == "finished", result["reason"]
-    assert result["detections"] >= 10
-    assert math.radians(150) < track.turned < math.radians(200)  # two sweeps with about a half-turn between them
-    assert track.world.servo.angle() == pytest.approx(0.0, abs=1.0)  # centred again
