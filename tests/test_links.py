@@ -53,6 +53,27 @@ def receive(link, count: int, what: str = "messages") -> list:
     return got
 
 
+KEY = bytes(range(32))
+
+
+class Clock:
+    """``links.time`` stand-in: monotonic() is what the test says it is."""
+
+    def __init__(self, now: float = 1000.0):
+        self.now = now
+
+    def monotonic(self) -> float:
+        return self.now
+
+
+def heard_as(socket_: socket.socket) -> tuple[int, int]:
+    """(system, component) of the first packet the socket receives."""
+    data, _ = socket_.recvfrom(65535)
+    message = mavlink.MAVLink(None).parse_buffer(data)[0]
+    return message.get_srcSystem(), message.get_srcComponent()
+
+
+# ---- UDP: each datagram on its own, senders bounded ------------------------------------------
 def test_a_stray_partial_datagram_spoils_neither_another_sender_nor_the_next_datagram(listening):
     """pymavlink runs every sender's bytes into one stream: half a packet from anyone swallowed the next
     packet from everyone. Here each datagram is parsed on its own, per sender."""
@@ -84,6 +105,63 @@ def test_garbage_is_counted_and_the_good_packets_beside_it_still_arrive(listenin
     assert [m.text for m in got if m.get_type() == "STATUSTEXT"] == ["after the garbage"]
     assert link.stats["datagrams"] == 3
     assert link.stats["bad"] >= 1
+
+
+def test_every_garbage_datagram_is_counted_once_and_a_packet_behind_garbage_still_arrives(listening):
+    """Each datagram starts parsing afresh (no prefix error carried over to hide the next one's garbage), and
+    the parser is robust: bytes that are no packet are skipped, the packet after them in the datagram read."""
+    link, port = listening
+    a = Sender(port, 1)
+    try:
+        for _ in range(3):
+            a.send(b"\x00\x01\x02\x03")
+        a.send(b"\x00\x01" + a.packet("behind garbage"))
+        got = []
+        wait_wall(lambda: got.extend(iter(link.recv_msg, None)) or any(m.get_type() == "STATUSTEXT" for m in got), 5)
+        assert [m.text for m in got if m.get_type() != "BAD_DATA"] == ["behind garbage"]
+        assert link.stats == {"datagrams": 4, "bad": 4, "senders forgotten": 0}
+        assert sum(m.get_type() == "BAD_DATA" for m in got) == 4  # handed on too, with where they came from
+        assert all(m._peer == a.address for m in got)
+    finally:
+        a.close()
+
+
+def test_a_datagram_the_parser_chokes_on_counts_as_bad_and_spoils_nothing_else(listening, monkeypatch):
+    link, port = listening
+    choking = links._parser
+
+    def parser():
+        made = choking()
+        real = made.parse_buffer
+        made.parse_buffer = lambda data: real(data) if data != b"boom" else 1 / 0
+        return made
+
+    monkeypatch.setattr(links, "_parser", parser)
+    a = Sender(port, 1)
+    try:
+        a.send(b"boom")
+        a.send(a.packet("after"))
+        a.send(b"boom")
+        a.send(a.packet("again"))
+        got = receive(link, 2)
+        assert [m.text for m in got] == ["after", "again"]
+        assert link.stats["bad"] == 2 and link.stats["datagrams"] == 4  # each choke counted
+    finally:
+        a.close()
+
+
+def test_a_datagram_too_short_for_a_header_is_neither_a_message_nor_bad_data(listening):
+    """Two bytes that begin like a packet: nothing to parse yet, and since a datagram holds whole packets,
+    nothing carried into the next one either."""
+    link, port = listening
+    a = Sender(port, 1)
+    try:
+        a.send(bytes([mavlink.PROTOCOL_MARKER_V2, 9]))
+        a.send(a.packet("next"))
+        got = receive(link, 1)
+        assert [m.text for m in got] == ["next"] and link.stats["bad"] == 0 and link.stats["datagrams"] == 2
+    finally:
+        a.close()
 
 
 def test_replies_go_to_their_sender_and_broadcasts_to_every_sender_heard(listening):
@@ -120,6 +198,22 @@ def test_a_flood_of_senders_is_bounded_and_the_oldest_are_forgotten(listening):
             sender.close()
 
 
+def test_the_sender_forgotten_first_is_the_one_heard_least_recently(listening, monkeypatch):
+    link, port = listening
+    monkeypatch.setattr(links, "MAX_SENDERS", 2)
+    a, b, c = Sender(port, 1), Sender(port, 2), Sender(port, 3)
+    try:
+        for sender in (a, b, a):
+            sender.send(sender.packet())
+            receive(link, 1)
+        c.send(c.packet())
+        receive(link, 1)
+        assert list(link.senders) == [a.address, c.address]  # b was heard before a's second packet
+    finally:
+        for sender in (a, b, c):
+            sender.close()
+
+
 def test_idle_senders_get_no_broadcasts_and_are_forgotten(listening, monkeypatch):
     link, port = listening
     monkeypatch.setattr(links, "SENDER_IDLE", 0.3)
@@ -136,6 +230,26 @@ def test_idle_senders_get_no_broadcasts_and_are_forgotten(listening, monkeypatch
     finally:
         a.close()
         b.close()
+
+
+def test_a_sender_is_a_peer_until_exactly_sender_idle_seconds_of_silence(listening, monkeypatch):
+    link, port = listening
+    clock = Clock()
+    monkeypatch.setattr(links, "time", clock)
+    a = Sender(port, 1)
+    try:
+        a.send(a.packet())
+        receive(link, 1)
+        clock.now += links.SENDER_IDLE
+        assert link.peers() == [a.address]
+        link._forget(clock.now)
+        assert a.address in link.senders
+        clock.now += 1e-6
+        assert link.peers() == []
+        link._forget(clock.now)
+        assert link.senders == {} and link.stats["senders forgotten"] == 1
+    finally:
+        a.close()
 
 
 def test_one_call_reads_a_bounded_number_of_datagrams(listening, monkeypatch):
@@ -173,6 +287,17 @@ def test_datagrams_packed_with_messages_wait_in_the_socket_while_many_are_parsed
     assert [m.text for m in got] == [f"datagram {i} message {k}" for i in range(4) for k in range(40)][1:]
 
 
+def test_socket_errors_are_reported_not_raised(listening):
+    link, _port = listening
+    link.port.close()
+    assert link.recv_msg() is None
+    assert "Bad file descriptor" in link.error
+    link.error = ""
+    link.write(b"x", ("127.0.0.1", 9))
+    assert "Bad file descriptor" in link.error
+
+
+# ---- link URLs, and what each kind opens -----------------------------------------------------
 @pytest.mark.parametrize("url", ["udpin:127.0.0.1", "udpout::14550", "udp:host:port",
                                  "udpin:127.0.0.1:70000", "udpout:127.0.0.1:0",  # a socket's OverflowError before
                                  "tcp:127.0.0.1", "tcpin::5760", "tcp:host:port"])  # retried for ever before
@@ -205,33 +330,34 @@ def test_a_serial_port_or_a_tcp_listener_is_a_link_even_before_it_opens(url):
         link.close()
 
 
-def test_a_stream_that_is_not_up_yet_reports_itself_down_then_comes_up(monkeypatch):
-    monkeypatch.setattr(links, "RETRY", (0.05, 0.2))
-    port = free_tcp_port()
-    link = links.connect(f"tcp:127.0.0.1:{port}")
-    watch = links.LinkWatch([link])
-    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+@pytest.mark.parametrize(("ids", "expected"), [((), (255, 0)), ((42, 191), (42, 191))])
+def test_a_udpout_link_sends_to_its_one_address_as_the_system_and_component_it_is_given(ids, expected):
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(5)
+    port = receiver.getsockname()[1]
+    link = links.connect(f"udpout:127.0.0.1:{port}", *ids)
     try:
-        assert not link.up and link.error and link.failures == 1
-        assert watch.changes() == [f"link tcp:127.0.0.1:{port} down ({link.error}); retrying"]
-        assert link.recv_msg() is None
-        assert watch.changes() == []  # said once
-        link.write(b"dropped while down")  # no exception either
-        server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        server.bind(("127.0.0.1", port))
-        server.listen(1)
-        wait_wall(lambda: link.recv_msg() is None and link.up, 5, "the stream up")
-        assert link.error == "" and link.failures == 0
-        assert watch.changes() == [f"link tcp:127.0.0.1:{port} up again"]
-        peer, _ = server.accept()
-        with peer:
-            mav = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
-            peer.sendall(mav.statustext_encode(6, b"over tcp").pack(mav))
-            got = receive(link, 1)
-            assert got[0].text == "over tcp" and got[0].get_srcSystem() == 7
+        assert (link.listen, link.destination, link.url) == (False, ("127.0.0.1", port), f"udpout:127.0.0.1:{port}")
+        assert link.peers() == [("127.0.0.1", port)]  # before hearing anyone
+        assert link.port.getsockname()[0] == "127.0.0.1"  # the interface towards the peer, not every one
+        link.mav.heartbeat_send(6, 8, 0, 0, 0)
+        assert heard_as(receiver) == expected
     finally:
         link.close()
-        server.close()
+        receiver.close()
+
+
+@pytest.mark.parametrize("kind", ["udpin", "udp"])
+def test_udpin_and_udp_listen_on_the_address_they_name(kind):
+    port = free_udp_port()
+    link = links.connect(f"{kind}:127.0.0.1:{port}")
+    try:
+        assert (link.listen, link.destination) == (True, None)
+        assert link.port.getsockname() == ("127.0.0.1", port)
+        assert link.peers() == [] and link.up and link.error == ""
+    finally:
+        link.close()
 
 
 def test_a_second_listener_on_a_udp_port_is_refused_and_the_first_keeps_hearing():
@@ -292,146 +418,7 @@ def test_a_serial_port_carries_mavlink_both_ways_at_its_baud_rate(name, tmp_path
         os.close(slave)
 
 
-# ---- against the surviving mutants of issue 14 ------------------------------------------------------------
-KEY = bytes(range(32))
-
-
-class Clock:
-    """``links.time`` stand-in: monotonic() is what the test says it is."""
-
-    def __init__(self, now: float = 1000.0):
-        self.now = now
-
-    def monotonic(self) -> float:
-        return self.now
-
-
-def heard_as(socket_: socket.socket) -> tuple[int, int]:
-    """(system, component) of the first packet the socket receives."""
-    data, _ = socket_.recvfrom(65535)
-    message = mavlink.MAVLink(None).parse_buffer(data)[0]
-    return message.get_srcSystem(), message.get_srcComponent()
-
-
-@pytest.mark.parametrize(("ids", "expected"), [((), (255, 0)), ((42, 191), (42, 191))])
-def test_a_udpout_link_sends_to_its_one_address_as_the_system_and_component_it_is_given(ids, expected):
-    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    receiver.bind(("127.0.0.1", 0))
-    receiver.settimeout(5)
-    port = receiver.getsockname()[1]
-    link = links.connect(f"udpout:127.0.0.1:{port}", *ids)
-    try:
-        assert (link.listen, link.destination, link.url) == (False, ("127.0.0.1", port), f"udpout:127.0.0.1:{port}")
-        assert link.peers() == [("127.0.0.1", port)]  # before hearing anyone
-        assert link.port.getsockname()[0] == "127.0.0.1"  # the interface towards the peer, not every one
-        link.mav.heartbeat_send(6, 8, 0, 0, 0)
-        assert heard_as(receiver) == expected
-    finally:
-        link.close()
-        receiver.close()
-
-
-@pytest.mark.parametrize("kind", ["udpin", "udp"])
-def test_udpin_and_udp_listen_on_the_address_they_name(kind):
-    port = free_udp_port()
-    link = links.connect(f"{kind}:127.0.0.1:{port}")
-    try:
-        assert (link.listen, link.destination) == (True, None)
-        assert link.port.getsockname() == ("127.0.0.1", port)
-        assert link.peers() == [] and link.up and link.error == ""
-    finally:
-        link.close()
-
-
-def test_every_garbage_datagram_is_counted_once_and_a_packet_behind_garbage_still_arrives(listening):
-    """Each datagram starts parsing afresh (no prefix error carried over to hide the next one's garbage), and
-    the parser is robust: bytes that are no packet are skipped, the packet after them in the datagram read."""
-    link, port = listening
-    a = Sender(port, 1)
-    try:
-        for _ in range(3):
-            a.send(b"\x00\x01\x02\x03")
-        a.send(b"\x00\x01" + a.packet("behind garbage"))
-        got = []
-        wait_wall(lambda: got.extend(iter(link.recv_msg, None)) or any(m.get_type() == "STATUSTEXT" for m in got), 5)
-        assert [m.text for m in got if m.get_type() != "BAD_DATA"] == ["behind garbage"]
-        assert link.stats == {"datagrams": 4, "bad": 4, "senders forgotten": 0}
-        assert sum(m.get_type() == "BAD_DATA" for m in got) == 4  # handed on too, with where they came from
-        assert all(m._peer == a.address for m in got)
-    finally:
-        a.close()
-
-
-def test_a_datagram_the_parser_chokes_on_counts_as_bad_and_spoils_nothing_else(listening, monkeypatch):
-    link, port = listening
-    choking = links._parser
-
-    def parser():
-        made = choking()
-        real = made.parse_buffer
-        made.parse_buffer = lambda data: real(data) if data != b"boom" else 1 / 0
-        return made
-
-    monkeypatch.setattr(links, "_parser", parser)
-    a = Sender(port, 1)
-    try:
-        a.send(b"boom")
-        a.send(a.packet("after"))
-        a.send(b"boom")
-        a.send(a.packet("again"))
-        got = receive(link, 2)
-        assert [m.text for m in got] == ["after", "again"]
-        assert link.stats["bad"] == 2 and link.stats["datagrams"] == 4  # each choke counted
-    finally:
-        a.close()
-
-
-def test_the_sender_forgotten_first_is_the_one_heard_least_recently(listening, monkeypatch):
-    link, port = listening
-    monkeypatch.setattr(links, "MAX_SENDERS", 2)
-    a, b, c = Sender(port, 1), Sender(port, 2), Sender(port, 3)
-    try:
-        for sender in (a, b, a):
-            sender.send(sender.packet())
-            receive(link, 1)
-        c.send(c.packet())
-        receive(link, 1)
-        assert list(link.senders) == [a.address, c.address]  # b was heard before a's second packet
-    finally:
-        for sender in (a, b, c):
-            sender.close()
-
-
-def test_a_sender_is_a_peer_until_exactly_sender_idle_seconds_of_silence(listening, monkeypatch):
-    link, port = listening
-    clock = Clock()
-    monkeypatch.setattr(links, "time", clock)
-    a = Sender(port, 1)
-    try:
-        a.send(a.packet())
-        receive(link, 1)
-        clock.now += links.SENDER_IDLE
-        assert link.peers() == [a.address]
-        link._forget(clock.now)
-        assert a.address in link.senders
-        clock.now += 1e-6
-        assert link.peers() == []
-        link._forget(clock.now)
-        assert link.senders == {} and link.stats["senders forgotten"] == 1
-    finally:
-        a.close()
-
-
-def test_socket_errors_are_reported_not_raised(listening):
-    link, _port = listening
-    link.port.close()
-    assert link.recv_msg() is None
-    assert "Bad file descriptor" in link.error
-    link.error = ""
-    link.write(b"x", ("127.0.0.1", 9))
-    assert "Bad file descriptor" in link.error
-
-
+# ---- signed links ----------------------------------------------------------------------------
 def test_a_signed_link_drops_an_unsigned_packet_and_keeps_the_signed_one_behind_it():
     port = free_udp_port()
     link = links.connect(f"udpin:127.0.0.1:{port}", key=KEY)
@@ -468,7 +455,7 @@ def test_a_link_with_a_key_signs_what_it_sends_and_by_default_requires_signature
         lax.close()
 
 
-# ---- streams
+# ---- streams ---------------------------------------------------------------------------------
 @pytest.fixture
 def clock(monkeypatch):
     clock = Clock()
@@ -502,6 +489,35 @@ def test_opening_a_stream_never_waits(clock):
     link = links.connect(f"tcp:127.0.0.1:{free_tcp_port()}")
     assert time.monotonic() - started < 0.5 and link.failures == 1
     link.close()
+
+
+def test_a_stream_that_is_not_up_yet_reports_itself_down_then_comes_up(monkeypatch):
+    monkeypatch.setattr(links, "RETRY", (0.05, 0.2))
+    port = free_tcp_port()
+    link = links.connect(f"tcp:127.0.0.1:{port}")
+    watch = links.LinkWatch([link])
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        assert not link.up and link.error and link.failures == 1
+        assert watch.changes() == [f"link tcp:127.0.0.1:{port} down ({link.error}); retrying"]
+        assert link.recv_msg() is None
+        assert watch.changes() == []  # said once
+        link.write(b"dropped while down")  # no exception either
+        server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        server.bind(("127.0.0.1", port))
+        server.listen(1)
+        wait_wall(lambda: link.recv_msg() is None and link.up, 5, "the stream up")
+        assert link.error == "" and link.failures == 0
+        assert watch.changes() == [f"link tcp:127.0.0.1:{port} up again"]
+        peer, _ = server.accept()
+        with peer:
+            mav = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
+            peer.sendall(mav.statustext_encode(6, b"over tcp").pack(mav))
+            got = receive(link, 1)
+            assert got[0].text == "over tcp" and got[0].get_srcSystem() == 7
+    finally:
+        link.close()
+        server.close()
 
 
 @pytest.mark.parametrize(("ids", "expected"), [((), (255, 0)), ((17, 191), (17, 191))])
@@ -582,20 +598,6 @@ def test_a_stream_whose_write_fails_goes_down_and_says_why(clock):
     finally:
         link.close()
         server.close()
-
-
-def test_a_datagram_too_short_for_a_header_is_neither_a_message_nor_bad_data(listening):
-    """Two bytes that begin like a packet: nothing to parse yet, and since a datagram holds whole packets,
-    nothing carried into the next one either."""
-    link, port = listening
-    a = Sender(port, 1)
-    try:
-        a.send(bytes([mavlink.PROTOCOL_MARKER_V2, 9]))
-        a.send(a.packet("next"))
-        got = receive(link, 1)
-        assert [m.text for m in got] == ["next"] and link.stats["bad"] == 0 and link.stats["datagrams"] == 2
-    finally:
-        a.close()
 
 
 def test_a_stream_whose_peer_goes_away_reports_itself_down(clock):
