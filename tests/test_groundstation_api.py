@@ -581,7 +581,7 @@ def test_websocket_streams_the_vehicles_while_they_fly(station, api, flyer):
 def test_a_new_stream_gets_the_status_at_once_not_a_period_later(station, monkeypatch):
     """The first frame is the status, sent as the stream opens: with a period of an hour between status frames,
     one still comes (a page used to show nothing for its first quarter of a second)."""
-    import groundstation.app as app
+    import groundstation.api.streams as app
 
     monkeypatch.setattr(app, "STREAM_PERIOD", 3600.0)
     with websockets.sync.client.connect(f"ws://127.0.0.1:{station.http_port}/ws", open_timeout=5) as socket_:

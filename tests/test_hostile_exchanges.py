@@ -15,7 +15,7 @@ import pytest
 from harness import RunningStation, StationClock, small_scene, wait_wall
 from mavlink_peer import Peer, position, vehicle_heartbeat
 
-from groundstation.app import EXCHANGES
+from groundstation.api.common import EXCHANGES
 from groundstation.link import REPLY_LOOK
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.mission import REQUESTS_PER_ITEM

@@ -535,7 +535,7 @@ def test_a_mission_with_comments_blank_lines_and_nan_params_is_taken(api, vehicl
 
 # ---- 10. nothing left behind ----------------------------------------------------------------------------------
 def test_streams_leave_nothing_behind_and_are_capped(station, monkeypatch):
-    import groundstation.app as app
+    import groundstation.api.streams as app
 
     for n in range(200):
         with ws_connect(ws_url(station, f"/ws?viewer=passing-viewer-{n:06d}")) as passing:

@@ -312,7 +312,7 @@ def test_a_recording_called_anything_downloads_under_its_own_name(flight, name):
 def test_a_name_that_is_no_text_is_named_by_its_bytes():
     """A replay started from any path (``groundstation replay FILE``) exports under that file's name: one that
     is no UTF-8 made quote() raise, and the export a 500."""
-    from groundstation.app import attachment
+    from groundstation.api.common import attachment
 
     header = attachment(os.fsdecode(b"odd\xff.html"))
     assert header == "attachment; filename=\"odd_.html\"; filename*=UTF-8''odd%FF.html"
