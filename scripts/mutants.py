@@ -50,7 +50,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "out" / "mutants"
 EQUIVALENT = ROOT / "scripts" / "equivalent-mutants"  # per module: surviving mutants shown equivalent, with why
-COPIED = ["vehicle", "groundstation", "tests", "static", "scenes", "pyproject.toml", "README.md"]
+COPIED = ["vehicle", "groundstation", "tests", "static", "scenes", "docs", "pyproject.toml", "README.md"]
 NUMBA_DECORATOR = re.compile(r"^\s*@numba\.n?jit\b.*$")
 KILLED = {"killed", "timeout", "caught by type check", "segfault"}
 
@@ -293,7 +293,7 @@ def prepare(module: Module, python: str) -> Path:
         path.write_text(text)
     settings = {
         "source_paths": ["vehicle", "groundstation"],
-        "also_copy": ["static", "scenes", "README.md"],  # served or read by the tests
+        "also_copy": ["static", "scenes", "docs", "README.md"],  # served or read by the tests
         "only_mutate": module.files,
         "pytest_add_cli_args": ["-p", "no:cacheprovider", "-q", "-p", "no:randomly"],
         "pytest_add_cli_args_test_selection": module.tests,

@@ -14,17 +14,17 @@ from vehicle.world.scene import parse_scene
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def readme_table() -> dict[str, tuple[str, float, tuple[float, float]]]:
-    """name -> (unit, default, (lowest, highest)) from the mission-parameter table of the README."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+def documented_table() -> dict[str, tuple[str, float, tuple[float, float]]]:
+    """name -> (unit, default, (lowest, highest)) from the mission-parameter table of docs/missions.md."""
+    text = (ROOT / "docs" / "missions.md").read_text(encoding="utf-8")
     rows = re.findall(r"^\| `(\w+)` \| ([^|]+) \| ([^|]+) \| ([-\d.e]+) to ([-\d.e]+) \|", text,
                       flags=re.MULTILINE)
-    assert rows, "no parameter table in README.md"
+    assert rows, "no parameter table in docs/missions.md"
     return {name: (unit.strip(), float(default), (float(lo), float(hi))) for name, unit, default, lo, hi in rows}
 
 
-def test_defaults_and_ranges_match_the_readme_table():
-    table = readme_table()
+def test_defaults_and_ranges_match_the_documented_table():
+    table = documented_table()
     described = {name: (unit, default, bounds) for name, default, unit, _, _, bounds in Settings.describe()}
     assert described == table
 
