@@ -214,7 +214,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene) if args.scene else None
     station = GroundStation([], scene, args.token, record_dir=path.parent, datum=args.datum,
                             scene_dirs=args.scene_dir)
-    replay = station.start_replay(path)
+    replay = station.replays.start(path)
     print(f"replaying {path.name}: {len(index)} messages, {index.duration:.1f} s; scene: {replay.scene['note']}",
           flush=True)
     _serve(station, args)

@@ -13,27 +13,21 @@ import math
 import secrets
 import socket
 import ssl
-import stat as file_mode
 import sys
-import threading
 import time
 from collections.abc import Iterable
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import uvicorn
 
 from groundstation.app import create_app
-from groundstation.export import export_html
 from groundstation.link import Link
 from groundstation.mapview import MapPictures
 from groundstation.proxy import VizProxy
 from groundstation.recorder import Recorder
-from groundstation.replay import Player, Replay, ReplayError, index_tlog
-from groundstation.replay_scene import find_scene, logged_scene
+from groundstation.recordings import RecordingIndex, Replays
 from groundstation.security import Access, is_loopback
 from groundstation.state import Fleet, VehicleState
-from groundstation.timeline import Timeline
 from groundstation.views import ViewRequestError
 from groundstation.viz import SceneView
 from vehicle.mapping.picture import draw_map
@@ -41,13 +35,11 @@ from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mission import MissionItem
 from vehicle.protocol.scene_note import note_text, scene_digest
 from vehicle.protocol.waypoints import positions
-from vehicle.world.bundled import scenes_dir
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
 
 log = logging.getLogger("groundstation")
 
-RECORDINGS_STREAMED = 200  # the newest recordings the status stream lists
 FAR_FROM_SCENE = 1000.0  # m outside the scene's edges: a vehicle there flies nowhere the scene shows
 
 
@@ -64,7 +56,7 @@ class GroundStation:
         self.scene_dirs = [Path(folder) for folder in scene_dirs]
         scene_file = scene.path if scene is not None and scene.path is not None and scene.path.is_file() else None
         self.scene_digest = scene_digest(scene_file) if scene_file else None  # recordings name the scene by it
-        self.given_datum = datum
+        datum_given = datum
         ground = None
         if scene is not None:
             datum = Datum.of_scene(scene.hints, datum)
@@ -86,19 +78,22 @@ class GroundStation:
         self.proxy = VizProxy(self.view.port)
         self.view.on_target(self._target)
         self.view.viewer_of = self.proxy.viewers.get  # which page each viser client is
-        self.replay: Replay | None = None  # set while a recording is replayed
-        self.timeline: Timeline | None = None  # the replayed log's whole history, scanned in the background
+        self.recordings = RecordingIndex(self.record_dir, lambda: self.recorder)
+        self.replays = Replays(self.view, self.live, scene, self.scene_digest, self.datum, datum_given,
+                               self.scene_dirs)
         self.pictures = MapPictures()  # the 2D map's
-        self._recordings: tuple[float, list[dict]] = (-1e9, [])  # (when listed, the list) for the stream
-        self._replay_world: tuple = (scene, self.datum, self.live.ground_height)  # its scene, datum, ground
-        self._player: Player | None = None
-        self._replay_lock = threading.Lock()
-        self._durations: dict[Path, tuple[tuple, float | None]] = {}  # path -> (its size and time, duration)
-        self._indexing: set[Path] = set()  # recordings the indexer has yet to read
-        self._untold: set[str] = set()  # recordings not listed, their names no text: said once each
-        self._indexer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recording-index")
         self._inboxes: dict[str | None, set[asyncio.Queue]] = {}  # viewer id -> its pages' /ws queues
         self._loop: asyncio.AbstractEventLoop | None = None
+
+    @property
+    def replay(self):
+        """The recording replayed now (``groundstation.replay.Replay``), or None: live."""
+        return self.replays.replay
+
+    @property
+    def timeline(self):
+        """The replayed log's whole history (``groundstation.timeline.Timeline``), scanned in the background."""
+        return self.replays.timeline
 
     @property
     def mode(self) -> str:
@@ -156,12 +151,12 @@ class GroundStation:
         self.view.start()
 
     def close(self) -> None:
-        self.stop_replay()
+        self.replays.stop()
         if self.link is not None:
             self.link.close()
         self.view.close()
         self._close_recording()
-        self._indexer.shutdown(wait=False, cancel_futures=True)
+        self.recordings.close()
 
     def _close_recording(self) -> None:
         """Close the session's recording; one that holds no message but the scene's note (the station never ran:
@@ -176,137 +171,7 @@ class GroundStation:
     def status(self) -> dict:
         replay = self.replay
         return {"type": "vehicles", "mode": self.mode, "time": self.now(), "vehicles": self.vehicles(),
-                "replay": replay.status() if replay is not None else None, "recordings": self.recordings_now()}
-
-    def recordings_now(self, every: float = 1.0) -> list[dict]:
-        """The recordings as the stream shows them: listed again at most every ``every`` seconds."""
-        listed, found = self._recordings
-        if time.monotonic() - listed >= every:
-            found = self.recordings()[:RECORDINGS_STREAMED]
-            self._recordings = (time.monotonic(), found)
-        return found
-
-    # ---- recordings and replay -----------------------------------------------------------------------
-    def recordings(self) -> list[dict]:
-        """The recordings in the record folder, newest first: regular files only (never a pipe that would
-        block a read, nor a folder), listed without reading them (see ``_duration``)."""
-        if self.record_dir is None or not self.record_dir.is_dir():
-            return []
-        found = []
-        for path in self.record_dir.glob("*.tlog"):
-            if not _is_text(path.name):  # JSON cannot carry it, and no request could name it
-                if path.name not in self._untold:
-                    self._untold.add(path.name)
-                    log.warning("the recording %r is not listed: its name is no UTF-8 text (rename it)", path.name)
-                continue
-            try:
-                stat = path.stat()
-            except OSError:  # gone since the listing
-                continue
-            if not file_mode.S_ISREG(stat.st_mode):
-                continue
-            recording = self.recorder is not None and path == self.recorder.path
-            found.append({"name": path.name, "size": stat.st_size, "modified": stat.st_mtime,
-                          "recording": recording,
-                          "duration_s": self.recorder.duration if recording else self._duration(path, stat)})
-        return sorted(found, key=lambda r: r["modified"], reverse=True)
-
-    def _duration(self, path: Path, stat) -> float | None:
-        """How long a recording lasts, from its index, kept while the file does not change; None until the
-        indexer has read it. Indexing reads the whole file (a gigabyte takes some 20 s), and the status
-        stream lists recordings on the event loop, so it is done in the background, one file at a time."""
-        version = (stat.st_mtime, stat.st_size)
-        known = self._durations.get(path)
-        if known is not None and known[0] == version:
-            return known[1]
-        if path not in self._indexing:
-            self._indexing.add(path)
-            self._indexer.submit(self._index, path, version)
-        return None
-
-    def _index(self, path: Path, version: tuple) -> None:
-        """On the indexer's thread: a failure is a recording without a duration (and a line in the log if it is
-        no bad file but a bug), never a path left marked as being indexed, which would never be again."""
-        try:
-            duration = round(index_tlog(path, columns=False).duration, 1)
-        except (ReplayError, OSError):
-            duration = None
-        except Exception:
-            log.exception("could not index the recording %s", path.name)
-            duration = None
-        self._durations[path] = (version, duration)  # a file that changed meanwhile is indexed again
-        self._indexing.discard(path)  # after: a listing between the two would index it once more
-
-    def recording_path(self, name: str) -> Path | None:
-        """The recording called ``name`` in the record folder (no paths, only .tlog files), or None."""
-        if self.record_dir is None or Path(name).name != name or not name.endswith(".tlog"):
-            return None
-        path = self.record_dir / name
-        try:
-            return path if path.is_file() else None
-        except OSError:  # a name too long for the file system, say
-            return None
-
-    def start_replay(self, path: Path) -> Replay:
-        """Show a recording instead of the live vehicles (the live link goes on in the background), in the
-        scene it names (see ``replay_scene``)."""
-        with self._replay_lock:
-            replay = Replay.open(path, Fleet(self.datum, self.live.ground_height))
-            folders = [("the bundled scenes", scenes_dir()), ("the recording's folder", path.parent),
-                       *((f"--scene-dir {folder}", folder) for folder in self.scene_dirs)]
-            chosen = find_scene(logged_scene(replay), self.scene, self.scene_digest, folders)
-            replay.scene = chosen.status
-            world = self._world(chosen.scene)
-            if chosen.scene is not self.scene:  # placed by that scene's datum, on its ground
-                replay.fleet = Fleet(world[1], world[2])
-                replay.seek(0.0)
-            self._stop_player()
-            self.replay = replay
-            self._replay_world = world
-            if self.view.scene is not chosen.scene:
-                self.view.set_scene(chosen.scene)
-            self._player = Player(replay).start()
-            if self.timeline is not None:
-                self.timeline.cancel()
-            self.timeline = Timeline(replay)
-            self.view.show(replay.fleet)
-            replay.playing = True
-            return replay
-
-    def _world(self, scene: Scene | None) -> tuple:
-        """(scene, datum, ground height) a replay in ``scene`` is shown with."""
-        if scene is self.scene:
-            return scene, self.datum, self.live.ground_height
-        if scene is None:
-            return None, self.given_datum, None
-        try:
-            datum = Datum.of_scene(scene.hints, self.given_datum)
-        except ValueError:  # a broken datum hint: the default datum, as the simulator would refuse it
-            datum = self.given_datum or Datum()
-        return scene, datum, RayCaster(scene).ground_height if len(scene.faces) else None
-
-    def stop_replay(self) -> None:
-        with self._replay_lock:
-            self._stop_player()
-            if self.replay is not None:
-                self.replay = None
-                if self.timeline is not None:
-                    self.timeline.cancel()
-                self.timeline = None
-                if self.view.scene is not self.scene:
-                    self.view.set_scene(self.scene)
-                self.view.show(self.live)
-
-    def export_replay(self, replay: Replay) -> str:
-        """The replay as one HTML file that plays offline (see ``export``), in the scene it is shown in."""
-        scene, datum, ground = self._replay_world if replay is self.replay else (self.scene, self.datum,
-                                                                                  self.live.ground_height)
-        return export_html(replay.index.path, scene, datum, ground)
-
-    def _stop_player(self) -> None:
-        if self._player is not None:
-            self._player.stop()
-            self._player = None
+                "replay": replay.status() if replay is not None else None, "recordings": self.recordings.latest()}
 
     def map_picture(self, vehicle: VehicleState, grid: tuple) -> bytes:
         """A PNG of the vehicle's memory map ``grid`` (values, resolution, origin) for people, with its trail,
@@ -317,7 +182,7 @@ class GroundStation:
             position = (vehicle.x, vehicle.y) if vehicle.x is not None else None
             described = self.fleet.describe(vehicle, self.now())
         replay = self.replay
-        scene = self._replay_world[0] if replay is not None else self.scene
+        scene = self.replays.world[0] if replay is not None else self.scene
         agent = described["agent"]
         title = (f"vehicle {vehicle.sysid} ({vehicle.kind})" + (f", {agent['mission']} mission" if agent else "")
                  + (f" in {scene.path.name}" if scene is not None and scene.path is not None else "")
@@ -373,15 +238,6 @@ class GroundStation:
         note = {"type": "target", "x": round(x, 2), "y": round(y, 2)}
         for inbox in list(self._inboxes.get(viewer, ())):
             self._loop.call_soon_threadsafe(_offer, inbox, note)
-
-
-def _is_text(name: str) -> bool:
-    """A file name that is text: not one with bytes no encoding decodes (Python keeps them as surrogates)."""
-    try:
-        name.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return True
 
 
 def _offer(inbox: asyncio.Queue, note: dict) -> None:

@@ -209,7 +209,7 @@ def test_listing_recordings_reads_none_of_them_and_lists_only_files(flight, monk
         released.wait(30)
         return real(path, columns)
 
-    monkeypatch.setattr("groundstation.server.index_tlog", slow_index)
+    monkeypatch.setattr("groundstation.recordings.index_tlog", slow_index)
     copy, pipe, folder = (flight.record_dir / name for name in ("held-copy.tlog", "pipe.tlog", "folder.tlog"))
     shutil.copyfile(flight.session, copy)
     os.mkfifo(pipe)
@@ -258,7 +258,7 @@ def test_a_recording_the_indexer_fails_on_has_no_duration_and_is_indexed_again_o
     def failing(path, columns=True):
         raise ValueError("mmap length is greater than file size")
 
-    monkeypatch.setattr("groundstation.server.index_tlog", failing)
+    monkeypatch.setattr("groundstation.recordings.index_tlog", failing)
     copy = flight.record_dir / "failing-copy.tlog"
     shutil.copyfile(flight.session, copy)
 
@@ -266,9 +266,9 @@ def test_a_recording_the_indexer_fails_on_has_no_duration_and_is_indexed_again_o
         return {r["name"]: r for r in flight.api.get("/api/recordings").json()}["failing-copy.tlog"]["duration_s"]
 
     try:
-        wait_wall(lambda: copy not in flight.running.station._indexing and duration() is None
+        wait_wall(lambda: copy not in flight.running.station.recordings._indexing and duration() is None
                   and "could not index the recording failing-copy.tlog" in caplog.text, 10, "the failure said")
-        monkeypatch.setattr("groundstation.server.index_tlog", real)
+        monkeypatch.setattr("groundstation.recordings.index_tlog", real)
         os.utime(copy, (time.time() + 5, time.time() + 5))  # changed: indexed again
         wait_wall(lambda: duration() == round(real(copy).duration, 1), 10, "the duration, once read again")
     finally:
@@ -373,7 +373,7 @@ def test_recording_names_cannot_leave_the_folder(flight, tmp_path):
             assert api.get(f"/api/recordings/{name}").status_code == 404, name
             assert api.delete(f"/api/recordings/{name}", headers=api.operator).status_code == 404, name
         for name in ("../outside.tlog", "/etc/passwd", "sub/x.tlog", "x.txt", "..", ""):
-            assert flight.station.recording_path(name) is None, name
+            assert flight.station.recordings.path(name) is None, name
         replay = api.post("/api/replay", json={"name": "../outside.tlog"}, headers=api.operator)
         assert replay.status_code == 404
         long = api.get(f"/api/recordings/{'x' * 5000}.tlog")
@@ -888,7 +888,7 @@ def test_a_replayed_old_log_draws_its_sonar_beams(experiment_run, monkeypatch):
         scene = station.view.server.scene
         drawn, add = [], scene.add_line_segments
         monkeypatch.setattr(scene, "add_line_segments", lambda name, *a, **k: drawn.append(name) or add(name, *a, **k))
-        replay = station.start_replay(experiment_run.log)
+        replay = station.replays.start(experiment_run.log)
         replay.playing = False
         replay.seek(replay.duration / 2)  # mid-scan
         station.view.draw()

@@ -16,7 +16,7 @@ def test_heartbeat_ages_stay_sane_while_seeking(tmp_path):
     assert vehicle_main(["experiment", "--mission", "browse", "--time-limit", "120", "--log", str(log)]) == 0
     station = GroundStation([], None, "token", record_dir=tmp_path)
     try:
-        replay = station.start_replay(log)
+        replay = station.replays.start(log)
         replay.playing = False
         assert replay.duration > 10
         ages: list[float] = []

@@ -56,7 +56,7 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
     operator = [Depends(guards.operator)]
 
     def recording_or_404(name: str) -> Path:
-        path = station.recording_path(name)
+        path = station.recordings.path(name)
         if path is None:
             shown = name if len(name) <= 80 else f"{name[:80]}..."  # the start of a long name says enough
             raise HTTPException(404, f"no recording called {shown!r}")
@@ -65,7 +65,7 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
     @router.get("/api/recordings", tags=["recordings"])
     def recordings():
         """The session recordings, newest first."""
-        return station.recordings()
+        return station.recordings.listing()
 
     @router.get("/api/recordings/{name}", tags=["recordings"])
     def recording(name: str):
@@ -100,7 +100,7 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
         """Replay a recording in the page (instead of the live vehicles)."""
         path = recording_or_404(body.name)
         try:
-            replay = await asyncio.to_thread(station.start_replay, path)
+            replay = await asyncio.to_thread(station.replays.start, path)
         except ReplayError as error:
             raise HTTPException(422, str(error)) from None
         return replay.status()
@@ -116,7 +116,7 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
     @router.post("/api/replay/stop", tags=["replay"], dependencies=operator)
     def stop_replay():
         """Back to the live vehicles."""
-        station.stop_replay()
+        station.replays.stop()
         return {"mode": station.mode}
 
     @router.get("/api/replay/timeline", tags=["replay"])
@@ -140,7 +140,7 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
         replay = station.replay
         if replay is None:
             raise HTTPException(409, "nothing is being replayed")
-        html = await asyncio.to_thread(station.export_replay, replay)
+        html = await asyncio.to_thread(station.replays.export, replay)
         name = Path(replay.name).stem + ".html"
         return Response(html, media_type="text/html",
                         headers={"Content-Disposition": attachment(name)})
