@@ -4,8 +4,8 @@ Each comes as ``{"bounds": [west, south, east, north], "image": "data:image/png;
 (scene metres), so the page can lay it under the vehicles with a canvas and
 no further requests. Memory maps are cropped to what has been explored and
 drawn in the states the 3D view uses (free pale, occupied red, unknown
-clear), at most ``MAX_PIXELS`` a side (blocks keep their strongest state, so
-a lone obstacle cell never disappears).
+clear), at most ``MAX_PIXELS`` a side: ``vehicle.mapping.picture.overlay``,
+the one crop and shrink that the 3D view and the map's PNG use too.
 
 The merged map combines the vehicles' evidence cell by cell: each map holds
 log-odds, and independent evidence about a cell adds up in log-odds, so the
@@ -23,7 +23,8 @@ import threading
 import numpy as np
 from PIL import Image
 
-from vehicle.mapping.memory_map import STATE_COLOURS, state_image, states_of
+from vehicle.mapping import picture
+from vehicle.mapping.memory_map import STATE_COLOURS
 from vehicle.world.scene import Scene
 
 MAX_PIXELS = 1024  # a side of a memory-map picture
@@ -67,35 +68,14 @@ def scene_picture(scene: Scene) -> dict | None:
     return {"bounds": [float(x0), float(y0), float(x1), float(y1)], "image": data_url(rgba)}
 
 
-def explored(values: np.ndarray, margin: int = 2) -> tuple[int, int, int, int] | None:
-    """Rows and columns (r0, r1, c0, c1) holding every cell with evidence, and a margin; None if there is none."""
-    rows = np.flatnonzero(values.any(axis=1))
-    cols = np.flatnonzero(values.any(axis=0))
-    if not len(rows):
-        return None
-    return (max(0, int(rows[0]) - margin), min(values.shape[0], int(rows[-1]) + 1 + margin),
-            max(0, int(cols[0]) - margin), min(values.shape[1], int(cols[-1]) + 1 + margin))
-
-
 def overlay(grid: Grid) -> dict | None:
     """A memory map as a picture of its explored part, with its bounds; None when nothing is explored."""
     values, resolution, origin = grid
-    window = explored(values)
-    if window is None:
+    found = picture.overlay(values, resolution, origin, MAX_PIXELS)
+    if found is None:
         return None
-    r0, r1, c0, c1 = window
-    states = states_of(values[r0:r1, c0:c1])
-    step = max(1, int(math.ceil(max(states.shape) / MAX_PIXELS)))
-    if step > 1:  # blocks keep their strongest state: occupied over free over unknown
-        h, w = -(-states.shape[0] // step) * step, -(-states.shape[1] // step) * step
-        padded = np.zeros((h, w), dtype=states.dtype)
-        padded[:states.shape[0], :states.shape[1]] = states
-        states = padded.reshape(h // step, step, w // step, step).max(axis=(1, 3))
-        r1, c1 = r0 + h, c0 + w
-    west, south = origin[0] + c0 / resolution, origin[1] + r0 / resolution
-    return {"bounds": [round(west, 3), round(south, 3), round(origin[0] + c1 / resolution, 3),
-                       round(origin[1] + r1 / resolution, 3)],
-            "resolution": resolution, "image": data_url(state_image(states))}
+    return {"bounds": [round(v, 3) for v in found.window], "resolution": resolution,
+            "image": data_url(found.image)}
 
 
 def merge(grids: list[Grid]) -> Grid | None:
@@ -103,7 +83,7 @@ def merge(grids: list[Grid]) -> Grid | None:
     covering what any of them explored (coarser if that would pass MERGED_CELLS a side)."""
     parts = []
     for values, resolution, origin in grids:
-        window = explored(values, margin=0)
+        window = picture.explored(values)
         if window is not None:
             parts.append((values, resolution, origin, window))
     if not parts:

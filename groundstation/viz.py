@@ -31,7 +31,7 @@ from groundstation.state import Fleet, VehicleState
 from groundstation.state import colour_of as colour
 from groundstation.viewport import Vehicle, Viewport, opacity_root
 from groundstation.views import Views
-from vehicle.mapping.memory_map import state_image, states_of
+from vehicle.mapping import picture
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
 
@@ -336,21 +336,12 @@ class SceneView:
         if grid is None:
             return
         drawn["map"] = stream_version
-        values, resolution, origin = grid
-        states = states_of(values)
-        rows = np.flatnonzero(states.any(axis=1))
-        cols = np.flatnonzero(states.any(axis=0))
-        if not len(rows):
+        found = picture.overlay(*grid, MAP_PIXELS)
+        if found is None:
             return
-        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
-        part = states[r0:r1, c0:c1]
-        step = max(1, int(math.ceil(max(part.shape) / MAP_PIXELS)))
-        if step > 1:  # shrink, keeping obstacles visible: the max of each block
-            h, w = (part.shape[0] // step) * step, (part.shape[1] // step) * step
-            part = part[:h, :w].reshape(h // step, step, w // step, step).max(axis=(1, 3))
-        image = state_image(part)
-        width, depth = (c1 - c0) / resolution, (r1 - r0) / resolution
-        centre = (origin[0] + (c0 + c1) / 2 / resolution, origin[1] + (r0 + r1) / 2 / resolution, height - 0.05)
+        image, (west, south, east, north) = found.image, found.window
+        width, depth = east - west, north - south
+        centre = ((west + east) / 2, (south + north) / 2, height - 0.05)
         for level in self._levels:  # one picture per opacity some viewer uses (viser's images have none)
             faded = image.copy()
             faded[..., 3] = (faded[..., 3] * level).astype(np.uint8)

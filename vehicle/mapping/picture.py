@@ -94,14 +94,9 @@ def draw_map(grid: np.ndarray, resolution: float, origin: Point, title: str = ""
     path = list(planned_path)
     points = trail_points + path + [p for p in (home, position) if p is not None]
     r0, r1, c0, c1 = _window(states, resolution, origin, points)
-    cells = states[r0:r1, c0:c1]
-    block = max(1, math.ceil(max(cells.shape) * MIN_CELL / MAX_SIDE))
-    if block > 1:  # a drawn cell for each block of cells: the most telling state in it (occupied > free > unknown)
-        rows, cols = math.ceil(cells.shape[0] / block) * block, math.ceil(cells.shape[1] / block) * block
-        padded = np.zeros((rows, cols), dtype=cells.dtype)
-        padded[:cells.shape[0], :cells.shape[1]] = cells
-        cells = padded.reshape(rows // block, block, cols // block, block).max(axis=(1, 3))
-        r1, c1 = r0 + rows, c0 + cols
+    block = max(1, math.ceil(max(r1 - r0, c1 - c0) * MIN_CELL / MAX_SIDE))
+    cells = block_max(states[r0:r1, c0:c1], block)
+    r1, c1 = r0 + cells.shape[0] * block, c0 + cells.shape[1] * block
     cell_pixels = int(np.clip(TARGET_SIDE // max(cells.shape), MIN_CELL, MAX_CELL))
     window = (origin[0] + c0 / resolution, origin[1] + r0 / resolution,
               origin[0] + c1 / resolution, origin[1] + r1 / resolution)
@@ -141,16 +136,65 @@ def save_map_picture(target: str | Path, *args, **kwargs) -> None:
     draw_map(*args, **kwargs).save(target)
 
 
+# ---- the explored part, in blocks: the overlays (the page's 2D map, the 3D view) and the picture share it ----
+def explored(values: np.ndarray, margin: int = 0) -> tuple[int, int, int, int] | None:
+    """Rows and columns (r0, r1, c0, c1) holding every nonzero cell (log-odds evidence, or a known state),
+    widened by ``margin`` cells within the grid; None when every cell is zero."""
+    rows = np.flatnonzero(values.any(axis=1))
+    if not len(rows):
+        return None
+    cols = np.flatnonzero(values.any(axis=0))
+    return (max(0, int(rows[0]) - margin), min(values.shape[0], int(rows[-1]) + 1 + margin),
+            max(0, int(cols[0]) - margin), min(values.shape[1], int(cols[-1]) + 1 + margin))
+
+
+def block_max(states: np.ndarray, block: int) -> np.ndarray:
+    """Each ``block`` x ``block`` cells of a state grid as one cell holding the most telling state in it
+    (occupied over free over unknown), so an obstacle never vanishes. A last row or column of blocks that the
+    grid only partly fills is padded with unknown, never cut off: the result covers ``shape * block`` cells
+    from the grid's first row and column, which may reach past its far edges."""
+    if block <= 1:
+        return states
+    rows, cols = -(-states.shape[0] // block) * block, -(-states.shape[1] // block) * block
+    padded = np.full((rows, cols), UNKNOWN, dtype=states.dtype)
+    padded[:states.shape[0], :states.shape[1]] = states
+    return padded.reshape(rows // block, block, cols // block, block).max(axis=(1, 3))
+
+
+@dataclass
+class Overlay:
+    """The explored part of a memory map as an RGBA image (north up; ``state_image``'s colours, unknown clear)
+    and the scene metres it covers, to lay under or over a scene."""
+
+    image: np.ndarray
+    window: tuple[float, float, float, float]  # west, south, east, north
+    block: int  # map cells a pixel stands for, along each side
+
+
+def overlay(values: np.ndarray, resolution: float, origin: Point, max_pixels: int) -> Overlay | None:
+    """A log-odds grid's known cells (cropped to them), at most ``max_pixels`` a side; None when none is known."""
+    states = states_of(values)
+    window = explored(states)
+    if window is None:
+        return None
+    r0, r1, c0, c1 = window
+    block = max(1, math.ceil(max(r1 - r0, c1 - c0) / max_pixels))
+    cells = block_max(states[r0:r1, c0:c1], block)
+    r1, c1 = r0 + cells.shape[0] * block, c0 + cells.shape[1] * block
+    return Overlay(state_image(cells), (origin[0] + c0 / resolution, origin[1] + r0 / resolution,
+                                        origin[0] + c1 / resolution, origin[1] + r1 / resolution), block)
+
+
 # ---- the window -----------------------------------------------------------------------------------------
 def _window(states: np.ndarray, resolution: float, origin: Point, points: list[Point]) -> tuple[int, int, int, int]:
     """Rows r0:r1 and columns c0:c1 of the grid to draw: the explored cells and the points, with a margin."""
     size_rows, size_cols = states.shape
-    rows = np.flatnonzero((states != UNKNOWN).any(axis=1))
-    cols = np.flatnonzero((states != UNKNOWN).any(axis=0))
+    known = explored(states)  # UNKNOWN is 0
     spans: list[tuple[float, float, float, float]] = []  # west, south, east, north in metres
-    if len(rows):
-        spans.append((origin[0] + cols[0] / resolution, origin[1] + rows[0] / resolution,
-                      origin[0] + (cols[-1] + 1) / resolution, origin[1] + (rows[-1] + 1) / resolution))
+    if known is not None:
+        row0, row1, col0, col1 = known
+        spans.append((origin[0] + col0 / resolution, origin[1] + row0 / resolution,
+                      origin[0] + col1 / resolution, origin[1] + row1 / resolution))
     if points:
         xs, ys = [p[0] for p in points], [p[1] for p in points]
         spans.append((min(xs), min(ys), max(xs), max(ys)))
