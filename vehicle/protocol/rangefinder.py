@@ -37,6 +37,7 @@ class Reading:
     beam_angle: float = 0.0  # degrees, half-angle of the cone
     min_range: float = 0.0
     pitch: float = 0.0  # degrees up of the mount
+    vehicle: int | None = None  # the system id of the team-mate the echo came from, None for the scene
 
     @property
     def hit(self) -> np.ndarray | None:

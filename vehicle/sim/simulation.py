@@ -26,7 +26,7 @@ from vehicle.sim.physics import Body, Limits
 from vehicle.world.collision import Collider, Contact, TriangleGrid
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
-from vehicle.world.sonar import Sonar, SonarArray
+from vehicle.world.sonar import Bodies, Sonar, SonarArray
 from vehicle.world.suites import DEFAULT_SUITE, sensor_suite
 
 DEFAULT_STEP = 0.05  # s
@@ -130,10 +130,17 @@ class Simulation:
 
     def step(self) -> list[Reading]:
         """Advance one fixed step; returns the sonar readings taken at its end (when one is due)."""
+        self.move()
+        return self.sense()
+
+    def move(self) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
+        """The first half of a step: the autopilot moves the body and the swept body is checked against the
+        scene. Returns where the body went from and to, or None for a wreck (a team checks the bodies
+        against each other between this and ``sense``)."""
         if self.collision is not None:  # the wreck lies still; its clock goes on
             self.steps += 1
             self.time = self.steps * self.dt
-            return []
+            return None
         pose = self.body.pose
         if self._ground_stale():
             bottom = pose.z - self.limits.radius - self.limits.ground_clearance
@@ -146,23 +153,33 @@ class Simulation:
         self.time = self.steps * self.dt
         contact = self.collider.sweep(before, after)
         if contact is not None:
-            pose.x, pose.y, pose.z = contact.point
-            self.body.stop()
-            self.collision = contact
-            self.autopilot.armed = False
-            return []
+            self.crash(contact)
+            return None
         self.distance_travelled += math.dist(before, after)
         autopilot, body = self.autopilot, self.body
         self.battery.drain(self.dt, autopilot.armed, autopilot.flying, math.hypot(body.vx, body.vy), body.vz)
         if self.battery.charge_mah <= self._battery_alarm_mah:
             self._battery_alarm()
-        if self.time + 1e-9 < self._next_reading:
+        return before, after
+
+    def crash(self, contact: Contact) -> None:
+        """The body touched something: it stops where it first touched, disarmed, a wreck from now on."""
+        pose = self.body.pose
+        pose.x, pose.y, pose.z = (float(v) for v in contact.point)
+        self.body.stop()
+        self.collision = contact
+        self.autopilot.armed = False
+
+    def sense(self, bodies: Bodies | None = None) -> list[Reading]:
+        """The second half of a step: the sonar readings, when one is due (``bodies``: the team-mates around)."""
+        if self.collision is not None or self.time + 1e-9 < self._next_reading:
             return []
+        pose = self.body.pose
         self._next_reading += 1.0 / self.sonar_rate
         for sensor in self.sonars.sensors:  # servos follow the autopilot's outputs
             if sensor.servo is not None and sensor.servo.channel in self.autopilot.servos:
                 sensor.servo.pwm = self.autopilot.servos[sensor.servo.channel]
-        readings = self.sonars.read(pose, self.time)
+        readings = self.sonars.read(pose, self.time, bodies)
         if readings:
             ox, oy, oz = readings[0].origin.tolist()  # one origin for every sensor of a read
             for reading in readings:

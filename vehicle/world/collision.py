@@ -25,10 +25,13 @@ WALKABLE_NORMAL_Z = 0.7  # faces flatter than ~45 degrees are ground a rover may
 class Contact:
     point: np.ndarray  # body centre at first contact
     fraction: float  # how far along the step (0..1) the contact happened
-    face: int  # index of the face touched
+    face: int  # index of the face touched (-1: another vehicle's body)
+    vehicles: tuple[int, ...] = ()  # the system ids of both vehicles, when two bodies met
 
     def describe(self) -> str:
         x, y, z = self.point
+        if self.vehicles:
+            return f"collision of vehicles {self.vehicles[0]} and {self.vehicles[1]} at x={x:.2f} y={y:.2f} z={z:.2f}"
         return f"collision at x={x:.2f} y={y:.2f} z={z:.2f} (face {self.face})"
 
 

@@ -7,12 +7,18 @@ minimum and a maximum range, a beam that is a cone rather than a single ray
 echo from surfaces hit beyond a critical angle of incidence, and optional
 seeded Gaussian noise. Sensors are mounted with a yaw (and pitch) relative to
 the body, optionally on a servo driven by PWM.
+
+In a team (``vehicle.sim.team``) the other vehicles are bodies too: spheres the
+cone echoes off as off a wall, met analytically (ray-sphere), the nearest echo
+of mesh and bodies winning. Only the bodies within the sensors' reach are
+tested, picked once per read, so a ray costs no more in a larger team.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -65,6 +71,14 @@ class Sonar:
         return self._mount
 
 
+class Bodies(NamedTuple):
+    """Other vehicles' bodies as the sonar meets them: spheres."""
+
+    ids: np.ndarray  # (k,) system ids
+    centres: np.ndarray  # (k, 3) scene metres
+    radii: np.ndarray  # (k,) metres
+
+
 class SonarArray:
     """Reads every sensor on the vehicle with one batched ray cast."""
 
@@ -78,6 +92,7 @@ class SonarArray:
         self._min_range = np.array([s.min_range for s in sensors])
         self._servos = any(s.servo is not None for s in sensors)
         self._yaw_offsets = [s.yaw_offset for s in sensors]  # fixed unless a servo turns one
+        self._max_range = max((s.max_range for s in sensors), default=0.0)
 
     def _body_rays(self) -> tuple[np.ndarray, np.ndarray]:
         """All sensors' rays and beam axes in the body frame; recomputed only when a servo moved."""
@@ -91,7 +106,8 @@ class SonarArray:
             self._mount_key = key
         return self._rays, self._axes
 
-    def read(self, pose: Pose, time: float) -> list[Reading]:
+    def read(self, pose: Pose, time: float, bodies: Bodies | None = None) -> list[Reading]:
+        """Every sensor's reading from ``pose``; ``bodies``: the other vehicles around (none alone)."""
         if not self.sensors:
             return []
         xyz = (pose.x, pose.y, pose.z)
@@ -102,6 +118,9 @@ class SonarArray:
         distance, faces = self.caster.cast_from(xyz, directions)
         nearest = _nearest_echoes(distance, faces, directions, self.caster.face_normals, self._first_ray,
                                   self._cos_critical, self._min_range).tolist()
+        hit_by = [None] * len(self.sensors)
+        if bodies is not None and len(bodies.ids):
+            self._echo_off_bodies(origin, directions, bodies, nearest, hit_by)
         world_axes = axes @ to_world
         readings = []
         for index, sensor in enumerate(self.sensors):
@@ -113,8 +132,38 @@ class SonarArray:
                 value = float(min(sensor.max_range, max(sensor.min_range, noisy)))
             yaw_offset = sensor.yaw_offset if self._servos else self._yaw_offsets[index]
             readings.append(Reading(time, index, origin, world_axes[index], value, sensor.max_range,
-                                    yaw_offset, sensor.beam_angle, sensor.min_range, sensor.mount_pitch))
+                                    yaw_offset, sensor.beam_angle, sensor.min_range, sensor.mount_pitch,
+                                    None if value is None else hit_by[index]))
         return readings
+
+    def _echo_off_bodies(self, origin: np.ndarray, directions: np.ndarray, bodies: Bodies, nearest: list[float],
+                         hit_by: list[int | None]) -> None:
+        """Where a body echoes nearer than the scene, its distance replaces the scene's in ``nearest`` and its
+        id goes in ``hit_by``. Only the bodies within reach of the sensors are tested (picked once)."""
+        offsets = bodies.centres - origin
+        reach = self._max_range + bodies.radii
+        near = np.flatnonzero(np.einsum("ij,ij->i", offsets, offsets) <= reach * reach)
+        if not len(near):
+            return
+        offsets, radii = offsets[near], bodies.radii[near]
+        along = directions @ offsets.T  # (rays, bodies): how far along each ray each centre lies
+        miss = along * along - (np.einsum("ij,ij->i", offsets, offsets) - radii * radii)
+        with np.errstate(invalid="ignore"):
+            reach_in = along - np.sqrt(miss)  # where each ray enters each sphere (NaN: it passes by)
+        # the sphere's normal at the entry point against the ray: its cosine is the root's share of the radius
+        cos = np.sqrt(np.maximum(miss, 0.0)) / radii
+        first = self._first_ray
+        for index in range(len(self.sensors)):
+            rays = slice(first[index], first[index + 1])
+            found = reach_in[rays]
+            good = (found >= self._min_range[index]) & (cos[rays] >= self._cos_critical[index])
+            if not good.any():
+                continue
+            value = np.where(good, found, np.inf)
+            ray, body = np.unravel_index(np.argmin(value), value.shape)
+            if value[ray, body] < nearest[index]:
+                nearest[index] = float(value[ray, body])
+                hit_by[index] = int(bodies.ids[near[body]])
 
 
 @numba.njit(cache=True)

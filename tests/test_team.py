@@ -1,0 +1,121 @@
+"""A team in one world: each vehicle a body the others' sonars echo off and the collision check sweeps."""
+
+from __future__ import annotations
+
+import pytest
+
+from vehicle.sim.simulation import PlacementError, Simulation
+from vehicle.sim.team import Team
+from vehicle.world.suites import sensor_suite
+
+
+def hovering_team(scene, starts, sensors="single", ids=None) -> Team:
+    """Copters at ``starts`` (all facing north), in the air at 4 m."""
+    team = Team([Simulation(scene, "copter", start, heading=0.0, sensors=sensor_suite(sensors) if sensors else [])
+                 for start in starts], ids)
+    for sim in team.simulations:
+        sim.autopilot.set_mode("GUIDED")
+        assert sim.autopilot.arm() == 0
+        assert sim.autopilot.takeoff(4.0) == 0
+    for _ in range(200):  # 10 s
+        team.step()
+    return team
+
+
+def front_readings(readings_by_vehicle, index):
+    return [r for r in readings_by_vehicle[index] if r.sensor == 0]
+
+
+def test_a_sonar_aimed_at_a_hovering_team_mate_reads_its_distance_and_names_it(flat_scene):
+    team = hovering_team(flat_scene, [(0.0, 0.0), (0.0, 6.0)], ids=[3, 7])
+    readings = []
+    for _ in range(4):
+        readings.append(team.step())
+    seen = [r for step in readings for r in front_readings(step, 0)]
+    assert seen, "no reading was due in 4 steps"
+    for reading in seen:
+        assert reading.distance == pytest.approx(6.0 - 0.3, abs=0.05)  # to the near side of its body
+        assert reading.vehicle == 7
+    # the one behind: its front sonar looks away, into nothing
+    assert all(r.distance is None and r.vehicle is None for step in readings for r in front_readings(step, 1))
+
+
+def test_alone_the_same_sonar_hears_nothing(flat_scene):
+    team = hovering_team(flat_scene, [(0.0, 0.0)])
+    readings = [r for _ in range(4) for r in front_readings(team.step(), 0)]
+    assert readings and all(r.distance is None for r in readings)
+
+
+def test_the_scene_nearer_than_a_team_mate_wins(make_scene, box):
+    from tests.conftest import GROUND
+
+    scene = make_scene(GROUND, box(0, 3.5, 2, 4, 0.2, 4))  # a wall between the two
+    team = hovering_team(scene, [(0.0, 0.0), (0.0, 6.0)])
+    readings = [r for _ in range(4) for r in front_readings(team.step(), 0)]
+    assert readings
+    for reading in readings:
+        assert reading.distance == pytest.approx(3.4, abs=0.05) and reading.vehicle is None
+
+
+def test_two_bodies_driven_into_each_other_collide_and_the_contact_names_both(flat_scene):
+    team = hovering_team(flat_scene, [(0.0, 0.0), (0.0, 8.0)], sensors=None, ids=[4, 2])  # no sonar: no avoidance
+    a, b = team.simulations
+    a.autopilot.goto(0.0, 8.0, 4.0)
+    b.autopilot.goto(0.0, 0.0, 4.0)
+    for _ in range(400):
+        team.step()
+        if a.collision is not None:
+            break
+    assert a.collision is not None and b.collision is not None
+    assert a.collision.vehicles == b.collision.vehicles == (4, 2)
+    assert "vehicles 4 and 2" in a.collision.describe()
+    gap = abs(a.pose.y - b.pose.y)  # they stop where they first touched: one body's width apart
+    assert gap == pytest.approx(0.6, abs=0.02)
+    assert team.closest_gap < 0 and team.closest_pair == (4, 2)
+    assert not a.autopilot.armed and not b.autopilot.armed
+
+
+def test_bodies_that_pass_apart_do_not_collide_and_their_closest_approach_is_kept(flat_scene):
+    team = hovering_team(flat_scene, [(-10.0, 0.0), (10.0, 1.5)], sensors=None)
+    a, b = team.simulations
+    a.autopilot.goto(10.0, 0.0, 4.0)
+    b.autopilot.goto(-10.0, 1.5, 4.0)
+    for _ in range(300):
+        team.step()
+    assert a.collision is None and b.collision is None
+    assert team.closest_gap == pytest.approx(1.5 - 0.6, abs=0.05)
+
+
+def test_the_same_command_gives_the_same_flight_twice(flat_scene):
+    def fly():
+        team = hovering_team(flat_scene, [(0.0, 0.0), (0.0, 6.0), (5.0, 3.0)], sensors="triple")
+        team.simulations[0].autopilot.goto(5.0, 8.0, 4.0)
+        team.simulations[2].autopilot.goto(-5.0, 3.0, 4.0)
+        echoes = []
+        for _ in range(300):
+            echoes += [(r.time, r.sensor, r.distance, r.vehicle) for rs in team.step() for r in rs]
+        return echoes, [s.pose.xyz() for s in team.simulations], team.closest_gap
+
+    first, second = fly(), fly()
+    assert first == second
+    assert any(vehicle is not None for *_, vehicle in first[0])
+
+
+def test_the_closest_approach_to_the_scene_leaves_the_ground_out(make_scene, box):
+    from tests.conftest import GROUND
+
+    scene = make_scene(GROUND, box(3, 0, 2, 0.2, 4, 4))  # a wall 2.9 m east
+    team = hovering_team(scene, [(0.0, 0.0), (-20.0, 0.0)], sensors=None)
+    near, far = team.scene_gaps
+    assert near.gap == pytest.approx(2.9 - 0.3, abs=0.01)  # not the ground it took off from
+    assert far.gap is None
+
+
+@pytest.mark.parametrize("starts, ids, words", [
+    ([], None, "at least one vehicle"),
+    ([(0.0, 0.0), (0.4, 0.0)], None, "start inside each other"),
+    ([(0.0, 0.0), (4.0, 0.0)], [2, 2], "system id 2"),
+])
+def test_a_team_that_cannot_be_is_refused_before_it_starts(flat_scene, starts, ids, words):
+    with pytest.raises(PlacementError, match=words):
+        Team([Simulation(flat_scene, "copter", start) for start in starts], ids)

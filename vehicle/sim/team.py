@@ -1,0 +1,171 @@
+"""A team: several simulated vehicles in one scene, on one simulated clock, each a body to the others.
+
+Why it is split this way: each vehicle stays a whole ``Simulation`` (its body,
+autopilot, sensors, battery, its own collider against the scene), exactly as
+when it flies alone, and the team only adds what lies between vehicles. A team
+step is two halves over every vehicle: all bodies move (``Simulation.move``,
+checked against the scene), then every pair is checked over that same step,
+then all sonars read (``Simulation.sense``) with the other bodies as spheres
+to echo off. So one vehicle costs what it costs alone, plus a pair check per
+step and, per read, a pick of the bodies within sonar reach; the same
+vehicles given the same seeds fly the same way, whatever the machine.
+
+Two bodies collide when their centres, each moving in a straight line over the
+step, come closer than the sum of their radii (the closest approach of two
+linearly moving points); the contact names both vehicles and both become
+wrecks where they first touched. The team also keeps the closest approach
+between any two bodies, and between each body and the scene's walls.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vehicle.sim.simulation import PlacementError, Simulation
+from vehicle.world.collision import WALKABLE_NORMAL_Z, Collider, Contact, TriangleGrid
+from vehicle.world.sonar import Bodies
+
+SCENE_GAP_REACH = 5.0  # m: the scene's walls further than this from a body's centre are not measured
+
+
+class Team:
+    def __init__(self, simulations: list[Simulation], ids: list[int] | None = None):
+        """``ids``: the vehicles' MAVLink system ids (default 1, 2, ...). Raises PlacementError for an empty
+        team, two vehicles with one id, or two that start inside each other."""
+        if not simulations:
+            raise PlacementError("a team needs at least one vehicle")
+        ids = list(ids) if ids is not None else list(range(1, len(simulations) + 1))
+        if len(ids) != len(simulations):
+            raise PlacementError(f"{len(ids)} system ids for {len(simulations)} vehicles")
+        repeated = sorted({i for i in ids if ids.count(i) > 1})
+        if repeated:
+            raise PlacementError(f"two vehicles have the system id {repeated[0]}: each needs its own")
+        self.simulations = simulations
+        self.ids = ids
+        self.radii = np.array([s.limits.radius for s in simulations])
+        centres = self._centres()
+        for i, j in zip(*np.triu_indices(len(simulations), 1), strict=True):
+            if np.linalg.norm(centres[i] - centres[j]) < self.radii[i] + self.radii[j]:
+                raise PlacementError(f"vehicles {ids[i]} and {ids[j]} start inside each other (at "
+                                     f"{_where(centres[i])} and {_where(centres[j])})")
+        self.closest_gap = math.inf  # m between the surfaces of the two bodies that came closest
+        self.closest_pair: tuple[int, int] | None = None
+        self.scene_gaps = [_SceneGap(s) for s in simulations]
+
+    def __len__(self) -> int:
+        return len(self.simulations)
+
+    @property
+    def time(self) -> float:
+        return self.simulations[0].time
+
+    def _centres(self) -> np.ndarray:
+        return np.array([s.body.pose.xyz() for s in self.simulations], dtype=np.float64)
+
+    def step(self) -> list[list]:
+        """One step of every vehicle: move all, collide pairs, then read every sonar. Returns each vehicle's
+        readings, in the team's order."""
+        moves = [s.move() for s in self.simulations]
+        if len(self.simulations) > 1:
+            self._collide(moves)
+        centres = self._centres()
+        for gap, centre in zip(self.scene_gaps, centres, strict=True):
+            gap.note(centre)
+        return [s.sense(self.others(i, centres)) for i, s in enumerate(self.simulations)]
+
+    def others(self, index: int, centres: np.ndarray | None = None) -> Bodies | None:
+        """Every body but vehicle ``index``'s (wrecks too: they still stand in the way)."""
+        if len(self.simulations) == 1:
+            return None
+        keep = np.arange(len(self.simulations)) != index
+        centres = self._centres() if centres is None else centres
+        return Bodies(np.array(self.ids)[keep], centres[keep], self.radii[keep])
+
+    def _collide(self, moves: list) -> None:
+        """Check every pair over the step just taken (a wreck stands where it lies); note the closest."""
+        sims = self.simulations
+        starts, ends = [], []
+        for sim, move in zip(sims, moves, strict=True):
+            if move is None:
+                here = sim.body.pose.xyz()
+                move = (here, here)
+            starts.append(move[0])
+            ends.append(move[1])
+        starts, ends = np.array(starts, dtype=np.float64), np.array(ends, dtype=np.float64)
+        first, second = np.triu_indices(len(sims), 1)
+        gap0 = starts[second] - starts[first]  # (pairs, 3): the second's centre seen from the first's
+        change = (ends[second] - ends[first]) - gap0
+        speed2 = np.einsum("ij,ij->i", change, change)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            when = np.where(speed2 > 1e-18, np.clip(-np.einsum("ij,ij->i", gap0, change) / speed2, 0.0, 1.0), 0.0)
+        nearest = np.linalg.norm(gap0 + when[:, None] * change, axis=1)
+        reach = self.radii[first] + self.radii[second]
+        gaps = nearest - reach
+        pair = int(np.argmin(gaps))
+        if gaps[pair] < self.closest_gap:
+            self.closest_gap = float(gaps[pair])
+            self.closest_pair = (self.ids[first[pair]], self.ids[second[pair]])
+        for k in np.flatnonzero(gaps < 0):
+            i, j = int(first[k]), int(second[k])
+            if moves[i] is None and moves[j] is None:
+                continue  # two wrecks
+            fraction = _first_touch(gap0[k], change[k], reach[k])
+            for index in (i, j):
+                point = starts[index] + fraction * (ends[index] - starts[index])
+                contact = Contact(point=point, fraction=fraction, face=-1, vehicles=(self.ids[i], self.ids[j]))
+                if sims[index].collision is None:
+                    sims[index].crash(contact)
+
+
+class _SceneGap:
+    """The closest a body came to the scene's walls (the ground a copter takes off from and lands on is no
+    obstacle). Measured exactly only where it could be a new closest:
+    the clearance at the last measured point, less the way gone since, bounds it from below."""
+
+    def __init__(self, simulation: Simulation):
+        scene = simulation.scene
+        grid = scene.prepared("walls", lambda: TriangleGrid(_Walls(scene)))
+        self.collider = Collider(grid, simulation.limits.radius, search=2 * SCENE_GAP_REACH)
+        self.radius = simulation.limits.radius
+        self.closest = math.inf  # m from the body's centre
+        self._anchor: np.ndarray | None = None
+        self._clear = 0.0
+
+    def note(self, centre: np.ndarray) -> None:
+        worth = min(self.closest, SCENE_GAP_REACH)
+        if self._anchor is not None and self._clear - float(np.linalg.norm(centre - self._anchor)) >= worth:
+            return
+        self._anchor, self._clear = centre.copy(), self.collider.clearance(centre)
+        if self._clear < SCENE_GAP_REACH:
+            self.closest = min(self.closest, self._clear)
+
+    @property
+    def gap(self) -> float | None:
+        """Metres between the body's surface and the nearest wall it came to; None if never within reach."""
+        return None if math.isinf(self.closest) else self.closest - self.radius
+
+
+class _Walls:
+    """The scene's faces steeper than 45 degrees, up or down (not the ground, a roof or a box's underside)."""
+
+    def __init__(self, scene):
+        steep = np.abs(np.asarray(scene.face_normals)[:, 2]) <= WALKABLE_NORMAL_Z
+        self.triangles = np.asarray(scene.triangles, dtype=np.float64).reshape(-1, 3, 3)[steep]
+        self.face_normals = np.asarray(scene.face_normals)[steep]
+
+
+def _first_touch(gap0: np.ndarray, change: np.ndarray, reach: float) -> float:
+    """The first fraction of the step at which |gap0 + t change| = reach (0 if already touching)."""
+    a = float(change @ change)
+    b = 2.0 * float(gap0 @ change)
+    c = float(gap0 @ gap0) - reach * reach
+    if c <= 0 or a <= 1e-18:
+        return 0.0
+    root = b * b - 4 * a * c
+    return min(1.0, max(0.0, (-b - math.sqrt(max(root, 0.0))) / (2 * a)))
+
+
+def _where(centre: np.ndarray) -> str:
+    return f"x={centre[0]:.2f} y={centre[1]:.2f}"
