@@ -15,8 +15,8 @@ from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
 from groundstation.link import Link
 from groundstation.state import AUTOPILOT, COMPANION, Fleet, VehicleState
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.mav import mavlink, mavutil
-from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE
+from vehicle.protocol.mav import mavlink
+from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, number_of
 
 Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed"]
 GOTO_REACH = 1000.0  # m from home a goto may go when neither the vehicle's map nor a scene bounds its space
@@ -74,21 +74,13 @@ def outside_space(fleet: Fleet, vehicle: VehicleState, x: float, y: float, scene
     return None
 
 
-def mode_number(vehicle: VehicleState, name: str) -> int | None:
-    mapping = mavutil.mode_mapping_bynumber(vehicle.mav_type) or {}
-    for number, mode in mapping.items():
-        if mode == name.upper():
-            return number
-    return None
-
-
 def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | None, now: float) -> str:
     """``now``: the receiver's clock, to tell whether the vehicle's companion is still heard."""
     sysid = vehicle.sysid
     action = command.action
 
     def set_mode(name: str) -> str:
-        number = mode_number(vehicle, name)
+        number = number_of(vehicle.mav_type, name)
         if number is None:
             return "unsupported"
         return link.command(sysid, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number)

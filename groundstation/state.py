@@ -43,8 +43,8 @@ from vehicle.protocol import agent_status
 from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum, on_earth
 from vehicle.protocol.mapstream import MapReceiver
-from vehicle.protocol.mav import RESULT_WORDS, mavlink, mavutil
-from vehicle.protocol.modes import FORCE_DISARM
+from vehicle.protocol.mav import RESULT_WORDS, mavlink
+from vehicle.protocol.modes import FORCE_DISARM, commanded_mode, heartbeat_mode, name_of
 from vehicle.protocol.rangefinder import reading_from
 from vehicle.protocol.statustext import Reassembler
 
@@ -324,7 +324,7 @@ class Fleet:
             vehicle.ordered = (now, message.custom_mode)
         elif kind in ("COMMAND_LONG", "COMMAND_INT") and message.command in MODE_ORDERS:
             named = message.command == mavlink.MAV_CMD_DO_SET_MODE
-            vehicle.ordered = (now, _mode_number(message.param2) if named else None)
+            vehicle.ordered = (now, commanded_mode(message.param2) if named else None)
 
     def _station_heard(self, sysid: int, now: float) -> None:
         self.stations.pop(sysid, None)
@@ -373,7 +373,7 @@ class Fleet:
         vehicle.autopilot = m.autopilot
         vehicle.custom_mode = m.custom_mode
         armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-        mode = mavutil.mode_string_v10(m)
+        mode = heartbeat_mode(m)
         if vehicle.last_heartbeat is None:
             self.history.event(vehicle.sysid, now, "mode", f"first heard: {mode}{', armed' if armed else ''}")
         else:
@@ -584,21 +584,14 @@ def _command_name(command: int) -> str:
 def _command_text(vehicle: VehicleState, m) -> str:
     """A command as the operator would say it: "DO_SET_MODE RTL", "arm", "kill"."""
     if m.command == mavlink.MAV_CMD_DO_SET_MODE and m.param1 == mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-        number = _mode_number(m.param2)
+        number = commanded_mode(m.param2)
         if number is None:
             return f"DO_SET_MODE {m.param2}"  # as sent: "nan", "inf", "-1.0"
-        mapping = mavutil.mode_mapping_bynumber(vehicle.mav_type) or {}
-        return f"DO_SET_MODE {mapping.get(number, number)}"
+        return f"DO_SET_MODE {name_of(vehicle.mav_type, number) or number}"
     if m.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
         return "arm" if m.param1 == 1 else "kill" if m.param2 == FORCE_DISARM else "disarm"
     to = " to the onboard agent" if m.target_component == COMPANION else ""
     return _command_name(m.command) + to
-
-
-def _mode_number(param: float) -> int | None:
-    """The custom mode a command's float parameter names; None for one no mode has (NaN, infinite, negative,
-    beyond 32 bits), which anyone on a link, or a recording of it, may send: int() of it would raise."""
-    return int(param) if math.isfinite(param) and 0 <= param < 2 ** 32 else None
 
 
 def _agent_text(status: agent_status.AgentStatus) -> str:

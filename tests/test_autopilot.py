@@ -11,6 +11,7 @@ import pytest
 
 from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
+from vehicle.protocol.mav import mavlink
 from vehicle.protocol.mission import (
     DO_CHANGE_SPEED,
     NAV_LAND,
@@ -20,7 +21,7 @@ from vehicle.protocol.mission import (
     NAV_WAYPOINT,
     MissionItem,
 )
-from vehicle.protocol.modes import MODES, STOP_MODE, Kind, mode_name, mode_number
+from vehicle.protocol.modes import STOP_MODE, Kind, commanded_mode, flown, mode_name, mode_number, name_of, number_of
 from vehicle.sim.autopilot import (
     ACCEPTED,
     DENIED,
@@ -311,11 +312,21 @@ def test_mode_numbers_are_ardupilots():
         "LAND": 9,
         "BRAKE": 17,
     }
-    assert all(mode_name(kind, number) == name for kind in Kind for name, number in MODES[kind].items())
+    assert all(mode_name(kind, number) == name for kind in Kind for name, number in flown(kind).items())
     assert mode_name(Kind.COPTER, 99) is None
     with pytest.raises(ValueError, match="no mode"):
         mode_number(Kind.COPTER, "HOLD")
     assert STOP_MODE == {"rover": "HOLD", "boat": "HOLD", "copter": "BRAKE", "plane": "LOITER"}
+
+
+def test_one_table_names_the_modes_of_every_vehicle_type():
+    """The simulator's modes, the station's commands and its timeline read the same table (ArduPilot's)."""
+    plane, copter = mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_TYPE_QUADROTOR
+    assert (number_of(plane, "rtl"), name_of(plane, 11)) == (11, "RTL")
+    assert (number_of(copter, "HOLD"), name_of(copter, 99), number_of(0, "RTL")) == (None, None, None)
+    assert all(name_of(kind.mav_type, number) == name for kind in Kind for name, number in flown(kind).items())
+    assert [commanded_mode(v) for v in (4.0, float("nan"), float("inf"), -1.0, 2.0 ** 32)] == [4, None, None, None,
+                                                                                                None]
 
 
 # ---- GUIDED: goto, velocity, yaw, speed ---------------------------------------------------------

@@ -28,7 +28,7 @@ from vehicle.protocol.mission import (
     MissionItem,
     home_item,
 )
-from vehicle.protocol.modes import MODES, Kind
+from vehicle.protocol.modes import FLOWN, Kind
 from vehicle.sim.avoidance import ObstacleDatabase
 from vehicle.sim.physics import Body
 
@@ -186,7 +186,7 @@ class Autopilot:
         """As ArduPilot: AUTO with nothing to fly but home is refused (but for a disarmed copter), unless
         ``agent_on_board``: then AUTO is the signal that starts or resumes an onboard agent's mission."""
         name = name.upper()
-        if name not in MODES[self.kind]:
+        if name not in FLOWN[self.kind]:
             return UNSUPPORTED
         if name == self.mode:
             self.mode_source = source
