@@ -43,6 +43,15 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--token", help="operator token (default: a new random one, printed at start)")
     parser.add_argument("--record-dir", default="recordings", help="where session recordings go (default "
                         "%(default)s; '' to not record)")
+    parser.add_argument("--record-max-mb", type=options.whole(1), default=256, metavar="MB",
+                        help="a recording this large is closed and the next begun (default %(default)s)")
+    parser.add_argument("--record-max-minutes", type=options.positive, default=60.0, metavar="MIN",
+                        help="likewise, a recording this long (default %(default)s)")
+    parser.add_argument("--record-min-free-mb", type=options.whole(0), default=1000, metavar="MB",
+                        help="no recording is begun while the disk has less free (default %(default)s)")
+    parser.add_argument("--stranger-messages", type=options.whole(0), default=100, metavar="N",
+                        help="messages a minute recorded from each sender that is not one of the vehicles "
+                             "(default %(default)s)")
     parser.add_argument("--viewer-token", help="a read-only token for watching, needed (with the operator token "
                         "as the alternative) only when serving beyond loopback")
     parser.add_argument("--allowed-host", action="append", default=[], metavar="NAME",
@@ -59,6 +68,7 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _station(args, urls: list[str], scene_path: str | None):
+    from groundstation.recorder import Limits
     from groundstation.server import GroundStation
     from vehicle.world.scene import load_scene
 
@@ -67,7 +77,9 @@ def _station(args, urls: list[str], scene_path: str | None):
     scene = load_scene(scene_path) if scene_path else None
     return GroundStation(urls, scene, args.token, args.record_dir or None, datum=args.datum,
                          scene_dirs=args.scene_dir, signing_key=args.signing_key,
-                         require_signing=args.require_signing)
+                         require_signing=args.require_signing,
+                         record_limits=Limits(args.record_max_mb * 10**6, args.record_max_minutes * 60.0,
+                                              args.record_min_free_mb * 10**6, args.stranger_messages))
 
 
 def cmd_serve(args: argparse.Namespace) -> int:

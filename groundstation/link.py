@@ -202,7 +202,7 @@ class Link:
             self.from_elsewhere[sysid] += 1
             return
         self.stats["received"] += 1
-        self._record(message.get_msgbuf(), now)
+        self._record(message.get_msgbuf(), now, sysid)
         beat = message.get_type() == "HEARTBEAT" and component == AUTOPILOT
         self._learn_route(sysid, port, peer, now, beat)
         self.fleet.apply(message, now)
@@ -277,11 +277,13 @@ class Link:
             self.send(mavlink.MAVLink_request_data_stream_message(sysid, AUTOPILOT, stream, rate, 1), sysid)
 
     # ---- recording ----------------------------------------------------------------------------------
-    def _record(self, packet: bytes, now: float) -> None:
+    def _record(self, packet: bytes, now: float, sender: int | None = None) -> None:
+        """What the station sends (``sender`` None) or heard from system ``sender`` (the recorder keeps only so
+        much of a sender the fleet does not know)."""
         if self.recorder is None:
             return
         try:
-            self.recorder.write(packet, now)
+            self.recorder.write(packet, now, sender)
             self.recording_error = ""
         except OSError as error:  # a full or vanished disk: say so, go on tracking the vehicles
             self.stats["recording errors"] += 1

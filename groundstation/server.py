@@ -24,7 +24,7 @@ from groundstation.app import create_app
 from groundstation.link import Link
 from groundstation.mapview import MapPictures
 from groundstation.proxy import VizProxy
-from groundstation.recorder import Recorder
+from groundstation.recorder import Limits, Recorder
 from groundstation.recordings import RecordingIndex, Replays
 from groundstation.security import Access, is_loopback
 from groundstation.state import Fleet, VehicleState
@@ -47,9 +47,10 @@ class GroundStation:
     def __init__(self, urls: list[str], scene: Scene | None = None, token: str | None = None,
                  record_dir: str | Path | None = "recordings", datum: Datum | None = None, viser_port: int = 0,
                  scene_dirs: Iterable[str | Path] = (), signing_key: bytes | None = None,
-                 require_signing: bool = False):
+                 require_signing: bool = False, record_limits: Limits | None = None):
         """``scene_dirs``: folders where replays look for the scenes their recordings name (besides the
-        bundled scenes and the recording's own folder)."""
+        bundled scenes and the recording's own folder); ``record_limits``: how much is recorded, and when a
+        recording is closed for the next (``recorder.Limits``)."""
         self.token = token or secrets.token_urlsafe(16)
         self.access = Access(self.token)  # serving beyond loopback makes it stricter (see app_config)
         self.scene = scene
@@ -65,8 +66,8 @@ class GroundStation:
         self.datum = datum  # None (no scene, none given): the first home heard becomes the origin
         self.live = Fleet(datum, ground)
         self.record_dir = Path(record_dir) if record_dir else None
-        self.recorder = Recorder(record_dir, note_text(scene_file) if scene_file else None) \
-            if record_dir and urls else None
+        self.recorder = Recorder(record_dir, note_text(scene_file) if scene_file else None, record_limits or Limits(),
+                                 known=lambda sysid: sysid in self.live.vehicles) if record_dir and urls else None
         self.link_urls = list(urls)
         try:
             self.link = Link(urls, self.live, self.recorder, signing_key=signing_key,
@@ -164,7 +165,7 @@ class GroundStation:
         if self.recorder is None:
             return
         self.recorder.close()
-        if not self.recorder.messages:
+        if self.recorder.path is not None and not self.recorder.messages:
             self.recorder.path.unlink(missing_ok=True)
 
     # ---- what the app asks for -------------------------------------------------------------------
@@ -299,8 +300,12 @@ def _run_app(station, host, port, tls_cert, tls_key, announce, viewer_token, all
     links = ", ".join(station.link_urls) or "no MAVLink links"
     announce(f"ground station: {scheme}://{shown}:{port}/#token={station.token}  (operator token {station.token}; "
              f"listening to {links}"
-             + (f"; recording to {station.recorder.path}" if station.recorder else "") + ")")
+             + (f"; {_recording(station.recorder)}" if station.recorder else "") + ")")
     server.run(sockets=[listening])
+
+
+def _recording(recorder: Recorder) -> str:
+    return f"recording to {recorder.path}" if recorder.path is not None else recorder.refused
 
 
 def _listening_socket(host: str, port: int) -> socket.socket:

@@ -151,6 +151,8 @@ def test_the_api_replays_a_poisoned_recording_to_its_end_and_reports_what_it_pas
         status = api.get("/api/replay").json()["replay"]
         assert status["time"] == pytest.approx((POSES - 1) * 0.1) and status["errors"] == 2
         assert "ValueError: cannot take COMMAND_INT" in status["last_error"]
+        health = api.get("/api/health").json()  # counted where the station's health is asked, too
+        assert health["replay"] == {"name": "poison.tlog", "errors": 2, "last_error": status["last_error"]}
         assert api.vehicle(1)["position"]["x"] == pytest.approx(POSES - 1)
         wait_wall(lambda: api.get("/api/replay/timeline").json()["ready"], 30, "the timeline")
         timeline = api.get("/api/replay/timeline").json()

@@ -33,15 +33,21 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
     @router.get("/api/health")
     @router.head("/api/health", include_in_schema=False)  # what uptime monitors send
     def health():
-        scene = station.scene
+        scene, recorder, replay = station.scene, station.recorder, station.replay
         link = station.link.health() if station.link is not None else None
+        if link is not None and recorder is not None and recorder.refused:
+            link["recording_error"] = recorder.refused  # what the page's health banner says of the recording
         troubled = link is not None and (link["thread"] != "ok" or link["recording_error"]
                                          or not all(port["up"] for port in link["links"]))
         return {"status": "degraded" if troubled else "ok", "version": __version__, "mode": station.mode,
                 "vehicles": len(station.fleet.ids()), "links": station.link_urls, "link": link,
                 "far_from_scene": station.far_from_scene(),
-                "recording": None if station.recorder is None else {
-                    "file": station.recorder.path.name, "error": link["recording_error"] if link else None},
+                "recording": None if recorder is None else {
+                    "file": recorder.path.name if recorder.path is not None else None,
+                    "error": link["recording_error"] if link else None, "refused": recorder.refused or None,
+                    "not_kept": recorder.not_kept, "strangers_dropped": recorder.strangers_dropped},
+                "replay": None if replay is None else {"name": replay.name, "errors": replay.errors,
+                                                       "last_error": replay.last_error or None},
                 "scene": None if scene is None else {"name": scene.path.name if scene.path else None,
                                                      "triangles": len(scene.faces)}}
 
