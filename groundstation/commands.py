@@ -13,9 +13,9 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
 
 from groundstation.link import Link
-from groundstation.state import AUTOPILOT, COMPANION, Fleet, VehicleState
+from groundstation.state import Fleet, VehicleState
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import AUTOPILOT, COMPANION, mavlink
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, number_of
 
 Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed"]

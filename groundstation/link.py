@@ -50,9 +50,9 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from groundstation.state import AUTOPILOT, FORGET_AFTER, LINK_LOST_AFTER, Fleet
+from groundstation.state import FORGET_AFTER, LINK_LOST_AFTER, Fleet
 from vehicle.protocol import links, mission, signing
-from vehicle.protocol.mav import RESULT_WORDS, mavlink, pack
+from vehicle.protocol.mav import AUTOPILOT, RESULT_WORDS, mavlink, pack
 from vehicle.protocol.mission import MissionItem
 
 log = logging.getLogger("groundstation.link")

@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.state import AUTOPILOT, Fleet, makes_a_vehicle
+from groundstation.state import Fleet, makes_a_vehicle
 from vehicle.protocol.agent_status import AGENT_STATUS
 from vehicle.protocol.mapstream import MAP_SNAPSHOT, PATH, PATH_CHUNK, SNAPSHOT_CHUNK
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import AUTOPILOT, mavlink
 
 log = logging.getLogger("groundstation.replay")
 

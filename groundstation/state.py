@@ -43,14 +43,12 @@ from vehicle.protocol import agent_status
 from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum, on_earth
 from vehicle.protocol.mapstream import MapReceiver
-from vehicle.protocol.mav import RESULT_WORDS, mavlink
+from vehicle.protocol.mav import AUTOPILOT, COMPANION, RESULT_WORDS, mavlink
 from vehicle.protocol.modes import FORCE_DISARM, commanded_mode, heartbeat_mode, name_of
 from vehicle.protocol.rangefinder import reading_from
 from vehicle.protocol.statustext import Reassembler
 
 LINK_LOST_AFTER = 3.0  # s without a heartbeat
-COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
-AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 TRAIL_POINTS = 2000
 TRAIL_SPACING = 0.3  # m between recorded trail points
 HITS_KEPT = 600

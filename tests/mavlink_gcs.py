@@ -11,10 +11,7 @@ from collections.abc import Callable
 
 from harness import WaitTimeout, wait_sim
 
-from vehicle.protocol.mav import mavlink, mavutil
-
-AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
-COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+from vehicle.protocol.mav import AUTOPILOT, mavlink, mavutil
 
 
 class Gcs:

@@ -11,7 +11,7 @@ import pytest
 
 from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import ACCEPTED, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED, mavlink
 from vehicle.protocol.mission import (
     DO_CHANGE_SPEED,
     NAV_LAND,
@@ -22,15 +22,7 @@ from vehicle.protocol.mission import (
     MissionItem,
 )
 from vehicle.protocol.modes import STOP_MODE, Kind, commanded_mode, flown, mode_name, mode_number, name_of, number_of
-from vehicle.sim.autopilot import (
-    ACCEPTED,
-    DENIED,
-    FAILED,
-    TEMPORARILY_REJECTED,
-    UNSUPPORTED,
-    VELOCITY_TIMEOUT,
-    Autopilot,
-)
+from vehicle.sim.autopilot import VELOCITY_TIMEOUT, Autopilot
 from vehicle.sim.avoidance import GRAZE, MARGIN, ObstacleDatabase
 from vehicle.sim.physics import Body, Limits
 from vehicle.sim.simulation import Simulation

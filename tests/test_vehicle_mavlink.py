@@ -16,12 +16,12 @@ from contextlib import contextmanager
 import numpy as np
 import pytest
 from harness import RunningSim, free_tcp_port, free_udp_port, wait_wall
-from mavlink_gcs import COMPANION, Gcs
+from mavlink_gcs import Gcs
 
 from vehicle.agent.settings import Settings
 from vehicle.lab.stepper import simulate
 from vehicle.protocol.mapstream import MAP_DELTA, MapReceiver
-from vehicle.protocol.mav import mavlink, mavutil
+from vehicle.protocol.mav import COMPANION, mavlink, mavutil
 from vehicle.protocol.modes import Kind
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.sim.endpoint import Endpoint

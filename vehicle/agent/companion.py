@@ -19,10 +19,10 @@ from vehicle.agent.params import Parameters
 from vehicle.protocol import agent_status
 from vehicle.protocol.geodesy import on_earth
 from vehicle.protocol.mapstream import PAYLOAD, MapStreamer
+from vehicle.protocol.mav import COMPANION as COMPONENT
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.statustext import statustexts
 
-COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 HEARTBEAT_PERIOD = 1.0  # s
 PATH_PERIOD = 0.5  # s between checks of the planned path
 STATUS_PERIOD = 1.0  # s between repeats of an unchanged status

@@ -24,8 +24,6 @@ from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import Kind
 from vehicle.protocol.rangefinder import Reading, Servo
 
-ACCEPTED = 0  # MAV_RESULT_ACCEPTED
-
 
 class FlightController(Protocol):
     kind: Kind

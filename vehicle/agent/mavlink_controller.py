@@ -36,15 +36,12 @@ from collections.abc import Callable
 from vehicle.protocol import mission as mission_protocol
 from vehicle.protocol.frames import Navigation, Pose
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
-from vehicle.protocol.mav import COMMAND_NAMES, RESULT_WORDS, mavlink, mavutil
+from vehicle.protocol.mav import ACCEPTED, AUTOPILOT, COMMAND_NAMES, RESULT_WORDS, UNSUPPORTED, mavlink, mavutil
+from vehicle.protocol.mav import COMPANION as COMPONENT
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import DISARMED, Kind
 from vehicle.protocol.rangefinder import Reading, Servo, reading_from, readings_from_obstacles
 
-COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
-AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
-ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
-UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
 NO_ANSWER = -1  # what a command returns when the autopilot never acknowledged it
 HEARTBEAT_LOST = 2.0  # wall s without the autopilot's heartbeat before the agent stops commanding
 FAILSAFE_NEWS = 3.0  # wall s: a mode change this soon after the autopilot said "failsafe" is the failsafe's

@@ -16,6 +16,16 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402 - must follow the environment setting
 
+# Who is who in a vehicle's system: the flight controller, and the onboard agent on its companion computer.
+AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1  # 1
+COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
+
+# A COMMAND_ACK's result, as the simulated autopilot, its endpoint and the agent answer and read it.
+ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
+TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+DENIED = mavlink.MAV_RESULT_DENIED
+UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
+FAILED = mavlink.MAV_RESULT_FAILED
 # MAV_RESULT values MAVLink defines (common.xml) that pymavlink 2.4.50's generated dialects lack (no 6, and 9 is
 # their ENUM_END): CANCELLED answers a long command stopped by COMMAND_CANCEL.
 MAV_RESULT_CANCELLED = getattr(mavlink, "MAV_RESULT_CANCELLED", 6)
@@ -54,4 +64,5 @@ def pack(message, packer) -> bytes:
     return packet
 
 
-__all__ = ["COMMAND_NAMES", "RESULT_WORDS", "mavlink", "pack"]  # and mavutil, on first use
+__all__ = ["ACCEPTED", "AUTOPILOT", "COMMAND_NAMES", "COMPANION", "DENIED", "FAILED", "RESULT_WORDS",
+           "TEMPORARILY_REJECTED", "UNSUPPORTED", "mavlink", "pack"]  # and mavutil, on first use

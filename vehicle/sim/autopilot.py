@@ -16,6 +16,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
+from vehicle.protocol.mav import ACCEPTED, DENIED, FAILED, TEMPORARILY_REJECTED, UNSUPPORTED
 from vehicle.protocol.mav import mavlink as mav
 from vehicle.protocol.mission import (
     ALTITUDE_LIMIT,
@@ -31,12 +32,6 @@ from vehicle.protocol.mission import (
 from vehicle.protocol.modes import FLOWN, Kind
 from vehicle.sim.avoidance import ObstacleDatabase
 from vehicle.sim.physics import Body
-
-ACCEPTED = mav.MAV_RESULT_ACCEPTED
-TEMPORARILY_REJECTED = mav.MAV_RESULT_TEMPORARILY_REJECTED
-DENIED = mav.MAV_RESULT_DENIED
-UNSUPPORTED = mav.MAV_RESULT_UNSUPPORTED
-FAILED = mav.MAV_RESULT_FAILED
 
 _PI, _TWO_PI = math.pi, 2 * math.pi
 TURN_FIRST = math.radians(12)  # heading error above which the vehicle turns in place before moving

@@ -37,7 +37,15 @@ from typing import Protocol
 
 from vehicle.protocol import links, signing
 from vehicle.protocol.geodesy import on_earth
-from vehicle.protocol.mav import mavlink, pack
+from vehicle.protocol.mav import (
+    ACCEPTED,
+    AUTOPILOT,
+    COMPANION,
+    DENIED,
+    UNSUPPORTED,
+    mavlink,
+    pack,
+)
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, Kind, mode_name
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
@@ -45,13 +53,6 @@ from vehicle.sim.mission_server import MissionServer
 from vehicle.sim.simulation import Simulation
 from vehicle.sim.telemetry import Telemetry
 
-ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
-DENIED = mavlink.MAV_RESULT_DENIED
-UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
-FAILED = mavlink.MAV_RESULT_FAILED
-TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
-AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
-COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 GCS = mavlink.MAV_TYPE_GCS
 MISSION_MESSAGES = {"MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_COUNT",
                     "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT"}
