@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 import subprocess
 import sys
 import threading
@@ -21,7 +22,7 @@ from pathlib import Path
 
 import pytest
 from harness import SCENE_TEXT, RunningStation, command_ok, free_udp_port, small_scene, wait_wall
-from mavlink_peer import Peer, vehicle_heartbeat
+from mavlink_peer import Peer, command, gcs_heartbeat, vehicle_heartbeat
 
 from vehicle.agent import mavlink_controller
 from vehicle.agent.agent import Agent
@@ -177,7 +178,6 @@ def test_an_agent_told_the_wrong_vehicle_refuses_to_fly_it(tmp_path):
 
 
 def test_ctrl_c_stops_an_agent_with_a_line_not_a_traceback(tmp_path):
-    import signal
     import socket
 
     scene = tmp_path / "yard.wrl"
@@ -351,6 +351,8 @@ class ScriptedAutopilot:
                 mav.global_position_int_send(ms, int(lat * 1e7), int(lon * 1e7), 584000, 4000, 0, 0, 0, 0)
                 mav.attitude_send(ms, *self.attitude, 0, 0, 0)
                 mav.home_position_send(int(lat * 1e7), int(lon * 1e7), 584000, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0)
+                prearm = mavlink.MAV_SYS_STATUS_PREARM_CHECK  # its pre-arm checks pass
+                mav.sys_status_send(prearm, prearm, prearm, 0, 12000, 0, 100, 0, 0, 0, 0, 0, 0)
             while self.late_acks:
                 mav.command_ack_send(*self.late_acks.pop(0), 0, 0, 1, 191)
             while (message := self.link.recv_msg()) is not None:
@@ -582,14 +584,22 @@ def test_an_unsupported_command_is_no_problem_worth_stopping_for():
         assert fc.took_over() is None and fc.problems == 0
 
 
-def test_a_flight_controller_that_falls_silent_stops_the_agent_commanding():
+def test_a_gap_in_the_heartbeat_is_no_takeover_and_a_command_it_left_unanswered_no_problem():
+    """The gap is ``lost`` (the process pauses the agent until the heartbeat is back); a command that went
+    unanswered while it lasted is the gap's silence, not a refusal to pause for good on."""
     with controller() as (fc, fake):
         fc.connect(10)
         assert not fc.lost and fc.took_over() is None
         fake.beating = False
         wait_wall(lambda: pumped(fc) and fc.lost, 5, "the heartbeat is missed")
-        assert fc.took_over() == "lost the flight controller's heartbeat for 2 s; not commanding"
-        assert fc.took_over() is None  # said once
+        assert fc.took_over() is None
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = None
+        assert fc.takeoff(4.0) == NO_ANSWER
+        assert fc.took_over() is None and fc.problems == 0
+        fake.beating = True
+        wait_wall(lambda: pumped(fc) and not fc.lost, 5, "the heartbeat is back")
+        assert fc.takeoff(4.0) == NO_ANSWER  # heard, and still no answer: that is a problem
+        assert fc.took_over() == "flight controller: nav_takeoff no answer" and fc.problems == 1
 
 
 def test_the_wrong_kind_of_vehicle_is_refused_at_once():
@@ -766,3 +776,144 @@ def test_an_agent_that_fails_mid_flight_holds_the_vehicle_says_why_and_ends_in_e
             assert moved < 0.3, f"{moved:.2f} m in {settled[-1][0] - settled[0][0]:.1f} s after it failed"
     finally:
         watcher.close()
+
+
+# ---- a slow machine: gaps in the autopilot's heartbeat, a mission that never starts ------------------------------
+LOST = "paused, lost the flight controller's heartbeat for 2 s; not commanding until it is back"
+BACK = "the flight controller's heartbeat is back after"
+
+
+class Lines:
+    """A process's standard error, line by line as it comes (read on a thread of its own)."""
+
+    def __init__(self, stream):
+        self.lines: list[str] = []
+        self._thread = threading.Thread(target=lambda: self.lines.extend(iter(stream.readline, "")), daemon=True)
+        self._thread.start()
+
+    def said(self, text: str) -> bool:
+        return any(text in line for line in list(self.lines))
+
+    def text(self) -> str:
+        return "".join(self.lines)
+
+
+@contextmanager
+def agent_flying(tmp_path: Path, mission: str = "pathfind"):
+    """A station, our simulated autopilot (``vehicle sim --role autopilot``, which can be stopped as a starved
+    process is) and the agent flying its mission, as far as the mission's start; yields (station's API, autopilot
+    process, agent process, its standard error, a raw ground station the autopilot also sends to)."""
+    scene_file = tmp_path / "yard.wrl"
+    scene_file.write_text(SCENE_TEXT)
+    agent_port = free_udp_port()
+    with (
+        RunningStation(small_scene(), tmp_path / "recordings") as station,
+        station.api() as api,
+        Peer(None, 254, 190) as gcs,
+        autopilot(scene_file, [f"udpout:127.0.0.1:{agent_port}", station.vehicle_url(), gcs.url], speedup=10) as pilot,
+    ):
+        # the agent speaks to the station straight too (--gcs): what it sent through the starved autopilot waits
+        # there behind the backlog of a few seconds, and some of it is lost, as UDP loses it
+        agent = subprocess.Popen(agent_command(agent_port, mission, scene_file, "copter", "--set", "space_size=20",
+                                               "--gcs", station.vehicle_url()),
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        errors = Lines(agent.stderr)
+        try:
+            api.wait_vehicle(1, lambda v: (v["agent"] or {}).get("phase") == "mission"
+                             and v["agent"]["state"] == "running", sim_timeout=120, what="the mission flies")
+            yield api, pilot, agent, errors, gcs
+        finally:
+            pilot.send_signal(signal.SIGCONT)
+            agent.kill()
+            agent.wait(timeout=10)
+
+
+def starve(pilot: subprocess.Popen, errors: Lines, meanwhile=None) -> None:
+    """Stop the autopilot's process (a machine too busy to run it) until the agent says it paused for the gap in
+    its heartbeat, do ``meanwhile`` then, and let it run again."""
+    pilot.send_signal(signal.SIGSTOP)
+    try:
+        wait_wall(lambda: errors.said(f"agent: {LOST}"), 60, "the agent pauses for the gap")
+        if meanwhile is not None:
+            meanwhile()
+    finally:
+        pilot.send_signal(signal.SIGCONT)
+
+
+def texts_shown(api) -> list[str]:
+    return [m["text"] for m in api.vehicle(1)["messages"]]
+
+
+def test_a_gap_in_the_autopilots_heartbeat_pauses_the_agent_until_it_is_back_and_says_both(tmp_path):
+    """The demo on a busy machine: its agent paused for a gap in the heartbeat and hovered for 8 minutes until
+    someone pressed Resume. Now it carries on by itself once the heartbeat is back, and says both: on standard
+    error and to the station (STATUSTEXT, routed by the autopilot)."""
+    with agent_flying(tmp_path) as (api, pilot, agent, errors, _):
+        starve(pilot, errors)
+        wait_wall(lambda: errors.said(f"agent: {BACK}"), 60, "the agent says the heartbeat is back")
+        api.wait_vehicle(1, lambda v: v["agent"]["state"] == "running" and v["agent"]["phase"] != "waiting",
+                         sim_timeout=30, what="the agent runs again, by itself")
+        wait_wall(lambda: f"Agent: {LOST}" in texts_shown(api) and any(
+            t.startswith(f"Agent: {BACK}") and t.endswith("; resuming mission") for t in texts_shown(api)),
+            30, "the station shows the pause and the resume")
+        agent.wait(timeout=300)
+        result = json.loads(agent.stdout.read().strip().splitlines()[-1])
+    assert result["outcome"] == "finished", (result, errors.text()[-2000:])
+    assert f"Agent: {LOST}" in result["messages"] and "Agent: resuming mission" not in result["messages"]
+    assert result["flight_controller_problems"] == 0
+
+
+@pytest.mark.parametrize("when", ["during", "after"])
+def test_an_operators_mode_change_during_or_after_a_gap_pauses_the_agent_for_good(tmp_path, when):
+    """A gap that ends lifts its own pause, never an operator's: an RTL the autopilot took during the gap (sent
+    while it was starved) or once the agent carried on pauses the agent until Resume."""
+    def rtl_during_the_gap():
+        gcs.send(gcs_heartbeat(), command(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6))
+
+    with agent_flying(tmp_path) as (api, pilot, agent, errors, gcs):
+        gcs.address = ("127.0.0.1", gcs.socket.recvfrom(65535)[1][1])  # where the autopilot sends from
+        if when == "during":
+            starve(pilot, errors, meanwhile=rtl_during_the_gap)
+        else:
+            starve(pilot, errors)
+            wait_wall(lambda: errors.said(f"agent: {BACK}"), 60, "the agent carries on")
+            command_ok(api, 1, action="rtl")
+        paused = api.wait_vehicle(1, lambda v: v["agent"]["reason"] == "operator switched to RTL", sim_timeout=30,
+                                  what="the agent pauses for the operator")
+        assert paused["agent"]["state"] == "paused"
+        later = api.wait_sim_time(1, 20)
+        assert later["agent"]["state"] == "paused" and later["agent"]["reason"] == "operator switched to RTL"
+        assert later["mode"] == "RTL"
+        command_ok(api, 1, action="resume")
+        api.wait_vehicle(1, lambda v: v["agent"]["state"] == "running", sim_timeout=30, what="resumed")
+        assert errors.said("agent: resuming mission")
+
+
+@pytest.mark.parametrize("ending", ["deadline", "duration"])
+def test_an_agent_whose_mission_never_started_exits_non_zero_saying_why(monkeypatch, capsys, ending):
+    """Against ArduCopter SITL an agent ended with exit code 0, its copter never off the ground. An autopilot that
+    refuses to arm: at the start deadline, or at any other end of the run before the mission started (here
+    --duration; the time limit too), the agent ends in error and says what held the mission up."""
+    from vehicle import cli
+    from vehicle.agent import process
+
+    port = free_udp_port()
+    if ending == "deadline":
+        monkeypatch.setattr(process, "START_TIMEOUT", 4.0)
+        extra, why = (), "the mission did not start within 4 s: "
+    else:
+        extra, why = ("--duration", "6"), ""
+    with ScriptedAutopilot(port) as fake:
+        fake.base_mode = 217 & ~mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        fake.answer[mavlink.MAV_CMD_COMPONENT_ARM_DISARM] = mavlink.MAV_RESULT_DENIED
+        code = cli.main(["agent", "--connect", f"udpin:127.0.0.1:{port}", "--mission", "browse", "--json", *extra])
+    printed = capsys.readouterr()
+    result = json.loads(printed.out.strip().splitlines()[-1])
+    held = "paused, flight controller: component_arm_disarm denied"
+    if ending == "deadline":
+        assert result["reason"] == f"{why}{held}"
+    else:
+        assert result["reason"] == f"the mission never started ({held}); stopped after the given duration"
+    assert code == 1 and result["outcome"] == "error"
+    assert f"Agent: {result['reason']}" in result["messages"]  # said to the station too
+    assert f"agent: {result['reason']}" in printed.err

@@ -7,7 +7,9 @@ one way: preflight -> take-off -> mission -> homing -> landing -> done. A
 mission that completes or gives up, a vehicle that leaves the allowed space,
 or a time budget that runs low all lead home. Someone else taking over (a
 mode change the agent did not make, another ground station's target) pauses
-the agent; ``resume`` hands control back to it. The operator's "Go here"
+the agent; ``resume`` hands control back to it. A pause for a cause that ends
+by itself (a gap in the autopilot's heartbeat) lifts itself once it is over,
+unless someone took over meanwhile. The operator's "Go here"
 (``go_to``) pauses the mission too, and the agent flies there along a path
 planned on its map, refusing a target it knows to be inside an obstacle.
 """
@@ -15,6 +17,7 @@ planned on its map, refusing a target it knows to be inside an obstacle.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from enum import StrEnum
 
 from vehicle.agent.controller import FlightController
@@ -46,8 +49,11 @@ class Phase(StrEnum):
 
 class Agent:
     def __init__(self, fc: FlightController, mission: str, settings: Settings,
-                 waypoints: list[tuple[float, float]] | None = None, autostart: bool = True):
+                 waypoints: list[tuple[float, float]] | None = None, autostart: bool = True,
+                 log: Callable[[str], None] | None = None):
+        """``log``: where the agent's messages are also written (a companion's standard error)."""
         self.fc = fc
+        self.log = log
         self.settings = settings
         home = (fc.home[0], fc.home[1])
         self.map = MemoryMap(home, settings.space_size, settings.resolution)
@@ -62,6 +68,8 @@ class Agent:
         self.reason = ""
         self.paused = False
         self.pause_reason = ""
+        self.mission_began = False  # the mission itself started (after the take-off), once at least
+        self._until: Callable[[], str | None] | None = None  # a passing pause's end, in words once it is over
         self._paused_since: float | None = None  # when the mission's clock stopped for a pause
         self._travel: Travel | None = None
         self._errand: Travel | None = None  # the operator's "Go here", flown while the mission is paused
@@ -76,6 +84,8 @@ class Agent:
     def say(self, text: str, severity: int = mavlink.MAV_SEVERITY_INFO) -> None:
         self.messages.append(text)
         self.outbox.append((severity, text))
+        if self.log is not None:
+            self.log(text)
 
     # ---- starting, pausing, resuming ----------------------------------------------------------
     def start(self) -> bool:
@@ -87,6 +97,7 @@ class Agent:
             self.outcome, self.reason, self._travel = None, "", None
         self.paused = False
         self.pause_reason = ""
+        self._until = None
         self._errand = None
         self._paused_since = None
         self.ctx.started = self.ctx.time = self.fc.time
@@ -98,28 +109,35 @@ class Agent:
         """Hand control back to the agent (the operator's resume). False if not paused."""
         if not self.paused:
             return False
-        self.paused = False
-        self.pause_reason = ""
-        self._restart_clock()
         if self._errand is not None:  # resumed on the way to the operator's target: the mission goes first
             self._errand = None
             self.ctx.planned_path = []
         self.fc.took_over()  # the operator's own switch back is the hand-back, not a takeover
-        self.say("Agent: resuming mission")
+        self._carry_on_after_pause("Agent: resuming mission", own_mode=True)
+        return True
+
+    def _carry_on_after_pause(self, said: str, own_mode: bool) -> None:
+        """Take up again whatever the pause interrupted; with ``own_mode`` in the agent's own mode (after an
+        operator's resume; after a passing pause the mode is still the agent's, or someone took over)."""
+        self.paused = False
+        self.pause_reason = ""
+        self._until = None
+        self._restart_clock()
+        self.say(said)
         if self._down_meanwhile():  # an operator's RTL, LAND or kill brought it down or disarmed it: up again first
             self._relaunch = self.phase
             self.phase = Phase.PREFLIGHT
-            return True
+            return
         if self.phase is Phase.TAKEOFF:  # the take-off was refused or cut short: from the start (GUIDED, arm, climb)
             self.phase = Phase.PREFLIGHT
-            return True
-        if self.phase is Phase.HOMING or (self.phase is Phase.MISSION and self.mission.mode == "GUIDED"):
+            return
+        if own_mode and (self.phase is Phase.HOMING
+                         or (self.phase is Phase.MISSION and self.mission.mode == "GUIDED")):
             self._set_mode("GUIDED")
         if self.phase is Phase.MISSION:
             self.mission.resume()
         if self._travel is not None:
             self._travel.resume()
-        return True
 
     def _stop_clock(self) -> None:
         """A pause stops the mission's clock: the time limit is for flying the mission, and an operator who
@@ -136,15 +154,28 @@ class Agent:
         return (self.phase in (Phase.MISSION, Phase.HOMING)
                 and not (self.fc.armed and (self.fc.kind is Kind.ROVER or self.fc.flying)))
 
-    def pause(self, reason: str) -> None:
-        """Stop commanding until resumed: someone took over, or the flight controller refused or went silent.
-        Said once: several requests sent before the pause may be refused for the same reason."""
+    def pause(self, reason: str, until: Callable[[], str | None] | None = None) -> None:
+        """Stop commanding until resumed: someone took over, or the flight controller refused a command.
+        Said once: several requests sent before the pause may be refused for the same reason.
+
+        ``until``: the pause passes by itself (the flight controller went silent, on a busy machine):
+        ``until()`` says in words that its cause is over (None while it lasts), and the agent carries on by
+        itself. A pause for good (an operator's takeover) meanwhile stays one."""
         if self.paused and reason == self.pause_reason:
             return
         self._stop_clock()
         self.paused = True
         self.pause_reason = reason
+        self._until = until
         self.say(f"Agent: paused, {reason}", mavlink.MAV_SEVERITY_WARNING)
+
+    def _passed(self) -> bool:
+        """A passing pause whose cause is over is lifted (and said); True then."""
+        over = self._until() if self._until is not None else None
+        if over is None:
+            return False
+        self._carry_on_after_pause(f"Agent: {over}; resuming mission", own_mode=False)
+        return True
 
     def go_to(self, point: tuple[float, float]) -> str | None:
         """The operator's "Go here": pause the mission and fly to ``point`` around what the map knows.
@@ -162,6 +193,7 @@ class Agent:
         self._stop_clock()
         self.paused = True
         self.pause_reason = f"going to {where} for the operator"
+        self._until = None
         if fc.mode != "GUIDED":
             self._set_mode("GUIDED")
         fc.took_over()  # the operator's own command is no takeover
@@ -212,7 +244,7 @@ class Agent:
             return
         if taken is not None:
             self.pause(taken)
-        if self.paused:
+        if self.paused and (taken is not None or not self._passed()):
             return
         self._note_blocked(now, observation)
         getattr(self, f"_{self.phase.value}")(now)
@@ -236,6 +268,7 @@ class Agent:
             fc.arm()
             if fc.mission.running or fc.start_mission() == 0:
                 self.phase = Phase.MISSION
+                self.mission_began = True
             return
         self._set_mode("GUIDED")
         fc.arm()
@@ -265,6 +298,7 @@ class Agent:
 
     def _start_mission(self) -> None:
         self.phase = Phase.MISSION
+        self.mission_began = True
         self.say(f"Mission {self.mission.name}: start")
         self.mission.begin()
 

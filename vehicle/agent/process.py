@@ -10,6 +10,15 @@ autopilot, which routes them to every ground station, and straight to the
 resumes it. A message the agent drops (in the autopilot's name from elsewhere,
 one request too many, one it fails on) is said, and the flight goes on.
 
+A companion computer is a slow machine, and so may be the autopilot's: a gap
+in the autopilot's heartbeat pauses the agent (it stops commanding), and once
+the heartbeat is back the agent carries on by itself; both are said, to the
+ground stations and on standard error (``--stay`` or not, nobody need press
+Resume). An operator's takeover meanwhile still pauses it for good. A mission
+that does not start within START_TIMEOUT of the agent's start (pre-arm checks
+that never pass, an arm or take-off refused, an autopilot gone silent), or a
+run that ends before it started, ends as ``error``, saying what held it up.
+
 Readings come from the autopilot's DISTANCE_SENSOR / OBSTACLE_DISTANCE
 (``--sensors fc``, sonars wired to a real vehicle), or (``--sensors scene``)
 from the sonar cast into a VRML scene at the pose the autopilot reports, ten
@@ -29,9 +38,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vehicle import __version__
-from vehicle.agent.agent import Agent
+from vehicle.agent.agent import Agent, Phase
 from vehicle.agent.companion import COMPONENT, Companion
-from vehicle.agent.mavlink_controller import FlightControllerError, MavlinkController
+from vehicle.agent.mavlink_controller import HEARTBEAT_LOST, FlightControllerError, MavlinkController
 from vehicle.agent.settings import Settings
 from vehicle.protocol import links
 from vehicle.protocol.frames import Pose
@@ -42,7 +51,7 @@ from vehicle.protocol.tlog import TlogWriter
 from vehicle.world.scene import Scene
 
 SONAR_RATE = 10.0  # Hz of the autopilot's clock
-READY_TIMEOUT = 180.0  # wall s for the autopilot's pre-arm checks to pass (ArduPilot's EKF takes ~45 s)
+START_TIMEOUT = 180.0  # wall s from the agent's start to the mission's (ArduPilot's EKF alone takes ~45 s)
 IDLE = 0.002  # wall s to wait when nothing came in
 RADIUS = 0.3  # m, the vehicle body the agent plans around
 CLEARANCE = 0.05  # m between the ground and the body when the vehicle stands
@@ -65,6 +74,8 @@ class AgentOptions:
     stay: bool = False  # after the mission, stay (a ground station's MISSION_START flies it again)
     connect_timeout: float = 60.0
     signing_key: bytes | None = None  # MAVLink 2 signing on every link: sign everything, refuse what is not signed
+    start_timeout: float | None = None  # wall s from its start (with ``wait``, the operator's) to the mission's;
+    # None: START_TIMEOUT
 
 
 class OnboardAgent:
@@ -106,14 +117,16 @@ class OnboardAgent:
         fc.connect(options.connect_timeout)
         say(f"agent: {options.kind} {fc.sysid} at home {fc.home[0]:.1f}, {fc.home[1]:.1f}; mission "
             f"{options.mission}; readings from {'the scene' if self.sonars else 'the flight controller'}")
-        self.agent = Agent(fc, options.mission, options.settings, options.waypoints, autostart=False)
+        self.agent = Agent(fc, options.mission, options.settings, options.waypoints, autostart=False,
+                           log=lambda text: say(f"agent: {text.removeprefix('Agent: ')}"))
         self.companion = Companion(self.agent, fc.sysid, start=time.time())
         fc.handler = self.companion.handle
         fc.avoid_margin = self._avoid_margin()
         fc.prefer_speed(options.settings.speed)
         begun = fc.time
         next_step = next_reading = fc.time
-        waiting_since = time.monotonic()
+        trying_since = None if options.wait else time.monotonic()  # the start deadline runs from here
+        allowed = options.start_timeout or START_TIMEOUT
         watch = links.LinkWatch([fc.conn, *fc.extra_links])
         outcome = reason = None
         period = options.settings.monitor_period
@@ -124,7 +137,6 @@ class OnboardAgent:
                 say(f"agent: {line}")
             self._record(came, now)
             if (news := fc.news()) is not None:  # spoofed, flooded or failing messages: the agent flies on
-                say(f"agent: {news}")
                 self.agent.say(f"Agent: {news}", mavlink.MAV_SEVERITY_WARNING)
             if self.sonars is not None and fc.time >= next_reading:
                 next_reading = fc.time + 1.0 / SONAR_RATE
@@ -133,21 +145,25 @@ class OnboardAgent:
                 outcome, reason = "collision", self.collision.describe()
                 break
             agent = self.agent
-            if agent.phase.value == "waiting" and not options.wait:
-                if fc.mode != "GUIDED" and fc.set_mode("GUIDED") == 0:
-                    waiting_since = time.monotonic()
+            self._mind_the_gap()  # right after the pump: a step that kept the loop busy is no gap
+            if agent.phase is Phase.WAITING and not options.wait and not fc.lost:
+                if fc.mode != "GUIDED":
+                    fc.set_mode("GUIDED")
                 if fc.ready() and fc.mode == "GUIDED":
                     agent.start()
-                elif time.monotonic() - waiting_since > READY_TIMEOUT:
-                    outcome, reason = "error", "the flight controller's pre-arm checks never passed"
+            if trying_since is None and agent.phase is not Phase.WAITING:  # with --wait: the operator's start
+                trying_since = time.monotonic()
+            if not agent.mission_began and trying_since is not None and time.monotonic() - trying_since > allowed:
+                fc.hold()
+                outcome, reason = "error", self._not_started(f"the mission did not start within {allowed:g} s: "
+                                                             f"{self._holdup()}")
+                break
             try:
                 if fc.time >= next_step:
                     next_step = max(next_step + period, fc.time)
                     agent.step()
                     if agent.done and not options.stay:
                         outcome, reason = agent.outcome, agent.reason
-                if fc.lost and not agent.paused and agent.phase.value not in ("waiting", "done"):
-                    agent.step()  # it reads the loss from took_over() and pauses, saying so
             except Exception as error:  # noqa: BLE001 - a bug in the agent: the vehicle must not fly on unwatched
                 outcome, reason = "error", self._failed(error, say)
                 break
@@ -158,10 +174,49 @@ class OnboardAgent:
                 outcome, reason = outcome or "stopped", reason or "stopped after the given duration"
             if not came:
                 time.sleep(IDLE)
+        if outcome not in ("error", "collision") and not self.agent.mission_began:  # a timeout, or --duration
+            outcome, reason = "error", self._not_started(f"the mission never started ({self._holdup()}); {reason}")
         self._broadcast(self.companion.final(), time.time())
         result = self.result(outcome, reason, begun, time.monotonic() - started)
         self.close()
         return result
+
+    def _mind_the_gap(self) -> None:
+        """A gap in the autopilot's heartbeat (a busy machine, here or there) pauses the agent; once the heartbeat
+        is back, the agent carries on by itself (``Agent.pause``'s ``until``). Said both times."""
+        fc, agent = self.fc, self.agent
+        if not fc.lost or agent.paused or agent.phase in (Phase.WAITING, Phase.DONE):
+            return
+        since = fc.last_heard
+
+        def back() -> str | None:
+            return None if fc.lost else \
+                f"the flight controller's heartbeat is back after {time.monotonic() - since:.1f} s"
+
+        agent.pause(f"lost the flight controller's heartbeat for {HEARTBEAT_LOST:g} s; not commanding until it is back",
+                    until=back)
+
+    def _not_started(self, reason: str) -> str:
+        """The run ends before the mission started: an error, said to the operator too."""
+        self.agent.say(f"Agent: {reason}", mavlink.MAV_SEVERITY_ERROR)
+        return reason
+
+    def _holdup(self) -> str:
+        """What kept the mission from starting, in words."""
+        fc, agent = self.fc, self.agent
+        if agent.paused:
+            return f"paused, {agent.pause_reason}"
+        if fc.lost:
+            return f"no heartbeat from the flight controller for {time.monotonic() - fc.last_heard:.0f} s"
+        if agent.phase is Phase.WAITING:
+            if self.options.wait:
+                return "it waited for a ground station's start (--wait)"
+            if fc.mode != "GUIDED":
+                return f"the flight controller stayed in {fc.mode}, not GUIDED"
+            return "the flight controller's pre-arm checks never passed"
+        if agent.phase is Phase.TAKEOFF:
+            return f"the take-off did not reach {self.options.settings.altitude:g} m"
+        return f"still in {agent.phase.value}"
 
     def _failed(self, error: Exception, say) -> str:
         """The agent failed (a bug): the vehicle is told to hold, the operator why (and standard error the
