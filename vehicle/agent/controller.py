@@ -76,7 +76,8 @@ class FlightController(Protocol):
     def took_over(self) -> str | None:
         """Why the agent must stop commanding, in words, if something happened since the last call: someone
         else took over (a mode change the agent did not make, another ground station's target), or the flight
-        controller refused a command, did not answer, or went silent. None if nothing."""
+        controller refused a command or did not answer. None if nothing. (A gap in a MAVLink autopilot's
+        heartbeat, which ends by itself, is the process's to handle: ``vehicle.agent.process``.)"""
 
     # ---- act (each returns a MAV_RESULT) ------------------------------------------------------------
     def arm(self) -> int: ...

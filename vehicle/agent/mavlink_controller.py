@@ -8,7 +8,10 @@ REQUEST_DATA_STREAM); its clock is the autopilot's ``time_boot_ms``. Actions
 are the commands ArduPilot takes in GUIDED: every COMMAND_LONG/INT waits for its
 COMMAND_ACK, resent with confirmation += 1. A refusal or a silence is reported
 (``took_over`` returns it, so the agent pauses) and the vehicle is told to
-hold, so no target or velocity stays running that nobody watches.
+hold, so no target or velocity stays running that nobody watches. A gap in the
+autopilot's heartbeat is no refusal: ``lost`` says it (the process pauses the
+agent until the heartbeat is back), and a command left unanswered while it
+lasted is not reported.
 
 A ground station's requests to the agent (component 191) are answered by
 ``pump``, the main loop's call, never inside a wait for the autopilot's answer:
@@ -43,7 +46,7 @@ from vehicle.protocol.modes import DISARMED, Kind
 from vehicle.protocol.rangefinder import Reading, Servo, reading_from, readings_from_obstacles
 
 NO_ANSWER = -1  # what a command returns when the autopilot never acknowledged it
-HEARTBEAT_LOST = 2.0  # wall s without the autopilot's heartbeat before the agent stops commanding
+HEARTBEAT_LOST = 2.0  # wall s without the autopilot's heartbeat before the agent stops commanding until it is back
 FAILSAFE_NEWS = 3.0  # wall s: a mode change this soon after the autopilot said "failsafe" is the failsafe's
 LINK_LOST_AFTER = 3.0  # wall s the autopilot's heartbeat is silent where it came from before it is heard elsewhere
 REQUESTS_HELD = 256  # requests to the agent kept for the next pump's answers; more are dropped (a flood)
@@ -132,7 +135,6 @@ class MavlinkController:
         self._speed_applied = False
         self._speed_news = False  # the operator set a speed that the next pump sends
         self._reposition_ok = True
-        self._lost_reported = False
 
     # ---- connecting ---------------------------------------------------------------------------------
     def connect(self, timeout: float = 30.0) -> None:
@@ -295,7 +297,6 @@ class MavlinkController:
 
     def _on_heartbeat(self, m) -> None:
         self._heard, self._place = time.monotonic(), m._place  # the autopilot is heard there (``_from_elsewhere``)
-        self._lost_reported = False
         was_armed, self._armed = self._armed, bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         mode = (mavutil.mode_mapping_bynumber(m.type) or {}).get(m.custom_mode, f"MODE{m.custom_mode}")
         if was_armed and not self._armed and mode == "GUIDED":  # the agent never disarms: a kill
@@ -400,8 +401,14 @@ class MavlinkController:
 
     @property
     def lost(self) -> bool:
-        """No heartbeat from the autopilot for HEARTBEAT_LOST wall seconds."""
+        """No heartbeat from the autopilot for HEARTBEAT_LOST wall seconds (as of the last take-in: ask after a
+        pump, or a step that kept the main loop busy reads as a gap)."""
         return time.monotonic() - self._heard > HEARTBEAT_LOST
+
+    @property
+    def last_heard(self) -> float:
+        """When (``time.monotonic()``) the autopilot's last heartbeat came."""
+        return self._heard
 
     @property
     def flying(self) -> bool:
@@ -444,9 +451,7 @@ class MavlinkController:
         return readings
 
     def took_over(self) -> str | None:
-        if self.lost and not self._lost_reported:
-            self._lost_reported = True
-            self._events.append(f"lost the flight controller's heartbeat for {HEARTBEAT_LOST:g} s; not commanding")
+        """(A gap in the heartbeat is not one: see ``lost``.)"""
         return self._events.popleft() if self._events else None
 
     # ---- sending ------------------------------------------------------------------------------------
@@ -490,12 +495,14 @@ class MavlinkController:
 
     def _acknowledged(self, command: int, build: Callable[[int], object], report: bool) -> int:
         result = NO_ANSWER
+        gap = False  # the autopilot's heartbeat went missing meanwhile: its silence is the gap's, no refusal
         for attempt in range(self.retries):
             self._acks.pop(command, None)
             self.send(build(attempt))
             deadline = time.monotonic() + self.timeout
             while time.monotonic() < deadline and command not in self._acks:
                 self._take_in()
+                gap = gap or self.lost
                 if command not in self._acks:
                     time.sleep(0.002)
             result = self._acks.pop(command, NO_ANSWER)
@@ -503,6 +510,8 @@ class MavlinkController:
                 continue
             if result != NO_ANSWER:
                 break
+        if result == NO_ANSWER and gap:
+            return result
         if report and result not in (ACCEPTED, UNSUPPORTED) and not self._refused_for_a_takeover(result):
             self._problem(f"flight controller: {COMMAND_NAMES.get(command, command)} {RESULTS.get(result, result)}")
         return result
