@@ -6,7 +6,16 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from vehicle.mapping.memory_map import FREE, FREE_SPREAD, NO_ECHO_CLEARS, OCCUPIED, SIDE_REACH, UNKNOWN, MemoryMap
+from vehicle.mapping.memory_map import (
+    ARC_SHARE,
+    FREE,
+    FREE_SPREAD,
+    NO_ECHO_CLEARS,
+    OCCUPIED,
+    SIDE_REACH,
+    UNKNOWN,
+    MemoryMap,
+)
 from vehicle.mapping.picture import draw_map
 
 ORIGIN = np.array([0.5, 0.5, 4.0])  # the centre of cell (10, 10) in the maps below, at the operating height
@@ -571,16 +580,21 @@ def along(m: MemoryMap, angle: float, distance: float, origin=(0.05, 0.05)) -> t
 
 
 def test_a_cone_marks_its_sides_free_up_to_the_echo_and_at_most_side_reach(fine):
-    """A sonar hears the nearest echo in its cone, so the cone is free up to it: lines at FREE_SPREAD of the
-    half-angle either side, as far as the centre line and SIDE_REACH at most; the echo on the centre line."""
+    """A sonar hears the nearest echo in its cone, so the cone is free up to it: lines at most a cell apart up
+    to FREE_SPREAD of the half-angle either side, to a cell short of the echo and SIDE_REACH at most; the echo
+    is on the arc of its cone, whose unknown cells share it (ARC_SHARE each): two echoes make them occupied."""
     origin = np.array([[0.05, 0.05, 4.0]])
     half = 0.3
     side = FREE_SPREAD * half
     fine.add_readings(origin, np.array([EAST]), np.array([6.0]), np.array([40.0]), beams=np.array([half]))
-    assert fine.occupied[along(fine, 0.0, 6.0)] and fine.detections == 1
-    for angle in (side, -side):
-        assert fine.free[along(fine, angle, 3.0)] and fine.free[along(fine, angle, 5.9)]
+    arc = [along(fine, angle, 6.0) for angle in np.linspace(-half, half, 9)]
+    assert all(fine.grid[cell] == ARC_SHARE for cell in arc) and fine.detections == 0
+    fine.add_readings(origin, np.array([EAST]), np.array([6.0]), np.array([40.0]), beams=np.array([half]))
+    assert all(fine.occupied[cell] for cell in arc)
+    for angle in np.linspace(-side, side, 7):
+        assert fine.free[along(fine, angle, 3.0)] and fine.free[along(fine, angle, 5.8)]
         assert not fine.free[along(fine, angle, 6.3)]  # not past the echo
+    assert not fine.free[along(fine, 1.3 * side, 3.0)]  # nor beyond FREE_SPREAD
     long = MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0)
     long.add_readings(origin, np.array([EAST]), np.array([9.5]), np.array([40.0]), beams=np.array([half]))
     for angle in (side, -side):
@@ -589,6 +603,34 @@ def test_a_cone_marks_its_sides_free_up_to_the_echo_and_at_most_side_reach(fine)
     bare = MemoryMap((0.0, 0.0), space_size=10.0, resolution=10.0)
     bare.add_readings(origin, np.array([EAST]), np.array([6.0]), np.array([40.0]))  # no beam: the centre only
     assert not bare.free[along(bare, side, 3.0)] and bare.free[along(bare, 0.0, 3.0)]
+    assert bare.occupied[along(bare, 0.0, 6.0)] and bare.detections == 1
+
+
+def test_an_occupied_cell_on_the_arc_explains_the_echo_alone(fine):
+    """A door frame seen face on (occupied) explains an echo whose cone spans the doorway beside it: only it
+    gains, the doorway's cells stay as they were; cells known free never explain an echo."""
+    origin = np.array([[0.05, 0.05, 1.0]])
+    half = math.radians(7.5)
+    frame = along(fine, half * 0.9, 4.0)
+    fine.grid[frame] = MemoryMap.OCCUPIED_AT
+    doorway = along(fine, 0.0, 4.0)
+    fine.add_readings(origin, np.array([EAST]), np.array([4.0]), np.array([40.0]), beams=np.array([half]))
+    assert fine.grid[frame] == MemoryMap.OCCUPIED_AT + MemoryMap.HIT and fine.grid[doorway] == 0
+    fine.grid[frame] = MemoryMap.FREE_AT  # seen free since: the rest of the arc shares the echo
+    fine.add_readings(origin, np.array([EAST]), np.array([4.0]), np.array([40.0]), beams=np.array([half]))
+    assert fine.grid[frame] == MemoryMap.FREE_AT and fine.grid[doorway] == ARC_SHARE
+
+
+def test_a_cone_without_echo_clears_unknown_cells_but_leaves_walls_alone(fine):
+    """Silence says nothing of a wall met too obliquely to echo: a cone without echo marks unknown cells free
+    and leaves occupied ones; a cone with an echo beyond takes evidence from them."""
+    origin = np.array([[0.05, 0.05, 1.0]])
+    wall = along(fine, 0.0, 3.0)
+    fine.grid[wall] = MemoryMap.OCCUPIED_AT
+    fine.add_readings(origin, np.array([EAST]), np.array([np.nan]), np.array([40.0]), beams=np.array([0.13]))
+    assert fine.grid[wall] == MemoryMap.OCCUPIED_AT and fine.free[along(fine, 0.0, 5.0)]
+    fine.add_readings(origin, np.array([EAST]), np.array([6.0]), np.array([40.0]), beams=np.array([0.13]))
+    assert fine.grid[wall] == MemoryMap.OCCUPIED_AT - MemoryMap.MISS
 
 
 def test_a_cone_pointing_north_east_marks_both_sides(fine):

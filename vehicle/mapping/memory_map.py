@@ -6,6 +6,22 @@ cell is unknown, free or occupied and objects that move away fade. Integers
 keep the map exact when it is streamed: a ground station applying the same
 cell values holds the same map, cell for cell. Rows run along +y (north),
 columns along +x (east), as an image of the map seen from above with row 0 south.
+
+Doorways. A sonar's echo at range r comes from somewhere on the arc of its
+cone at r (at 3 m the arc of a 7.5 degree half-angle is 0.8 m wide, nearly a
+doorway). Putting the echo on the centre line, or marking the whole arc
+occupied, closes a doorway whenever a cone's edge touches its frame. Of the
+three ways out (a finer grid near the vehicle, sub-cell ray ends, or hits
+that mark only the cells that can explain them), the last is chosen: it keeps
+one grid at one resolution (so the streamed map, its pictures and the
+planner's windows are unchanged) and it fixes the cause, not the scale. An
+echo's arc is sampled every half cell; cells known free cannot explain it, an
+occupied cell on it (a door frame seen face on) explains it alone, and
+otherwise the unknown cells share its evidence (``ARC_SHARE`` each at
+least), which the free lines through the doorway from nearer poses clear.
+The free part of a cone is filled with lines at most a cell apart (up to
+``FREE_SPREAD`` of its half-angle and ``SIDE_REACH``), so that a doorway
+seen through is free cell for cell, as planning through it needs.
 """
 
 from __future__ import annotations
@@ -28,6 +44,7 @@ LIMIT = 30  # saturation, so a long-seen wall can still fade within a few passes
 FLOOR = -3  # free evidence saturates at once: a newcomer shows up at its first echo, and
 # free cells change only once, which keeps the streamed map small
 OCCUPIED_AT = 6  # at or above: occupied
+ARC_SHARE = 3  # the least evidence each unknown cell of an unexplained echo's arc gains (two echoes: occupied)
 FREE_AT = -3  # at or below: free
 NO_ECHO_CLEARS = 15.0  # m: a reading without echo is evidence of free space only this far
 # (a surface met at a grazing angle returns no echo either, so "nothing" is weak evidence)
@@ -78,13 +95,15 @@ class MemoryMap:
         ``distances`` holds NaN where a reading had no echo (then the ray is free up to
         its max range, at most ``NO_ECHO_CLEARS``). A sonar hears the nearest echo in
         its cone, so the whole cone is free up to the distance measured (the classic
-        sonar model): besides the centre line, two lines at ``FREE_SPREAD`` of the
-        half-angle ``beams`` (radians) either side are marked free, up to ``SIDE_REACH``
-        where the cone is narrow enough to matter (doorways). The echo itself is
-        placed on the centre line. A batch is one monitor period: each cell that any
-        line passes loses ``MISS`` once, each cell an echo ends in gains ``HIT`` once
-        (readings of one period see the same thing, so they are one piece of
-        evidence); misses are applied before hits. A beam that leaves the band around
+        sonar model): lines across the cone, at most a cell apart, up to ``FREE_SPREAD``
+        of the half-angle ``beams`` (radians) either side, are marked free up to a cell
+        short of the echo (the sides up to ``SIDE_REACH`` at most). The echo marks the
+        cells of its arc that can explain it (see the module docstring); without
+        ``beams`` a reading is one line, free up to the cell its echo ends in, which
+        gains ``HIT``. A batch is one monitor period: each cell that any line passes
+        loses ``MISS`` once, each cell an echo marks gains once, the most any echo of
+        the batch gives it (readings of one period see the same thing, so they are
+        one piece of evidence); misses are applied before hits. A beam that leaves the band around
         the sensor's height counts only up to where it leaves it, and its echo (ground
         or ceiling) is no obstacle. ``free`` (a mask) picks the readings whose beams
         mark free space, when several of a batch would only repeat each other.
@@ -97,12 +116,12 @@ class MemoryMap:
         directions = _per_reading(directions, (count, 3), "directions")
         distances = _per_reading(distances, (count,), "distances")
         clears = np.minimum(_per_reading(max_ranges, (count,), "max_ranges"), self.NO_ECHO_CLEARS)
-        spreads = np.zeros(count) if beams is None else FREE_SPREAD * _per_reading(beams, (count,), "beams")
+        halves = np.zeros(count) if beams is None else _per_reading(beams, (count,), "beams")
         marks = np.ones(count, dtype=np.bool_) if free is None else _per_reading(free, (count,), "free", np.bool_)
         self.version += 1
         changed, hits, crossed = _loops().project(
             self.grid.reshape(-1), self.ever_hit.reshape(-1), self.size, self.origin[0], self.origin[1],
-            self.resolution, self.band, np.ascontiguousarray(origins), directions, distances, clears, spreads,
+            self.resolution, self.band, np.ascontiguousarray(origins), directions, distances, clears, halves,
             beams is not None, marks)
         self.occupied_version += crossed
         if len(changed):

@@ -13,12 +13,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import ndimage
 
 from vehicle.mapping import planning
 from vehicle.mapping.memory_map import MemoryMap
 
 PLAN_MARGINS = (15.0, 40.0)  # m around start and goal that planning searches, the small window first
 UNSEEN_EXTENT = 1.0  # m: unknown cells this close to an obstacle are presumed to be more of it
+DOORWAY_CLEARANCE = 0.05  # m between the body and an obstacle's cell when nothing wider gets through
 
 Point = tuple[float, float]
 
@@ -28,23 +30,26 @@ class MapPlanner:
         self.map = memory_map
         self.radius = radius  # of the vehicle body, m
         self.avoid_margin = avoid_margin  # m the autopilot's avoidance keeps from echoes
+        self.reason = ""  # why the last plan found no path
 
     def plan(self, start: Point, goal: Point, padding: float, relax: bool = False,
              level: int = 0) -> tuple[list[Point] | None, int]:
         """A path (scene metres, excluding ``start``) to ``goal`` around known obstacles, ``padding`` m clear.
 
-        Searches a window around start and goal first (fast), then a wider one.
-        Obstacles are grown by the body radius plus the padding; a vehicle that
-        is already closer first escapes the shortest way out. If the goal sits
-        inside that margin, it retries with the avoidance margin only. With
-        ``relax`` (going home), an unreachable goal is tried again without
-        presuming unseen obstacles: getting home along a tight path beats not
-        getting home. Returns the path (None if there is none) and the level of
-        relaxation that found it, to start from next time.
+        Tries, from ``level`` on: obstacles grown by the body radius plus the padding, with unseen
+        obstacles presumed beside the seen ones; then the body plus ``DOORWAY_CLEARANCE`` only (a
+        doorway the body fits through); then that without presuming unseen obstacles. Each in a
+        window around start and goal (fast), a wider one, and the whole map, so a way round that
+        leaves the windows is still found. A vehicle that is already too close first escapes the
+        shortest way out. ``relax`` is kept for callers going home (every goal now gets every level).
+        Returns the path (None if there is none, and then ``reason`` says why) and the level that found
+        it, to start from next time.
         """
+        self.reason = ""
         start_cell = self.map.cell_of(*start)
         goal_cell = self.map.cell_of(*goal)
         if goal_cell is None:
+            self.reason = "the target is outside the map"
             return None, level
         if start_cell is None:  # off the map (a vehicle that just left its space): straight back onto it first
             entry = self._entry(start, goal)
@@ -52,24 +57,55 @@ class MapPlanner:
             return (None if path is None else [entry, *path]), level
         if level == 0 and self.path_clear(start, [goal], horizon=math.inf, padding=padding):
             return [goal], level  # in the open: no search needed
-        attempts = [(padding, True), (0.0, True)] + ([(0.0, False)] if relax else [])
-        for index, (kept, presume) in enumerate(attempts[level:], start=level):
-            for wider, margin in enumerate(PLAN_MARGINS):
-                window = self._window(start_cell, goal_cell, margin)
+        attempts = [(self.margin_cells(padding), True), (self.margin_cells(0.0), True), (self.margin_cells(0.0), False)]
+        for index, (margin, presume) in enumerate(attempts[level:], start=level):
+            for wider, window in enumerate(self._windows(start_cell, goal_cell)):
                 try:  # a wider window is tried when a smaller one had no path: there may be none
-                    cells = self._plan_in(start_cell, goal_cell, kept, window, presume, doubtful=wider > 0)
+                    cells = self._plan_in(start_cell, goal_cell, margin, window, presume, doubtful=wider > 0)
                 except planning.NoPath as failure:
                     if failure.reason == planning.UNREACHABLE:
                         continue  # a wider window may find a way round
-                    break  # start or goal inside the padding: try with less
+                    break  # start or goal inside the margin: try with less
                 points = [self.map.center_of(r, c) for r, c in cells[1:]]
                 if points:
                     points[-1] = goal
                 return points or [goal], index
-            else:
-                if not relax:
-                    return None, level  # less padding would only squeeze through gaps never seen
+        self.reason = self._why_not(start_cell, goal_cell, attempts[-1][0])
         return None, level
+
+    def _windows(self, a: tuple[int, int], b: tuple[int, int]):
+        """The windows planning searches, smallest first, the whole map last (each once)."""
+        seen = set()
+        for margin in PLAN_MARGINS:
+            window = self._window(a, b, margin)
+            key = (window[0].start, window[0].stop, window[1].start, window[1].stop)
+            if key not in seen:
+                seen.add(key)
+                yield window
+        if (0, self.map.size, 0, self.map.size) not in seen:
+            yield slice(0, self.map.size), slice(0, self.map.size)
+
+    def _why_not(self, start: tuple[int, int], goal: tuple[int, int], margin: float) -> str:
+        """Why no path joins start and goal at the smallest clearance, with no unseen obstacles presumed."""
+        occupied = self.map.occupied
+        if occupied[goal]:
+            return "the target is on an occupied cell"
+        inflated = planning.inflate(occupied, margin)
+        if inflated[goal]:
+            return f"the target is within {margin / self.map.resolution:.2f} m of a known obstacle"
+        labels, _ = ndimage.label(~inflated, structure=np.ones((3, 3)))
+        if labels[start] == 0:  # the body is within the clearance: where it can escape to
+            escape = planning._escape(occupied, inflated, start)[-1] if not occupied[start] else None
+            if escape is None:
+                return "the vehicle is inside a known obstacle"
+            start = (int(escape[0]), int(escape[1]))
+        if labels[start] == labels[goal]:
+            return "no path (only through a gap where a corner is cut)"
+        sizes = np.bincount(labels.ravel())
+        edge = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+        if labels[goal] not in edge and sizes[labels[goal]] <= sizes[labels[start]]:
+            return "the target is enclosed by known obstacles"
+        return "the vehicle is enclosed by known obstacles"
 
     def _entry(self, outside: Point, inside: Point) -> Point:
         """Where the line from a point off the map to one on it comes onto the map, a tenth of a cell in."""
@@ -85,7 +121,12 @@ class MapPlanner:
 
     def margin_cells(self, padding: float) -> float:
         """How far paths keep from obstacles, in cells: the body radius plus padding, and at least twice the
-        margin of the autopilot's avoidance, so that a planned path never runs into the avoidance's stop."""
+        margin of the autopilot's avoidance, so that a planned path never runs into the avoidance's stop.
+        Padding 0 is the least clearance planning accepts: the body plus ``DOORWAY_CLEARANCE`` (a doorway
+        0.8 m wide or more at 10 cells/m for a 0.3 m body; the autopilot's avoidance holds back only an
+        echo the line passes within its margin less its graze, 0.35 m, so it lets the body through)."""
+        if padding <= 0:
+            return (self.radius + DOORWAY_CLEARANCE) * self.map.resolution
         return (self.radius + max(padding, 2 * self.avoid_margin)) * self.map.resolution
 
     def _window(self, a: tuple[int, int], b: tuple[int, int], margin_m: float) -> tuple[slice, slice]:
@@ -109,7 +150,7 @@ class MapPlanner:
         presumed = planning.inflate(occupied, UNSEEN_EXTENT * self.map.resolution)
         return occupied | (presumed & ~self.map.free_in(rows, cols))
 
-    def _plan_in(self, start, goal, padding: float, window, presume: bool, doubtful: bool = False) -> np.ndarray:
+    def _plan_in(self, start, goal, margin: float, window, presume: bool, doubtful: bool = False) -> np.ndarray:
         obstacles, offset = self.blocked_in(*window, presume), (window[0].start, window[1].start)
         local_start = (start[0] - offset[0], start[1] - offset[1])
         if presume:  # where the body is now is no presumed obstacle, whatever the sonar has not seen
@@ -119,7 +160,7 @@ class MapPlanner:
             obstacles[rows, cols] &= self.map.occupied_in(slice(rows.start + offset[0], rows.stop + offset[0]),
                                                           slice(cols.start + offset[1], cols.stop + offset[1]))
         local_goal = (goal[0] - offset[0], goal[1] - offset[1])
-        local = planning.plan(obstacles, local_start, local_goal, self.margin_cells(padding), doubtful)
+        local = planning.plan(obstacles, local_start, local_goal, margin, doubtful)
         return local + np.array(offset)
 
     def path_clear(self, start: Point, points: list[Point], horizon: float = 15.0, padding: float = 0.0) -> bool:

@@ -16,7 +16,7 @@ import math
 import numba
 import numpy as np
 
-from vehicle.mapping.memory_map import FLOOR, FREE_AT, HIT, LIMIT, MISS, OCCUPIED_AT, SIDE_REACH
+from vehicle.mapping.memory_map import ARC_SHARE, FLOOR, FREE_AT, FREE_SPREAD, HIT, LIMIT, MISS, OCCUPIED_AT, SIDE_REACH
 
 
 @numba.njit(cache=True)
@@ -58,8 +58,9 @@ def _trace(out, used, x, y, dx, dy, skip, x0, y0, resolution, size):
 
 
 @numba.njit(cache=True)
-def _add_line(lines, used, x, y, dx, dy, skip, x0, y0, resolution, size):
-    """Append the segment (x, y) + t (dx, dy), t in [0, 1], to ``lines``; returns the new count. One longer
+def _add_line(lines, used, x, y, dx, dy, skip, strong, x0, y0, resolution, size):
+    """Append the segment (x, y) + t (dx, dy), t in [0, 1], to ``lines`` (``strong``: it takes evidence from
+    occupied cells too); returns the new count. One longer
     than the map is wide is cut to its part over the map first, so no line takes more samples than the map
     has cells across, whatever it is given."""
     if _samples(dx, dy, resolution) > 2 * size + 2:
@@ -72,6 +73,7 @@ def _add_line(lines, used, x, y, dx, dy, skip, x0, y0, resolution, size):
             return used
         x, y, dx, dy = x + dx * start, y + dy * start, dx * (end - start), dy * (end - start)
     lines[used, 0], lines[used, 1], lines[used, 2], lines[used, 3], lines[used, 4] = x, y, dx, dy, skip
+    lines[used, 5] = 1.0 if strong else 0.0
     return used + 1
 
 
@@ -87,79 +89,172 @@ def _clip(step, gap, start, end):
 
 
 @numba.njit(cache=True)
-def project(grid, ever_hit, size, x0, y0, resolution, band, origins, directions, distances, clears, spreads,
-             sides, marks):
+def project(grid, ever_hit, size, x0, y0, resolution, band, origins, directions, distances, clears, beams,
+            sides, marks):
     """``MemoryMap.add_readings`` on flat views of the grid: returns the cells whose value changed (most cells
-    a beam passes are free already), how many cells were hit, and 1 if some cell became or ceased to be
-    occupied, else 0."""
+    a beam passes are free already), how many readings ended in an echo on the map, and 1 if some cell
+    became or ceased to be occupied, else 0."""
     count = len(origins)
-    echo_cell = np.full(count, -1)
-    lines = np.empty((3 * count, 5))  # x, y, dx, dy and the echo cell of each line marked free
-    used_lines = np.int64(0)  # not the literal 0: that would compile the callees once more for it
+    lengths = np.zeros(count)
+    units = np.zeros((count, 2))
+    echoes = np.zeros(count, dtype=np.bool_)
+    fans = np.zeros(count, dtype=np.int64)  # free lines either side of the centre line
+    arcs = np.zeros(count + 1, dtype=np.int64)  # where each reading's arc samples start
+    total_lines = 0
     for i in range(count):
+        arcs[i + 1] = arcs[i]
         echo = math.isfinite(distances[i])
         length = distances[i] if echo else clears[i]
-        x, y, ux, uy, uz = origins[i, 0], origins[i, 1], directions[i, 0], directions[i, 1], directions[i, 2]
+        ux, uy, uz = directions[i, 0], directions[i, 1], directions[i, 2]
         norm = math.sqrt(ux * ux + uy * uy + uz * uz)
-        if not norm > 0 or not math.isfinite(norm):
-            continue  # no direction: no reading
+        if not norm > 0 or not math.isfinite(norm) or not length >= 0:
+            continue  # no direction (or no length): no reading
         if abs(norm - 1.0) > 1e-9:  # directions should be unit vectors; a sloppy caller's still are
             ux, uy, uz = ux / norm, uy / norm, uz / norm
         vertical = abs(uz * length)
-        if vertical > band:  # the beam leaves the band: it counts up to there, and its echo is ground or ceiling
-            length = length * band / max(vertical, 1e-12)
+        if vertical > band:  # the beam leaves the band: it counts up to there, and its echo (ground or ceiling)
+            length = length * band / max(vertical, 1e-12)  # is no obstacle
             echo = False
-        if echo:
-            echo_cell[i] = _cell(x + ux * length, y + uy * length, x0, y0, resolution, size)
-        if not marks[i]:
+        lengths[i], units[i, 0], units[i, 1], echoes[i] = length, ux, uy, echo
+        if echo:  # the arc the echo lies on, sampled every half cell (the centre only for a bare line)
+            across = 2.0 * beams[i] * length * math.hypot(ux, uy) * resolution
+            arcs[i + 1] += 1 + 2 * int(min(across, 4.0 * size) + 0.5) if sides else 1
+        if marks[i]:
+            if sides:  # lines across the cone at most a cell apart where they end
+                reach = min(length, SIDE_REACH)
+                fans[i] = int(math.ceil(FREE_SPREAD * beams[i] * reach * resolution))
+            total_lines += 1 + 2 * fans[i]
+    lines = np.empty((max(total_lines, 1), 6))  # x, y, dx, dy, a cell the line does not mark, strong
+    used_lines = np.int64(0)  # not the literal 0: that would compile the callees once more for it
+    arc_cells = np.full(arcs[count], -1, dtype=np.int64)
+    for i in range(count):
+        x, y, ux, uy, length = origins[i, 0], origins[i, 1], units[i, 0], units[i, 1], lengths[i]
+        echo_cell = -1
+        if echoes[i]:
+            echo_cell = _cell(x + ux * length, y + uy * length, x0, y0, resolution, size)
+            samples = arcs[i + 1] - arcs[i]
+            for k in range(samples):
+                angle = beams[i] * (2.0 * k / (samples - 1.0) - 1.0) if samples > 1 else 0.0
+                c, s = math.cos(angle), math.sin(angle)
+                arc_cells[arcs[i] + k] = _cell(x + (ux * c - uy * s) * length, y + (uy * c + ux * s) * length,
+                                               x0, y0, resolution, size)
+        if not marks[i] or not (length >= 0):
             continue
-        used_lines = _add_line(lines, used_lines, x, y, ux * length, uy * length, echo_cell[i], x0, y0,
-                               resolution, size)
-        if sides:  # the cone's sides, as far as the centre line reaches and SIDE_REACH at most
-            c, s = math.cos(spreads[i]), math.sin(spreads[i])
-            reach = min(length, SIDE_REACH)
+        if not sides:  # a bare line: free up to the cell its echo ends in
+            used_lines = _add_line(lines, used_lines, x, y, ux * length, uy * length, echo_cell, True, x0, y0,
+                                   resolution, size)
+            continue
+        free = max(length - 1.0 / resolution, 0.0) if echoes[i] else length  # a cell short of the echo's arc
+        heard = echoes[i]  # silence says nothing of a wall met too obliquely to echo: it clears unknown cells only
+        used_lines = _add_line(lines, used_lines, x, y, ux * free, uy * free, -1, heard, x0, y0, resolution, size)
+        reach = min(free, SIDE_REACH)
+        for k in range(1, fans[i] + 1):
+            spread = FREE_SPREAD * beams[i] * k / fans[i]
+            c, s = math.cos(spread), math.sin(spread)
             used_lines = _add_line(lines, used_lines, x, y, (ux * c + uy * s) * reach, (uy * c - ux * s) * reach,
-                                   echo_cell[i], x0, y0, resolution, size)
+                                   -1, heard, x0, y0, resolution, size)
             used_lines = _add_line(lines, used_lines, x, y, (ux * c - uy * s) * reach, (uy * c + ux * s) * reach,
-                                   echo_cell[i], x0, y0, resolution, size)
+                                   -1, heard, x0, y0, resolution, size)
     room = 0
     for k in range(used_lines):
         room += _samples(lines[k, 2], lines[k, 3], resolution)
     passed = np.empty(room, dtype=np.int64)
+    strong = np.empty(room, dtype=np.bool_)
     used = np.int64(0)
     for k in range(used_lines):
+        first = used
         used = _trace(passed, used, lines[k, 0], lines[k, 1], lines[k, 2], lines[k, 3], int(lines[k, 4]), x0, y0,
                       resolution, size)
+        strong[first:used] = lines[k, 5] > 0
     passed = passed[:used]
     crossed = 0
-    # each cell loses MISS once however many lines pass it: all new values come from the old ones
+    # each cell loses MISS once however many lines pass it: all new values come from the old ones; a line
+    # that is not strong leaves occupied cells alone
     after = np.empty(used, dtype=np.int8)
     for k in range(used):
         before = grid[passed[k]]
-        after[k] = max(before - MISS, FLOOR)
+        after[k] = max(before - MISS, FLOOR) if strong[k] or before < OCCUPIED_AT else before
         if before >= OCCUPIED_AT and after[k] < OCCUPIED_AT:
             crossed = 1
-    hits = echo_cell[echo_cell >= 0]
-    changed = np.empty(used + len(hits), dtype=np.int64)
-    count = 0
+    changed = np.empty(used + arcs[count], dtype=np.int64)
+    changes = 0
     for k in range(used):
+        if not strong[k] and after[k] == grid[passed[k]]:
+            continue  # a weak line that left an occupied cell alone does not undo a strong one's miss
         if grid[passed[k]] != after[k]:
-            changed[count] = passed[k]
-            count += 1
+            changed[changes] = passed[k]
+            changes += 1
         grid[passed[k]] = after[k]
-    gained = np.empty(len(hits), dtype=np.int8)
-    for k in range(len(hits)):  # misses first, then hits, each once
-        before = grid[hits[k]]
-        gained[k] = min(before + HIT, LIMIT)
-        if before < OCCUPIED_AT and gained[k] >= OCCUPIED_AT:
+    # then the echoes, each on the cells of its arc that can explain it (misses first, then hits)
+    targets, gains, hits = _explain(grid, arcs, arc_cells, echoes)
+    order = np.argsort(targets, kind="mergesort")
+    k = 0
+    while k < len(order):  # each cell gains once, the most any echo of the batch gives it
+        cell, gain = targets[order[k]], gains[order[k]]
+        k += 1
+        while k < len(order) and targets[order[k]] == cell:
+            gain = max(gain, gains[order[k]])
+            k += 1
+        before = grid[cell]
+        value = min(before + gain, LIMIT)
+        if before < OCCUPIED_AT <= value:
             crossed = 1
-    for k in range(len(hits)):
-        if grid[hits[k]] != gained[k]:
-            changed[count] = hits[k]
-            count += 1
-        grid[hits[k]] = gained[k]
-        ever_hit[hits[k]] = True
-    return changed[:count], len(hits), crossed
+        if value != before:
+            changed[changes] = cell
+            changes += 1
+        grid[cell] = value
+        ever_hit[cell] = True
+    return changed[:changes], hits, crossed
+
+
+@numba.njit(cache=True)
+def _explain(grid, arcs, arc_cells, echoes):
+    """The cells each echo adds evidence to, and how much: an echo at range r comes from somewhere on the arc
+    of its cone at r. Cells known free cannot explain it; if some cell of the arc is occupied already, it
+    explains the echo and gains HIT; else the cells still unknown share HIT (each at least ARC_SHARE), so
+    an arc from afar that spans a doorway marks its cells weakly and the free rays through the doorway
+    from nearer clear them. An arc whose every cell is known free marks its centre cell (something new)."""
+    targets = np.empty(len(arc_cells), dtype=np.int64)
+    gains = np.empty(len(arc_cells), dtype=np.int64)
+    used = 0
+    hits = 0
+    for i in range(len(arcs) - 1):
+        if not echoes[i]:
+            continue
+        first, last = arcs[i], arcs[i + 1]
+        occupied = 0
+        unknown = 0
+        previous = -2
+        for k in range(first, last):
+            cell = arc_cells[k]
+            if cell < 0 or cell == previous:
+                previous = cell
+                continue
+            previous = cell
+            if grid[cell] >= OCCUPIED_AT:
+                occupied += 1
+            elif grid[cell] > FREE_AT:
+                unknown += 1
+        if occupied + unknown == 0:
+            middle = arc_cells[(first + last - 1) // 2]
+            if middle >= 0:
+                targets[used], gains[used] = middle, HIT
+                used += 1
+                hits += 1
+            continue
+        hits += 1
+        share = HIT if occupied else max(HIT // unknown, ARC_SHARE)
+        previous = -2
+        for k in range(first, last):
+            cell = arc_cells[k]
+            if cell < 0 or cell == previous:
+                previous = cell
+                continue
+            previous = cell
+            if grid[cell] >= OCCUPIED_AT if occupied else grid[cell] > FREE_AT:
+                targets[used], gains[used] = cell, share
+                used += 1
+    return targets[:used], gains[:used], hits
 
 
 @numba.njit(cache=True)
