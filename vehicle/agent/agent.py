@@ -26,6 +26,7 @@ from vehicle.agent.missions.base import Context, Status
 from vehicle.agent.missions.routines import Travel
 from vehicle.agent.monitor import Monitor
 from vehicle.agent.settings import Settings
+from vehicle.agent.traffic import GiveWay
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.modes import Kind
@@ -76,6 +77,7 @@ class Agent:
         self._settling = False
         self._blocked_since: float | None = None
         self._relaunch: Phase | None = None  # the phase to go back to after taking off again on a resume
+        self.give_way = GiveWay(self.ctx, self._after_giving_way)  # to team-mates (none alone)
 
     @property
     def done(self) -> bool:
@@ -247,7 +249,20 @@ class Agent:
         if self.paused and (taken is not None or not self._passed()):
             return
         self._note_blocked(now, observation)
+        if self._guided_flight() and self.give_way.step():
+            return
         getattr(self, f"_{self.phase.value}")(now)
+
+    def _guided_flight(self) -> bool:
+        """The agent steers (a GUIDED mission, or on the way home): it may give way to a team-mate."""
+        return self.phase is Phase.HOMING or (self.phase is Phase.MISSION and self.mission.mode == "GUIDED")
+
+    def _after_giving_way(self) -> None:
+        """The way is clear again: send again whatever the mission or the way home was doing."""
+        if self.phase is Phase.MISSION:
+            self.mission.resume()
+        if self._travel is not None:
+            self._travel.resume()
 
     def _note_blocked(self, now: float, observation) -> None:
         """Held back by the autopilot's avoidance for BLOCKED_FOR counts as an obstacle too close."""

@@ -23,6 +23,7 @@ from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import Kind
 from vehicle.protocol.rangefinder import Reading, Servo
+from vehicle.protocol.traffic import Traffic
 
 
 class FlightController(Protocol):
@@ -33,6 +34,7 @@ class FlightController(Protocol):
     brake: float  # m/s^2 the vehicle decelerates at (the monitor's stopping distance)
     avoid_margin: float  # m that the autopilot's own obstacle avoidance keeps from echoes (0: none)
     servo: Servo | None  # a servo that turns the sonar, if the vehicle has one
+    system_id: int  # the vehicle's MAVLink system id (in a team, the lower id has the right of way)
 
     # ---- observe ----------------------------------------------------------------------------------
     @property
@@ -72,6 +74,9 @@ class FlightController(Protocol):
 
     def readings(self) -> list[Reading]:
         """Distance readings taken since the last call."""
+
+    def traffic(self) -> list[Traffic]:
+        """The other vehicles of the team, as last known (none for a vehicle alone)."""
 
     def took_over(self) -> str | None:
         """Why the agent must stop commanding, in words, if something happened since the last call: someone

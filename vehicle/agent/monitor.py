@@ -1,7 +1,9 @@
 """The monitor: every period, vet the sensor readings, keep the memory map, and raise the alarm.
 
 It drops readings past ``farness`` (a glitching sonar reports nonsense far
-away), projects the rest into the memory map, and reports an obstacle closer
+away), takes an echo off a team-mate for free space up to it (not a wall: the
+agent keeps apart from team-mates through ``vehicle.agent.traffic``), projects
+the rest into the memory map, and reports an obstacle closer
 than ``closeness`` in the direction the vehicle is moving, so the agent can
 stop before it gets any closer. It also keeps the mission's progress figures.
 """
@@ -89,10 +91,13 @@ class Monitor:
         pending = self._pending
         readings = [r if r.distance is None or r.distance <= farness else replace(r, distance=None)
                     for r in pending]  # past farness: a glitch, or too far to trust
-        observation.readings = readings
         count = len(readings)
         self.readings_used += count
         self.readings_dropped += sum(r is not kept for r, kept in zip(pending, readings, strict=True))
+        # an echo off a team-mate is no wall: free space up to it, nothing known beyond (it moves on)
+        readings = [r if r.vehicle is None or r.distance is None else replace(r, distance=None, max_range=r.distance)
+                    for r in readings]
+        observation.readings = readings
         if readings:
             # one pass into arrays (np.array of a list of small arrays is slow)
             origins, directions = np.empty((count, 3)), np.empty((count, 3))

@@ -40,6 +40,10 @@ class Settings(BaseModel):
                                      ge=0.05, le=5)
     time_limit: float = _setting(600.0, "s", "simulated time limit of a headless run", "SCN_TIME_LIMIT",
                                  ge=1, le=86400)
+    separation: float = _setting(2.0, "m", "gap kept between the bodies of two vehicles of a team", "SCN_SEPARATION",
+                                 ge=0.5, le=50)
+    share_maps: float = _setting(1.0, "0/1", "1: take the team-mates' map updates into the memory map; 0: map alone",
+                                 "SCN_SHARE_MAPS", ge=0, le=1)
 
     @model_validator(mode="after")
     def _map_fits_the_stream(self) -> Settings:

@@ -14,9 +14,11 @@ from collections.abc import Callable
 
 from vehicle.agent.agent import Agent
 from vehicle.agent.settings import Settings
+from vehicle.mapping.sharing import take_in
 from vehicle.protocol.rangefinder import Reading
 from vehicle.sim.onboard import SimController
-from vehicle.sim.simulation import Simulation
+from vehicle.sim.simulation import PlacementError, Simulation
+from vehicle.sim.team import Team
 from vehicle.world.scene import Scene
 
 
@@ -67,3 +69,81 @@ def simulate(scene: Scene, mission: str | None = None, kind: str = "copter", set
     simulation = Simulation(scene, kind, start, heading, cruise_speed=settings.speed, wp_radius=settings.closeness,
                             **options)
     return Stepper(simulation, mission, settings, waypoints, autostart)
+
+
+class TeamStepper:
+    """A team's simulations (``Team``) and their agents, stepped together on the one clock.
+
+    Each step moves the whole world one step and hands every vehicle's readings to its own controller;
+    every ``monitor_period`` each agent still flying steps, and (``share_maps``) each map takes in the cells
+    the others' maps changed since, as the map stream would carry them. A wreck's agent steps no more; the
+    others fly on.
+    """
+
+    def __init__(self, team: Team, mission: str, settings: Settings | None = None,
+                 waypoints: list[list[tuple[float, float]] | None] | None = None, autostart: bool = True):
+        """``waypoints``: per vehicle (None: the mission's default)."""
+        self.team = team
+        self.settings = settings or Settings()
+        self.controllers = [SimController(simulation, team) for simulation in team.simulations]
+        waypoints = waypoints or [None] * len(team)
+        self.agents = [Agent(controller, mission, self.settings, points, autostart)
+                       for controller, points in zip(self.controllers, waypoints, strict=True)]
+        self.period = max(1, round(self.settings.monitor_period / team.simulations[0].dt))
+        self.share_maps = self.settings.share_maps >= 0.5
+        self.cells_shared = 0
+
+    @property
+    def monitor_due(self) -> bool:
+        return self.team.simulations[0].steps % self.period == 0
+
+    def step(self) -> list[list[Reading]]:
+        readings = self.team.step()
+        due = self.monitor_due
+        for simulation, controller, agent, taken in zip(self.team.simulations, self.controllers, self.agents,
+                                                        readings, strict=True):
+            if simulation.collision is None:
+                controller.collect(taken)
+                if due:
+                    agent.step()
+        if due and self.share_maps and len(self.agents) > 1:
+            self._share()
+        return readings
+
+    def _share(self) -> None:
+        maps = [agent.map for agent in self.agents]
+        changes = [m.take_changes() for m in maps]
+        for target in maps:
+            for source, cells in zip(maps, changes, strict=True):
+                if source is not target:
+                    self.cells_shared += take_in(target, source, cells)
+
+
+def simulate_team(scene: Scene, mission: str, count: int, kind: str = "copter", settings: Settings | None = None,
+                  starts: list[tuple[float, ...]] | None = None, ids: list[int] | None = None,
+                  waypoints: list[list[tuple[float, float]] | None] | None = None, seed: int = 0,
+                  **options) -> TeamStepper:
+    """``count`` vehicles in ``scene`` flying ``mission``, each with its agent; ``starts`` (default: the team's
+    spots around the scene's start), ``ids`` (default 1 ... count). Vehicle k's sensor noise has seed + k.
+    Raises PlacementError for a team that cannot be (see ``Team``)."""
+    settings = settings or Settings()
+    if count < 1:
+        raise PlacementError(f"a team needs at least one vehicle, not {count}")
+    starts = starts or team_starts(scene, count)
+    if len(starts) != count:
+        raise PlacementError(f"{len(starts)} starts for {count} vehicles")
+    simulations = [Simulation(scene, kind, start, cruise_speed=settings.speed, wp_radius=settings.closeness,
+                              seed=seed + k, **options) for k, start in enumerate(starts)]
+    return TeamStepper(Team(simulations, ids), mission, settings, waypoints)
+
+
+# where a team starts, around the scene's start: the spots of ``groundstation demo --vehicles N``, metres apart
+TEAM_SPOTS = [(0.0, 0.0), (-4.0, -4.0), (4.0, -3.0), (-3.0, 4.0), (6.0, 6.0), (-7.0, 1.0), (1.0, -7.0), (8.0, -1.0)]
+
+
+def team_starts(scene: Scene, count: int) -> list[tuple[float, float]]:
+    if count > len(TEAM_SPOTS):
+        raise PlacementError(f"at most {len(TEAM_SPOTS)} vehicles start on the team's spots; give --start for each "
+                             f"of {count}")
+    x, y = (scene.start or (0.0, 0.0))[:2]
+    return [(x + dx, y + dy) for dx, dy in TEAM_SPOTS[:count]]

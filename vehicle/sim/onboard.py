@@ -19,16 +19,21 @@ from vehicle.protocol.mav import COMMAND_NAMES, RESULT_WORDS, mavlink
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import DISARMED
 from vehicle.protocol.rangefinder import Reading
+from vehicle.protocol.traffic import Traffic
 from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.sim.simulation import Simulation
+from vehicle.sim.team import Team
 
 SOURCE = "companion"  # what the autopilot records as the source of the requests made here
 MOVING = 0.05  # m/s: navigation asking for less is not moving anywhere
 
 
 class SimController:
-    def __init__(self, simulation: Simulation):
+    def __init__(self, simulation: Simulation, team: Team | None = None, system_id: int = 1):
+        """``team``: the team the simulation flies in, whose other vehicles ``traffic`` reports."""
         self.simulation = simulation
+        self.team = team
+        self.system_id = team.ids[team.simulations.index(simulation)] if team is not None else system_id
         self.autopilot = pilot = simulation.autopilot
         self.kind = simulation.kind
         self.datum = simulation.datum
@@ -99,6 +104,13 @@ class SimController:
     def readings(self) -> list[Reading]:
         readings, self._readings = self._readings, []
         return readings
+
+    def traffic(self) -> list[Traffic]:
+        if self.team is None:
+            return []
+        own, now = self.simulation, self.simulation.time
+        return [Traffic(vehicle, *sim.body.pose.xyz(), sim.body.vx, sim.body.vy, sim.limits.radius, now)
+                for vehicle, sim in zip(self.team.ids, self.team.simulations, strict=True) if sim is not own]
 
     def took_over(self) -> str | None:
         pilot = self.autopilot

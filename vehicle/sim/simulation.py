@@ -184,7 +184,8 @@ class Simulation:
             ox, oy, oz = readings[0].origin.tolist()  # one origin for every sensor of a read
             for reading in readings:
                 distance = reading.distance
-                if distance is not None:
+                if distance is not None and reading.vehicle is None:  # the team keeps apart by giving way: a
+                    # team-mate held in the database of fixed obstacles would block the way after it left
                     dx, dy, dz = reading.direction.tolist()  # reading.hit, in plain floats
                     hz = oz + dz * distance
                     if abs(hz - pose.z) <= AVOID_BAND:

@@ -1,0 +1,93 @@
+"""Agents of a team know each other: team-mates are moving obstacles kept a separation apart, the higher
+system id gives way to the lower and says so, and their echoes are no walls."""
+
+from __future__ import annotations
+
+import pytest
+
+from vehicle.agent.settings import Settings
+from vehicle.lab.stepper import TeamStepper, simulate_team
+
+
+def fly(stepper: TeamStepper, limit: float = 200.0) -> list:
+    """Step the team until every agent is done (or the limit); returns every vehicle's readings."""
+    readings = []
+    while stepper.team.time < limit and not all(a.done for a in stepper.agents):
+        for taken in stepper.step():
+            readings += taken
+    return readings
+
+
+def crossing(flat_scene, ids=None, **settings) -> TeamStepper:
+    """Two copters whose straight paths cross at the origin at the same time: one flies east, one north."""
+    return simulate_team(flat_scene, "pathfind", 2, settings=Settings().updated({"time_limit": 200, **settings}),
+                         starts=[(-12.0, 0.0), (0.0, -12.0)], ids=ids, waypoints=[[(12.0, 0.0)], [(0.0, 12.0)]])
+
+
+def said(agent, words: str) -> list[str]:
+    return [m for m in agent.messages if words in m]
+
+
+def test_two_vehicles_whose_paths_cross_keep_their_separation_and_both_arrive(flat_scene):
+    stepper = crossing(flat_scene)
+    fly(stepper)
+    first, second = stepper.agents
+    assert [a.outcome for a in stepper.agents] == ["finished", "finished"]
+    assert all(s.collision is None for s in stepper.team.simulations)
+    assert stepper.team.closest_gap >= 2.0  # the separation, between the bodies
+    assert said(second, "Pathfind: reached waypoint 1") and said(first, "Pathfind: reached waypoint 1")
+    # the higher id gave way to the lower, and said so; the lower flew on
+    assert said(second, "giving way to vehicle 1 (lower system id)")
+    assert not said(first, "giving way")
+
+
+def test_the_rule_goes_by_system_id_not_by_order(flat_scene):
+    stepper = crossing(flat_scene, ids=[9, 4])
+    fly(stepper)
+    east, north = stepper.agents
+    assert said(east, "giving way to vehicle 4 (lower system id)")
+    assert not said(north, "giving way")
+    assert stepper.team.closest_gap >= 2.0
+
+
+def test_the_separation_is_a_setting(flat_scene):
+    stepper = crossing(flat_scene, separation=5.0)
+    fly(stepper)
+    assert [a.outcome for a in stepper.agents] == ["finished", "finished"]
+    assert stepper.team.closest_gap >= 5.0
+
+
+def test_a_team_mate_standing_in_the_way_is_gone_round(flat_scene):
+    """Vehicle 1 only turns in place (browse) on the line vehicle 2 flies: 2 goes round it, and arrives."""
+    stepper = simulate_team(flat_scene, "browse", 2, settings=Settings().updated({"time_limit": 200}),
+                            starts=[(0.0, 0.0), (0.0, -12.0)])
+    from vehicle.agent.agent import Agent
+
+    stepper.agents[1] = Agent(stepper.controllers[1], "pathfind", stepper.settings, [(0.0, 12.0)])
+    fly(stepper)
+    browsing, passing = stepper.agents
+    assert passing.outcome == "finished" and said(passing, "going round vehicle 1")
+    assert stepper.team.closest_gap >= 2.0
+    assert all(s.collision is None for s in stepper.team.simulations)
+
+
+def test_an_echo_off_a_team_mate_is_no_wall_in_the_map(flat_scene):
+    stepper = crossing(flat_scene, share_maps=0)
+    readings = fly(stepper)
+    assert sum(r.vehicle is not None for r in readings) > 5  # they did see each other
+    assert [a.map.detections for a in stepper.agents] == [0, 0]  # and the flat ground has no walls
+
+
+def test_a_vehicle_alone_has_no_traffic(flat_scene):
+    stepper = simulate_team(flat_scene, "pathfind", 1, waypoints=[[(0.0, 8.0)]])
+    fly(stepper)
+    assert stepper.controllers[0].traffic() == []
+    assert stepper.agents[0].outcome == "finished" and not said(stepper.agents[0], "Traffic")
+
+
+@pytest.mark.parametrize("name, value", [("separation", 0.1), ("share_maps", 2)])
+def test_team_settings_out_of_range_are_refused(name, value):
+    from vehicle.agent.settings import SettingsError
+
+    with pytest.raises(SettingsError, match=name):
+        Settings().updated({name: value})

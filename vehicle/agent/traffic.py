@@ -1,0 +1,212 @@
+"""Giving way: the other vehicles of a team are moving obstacles, kept ``separation`` metres away.
+
+Every period the agent looks ``HORIZON`` seconds ahead: where it is going (the
+heading and reach its autopilot navigates by, at the cruise speed) against
+where each team-mate is going (its velocity). When two moving vehicles would
+come closer than the separation plus both bodies' radii, the one with the
+higher system id gives way (a deterministic rule both ends agree on without
+talking): it stops the mission where it is, or, when it stands in the other's
+track, steps aside out of it. A team-mate that stands still (scanning,
+holding, landed, a wreck) is gone round instead, whatever its id: to the point
+beside it, the margin and a metre off, after which the mission plans on. As a
+last resort a vehicle waits rather than move closer to a team-mate already
+within the margin. Each says what it does, and carries on once the way has
+been clear for a second: the mission is never given up for a team-mate, and
+its echoes are no walls in the map (``vehicle.agent.monitor``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from vehicle.agent.missions.base import Context
+from vehicle.protocol.traffic import Traffic
+
+HORIZON = 8.0  # s looked ahead for a conflict
+SAMPLES = 33  # times looked at over the horizon (every quarter second)
+CLEAR_FOR = 1.0  # s without a conflict before carrying on
+ASIDE = 1.0  # m beyond the margin that stepping aside leaves
+MOVING = 0.3  # m/s: a team-mate slower than this stands: it has no track to keep out of, it is gone round
+DETOUR_REACHED = 0.7  # m from the point beside a team-mate at which going round it is done
+DETOUR_FOR = 20.0  # s at most spent going round one
+_TIMES = np.linspace(0.0, HORIZON, SAMPLES)
+
+
+class GiveWay:
+    def __init__(self, ctx: Context, carry_on: Callable[[], None]):
+        """``carry_on``: called when the way is clear again, to send again what the mission was doing."""
+        self.ctx = ctx
+        self.carry_on = carry_on
+        self.giving_way_to: int | None = None  # the team-mate given way to now
+        self.times = 0  # how often it gave way
+        self._wanted = (0.0, 0.0)  # the velocity it wanted when it stopped for a team-mate
+        self._clear_since: float | None = None
+        self._sent: tuple[float, float] | None = None
+        self._said: tuple[int, str] | None = None
+        self._detour: tuple[tuple[float, float], float] | None = None  # where it goes round a team-mate, till when
+
+    def step(self) -> bool:
+        """True while the vehicle gives way, goes round a team-mate or waits: the mission is then not stepped."""
+        ctx = self.ctx
+        fc = ctx.fc
+        others = team_mates(fc)
+        busy = self.giving_way_to is not None
+        if not others and not busy:
+            return False
+        wanted = self._wanted if busy else self._intent()
+        me = getattr(fc, "system_id", 1)
+        conflicts = [o for o in others if self._conflict(wanted, o)]
+        standing = [o for o in conflicts if math.hypot(o.vx, o.vy) <= MOVING]
+        moving_lower = [o for o in conflicts if o.vehicle < me and o not in standing]
+        if moving_lower:  # the rule: the higher system id gives way to the lower
+            other = min(moving_lower, key=lambda o: o.vehicle)
+            self._begin(other, wanted, "giving way to vehicle {} (lower system id)")
+            self._keep_out_of(other)
+            return True
+        if self._detour is not None and self._detouring():
+            return True
+        if standing:  # a team-mate that stands in the way (scanning, holding, landed): go round it
+            other = min(standing, key=lambda o: math.hypot(o.x - fc.pose.x, o.y - fc.pose.y))
+            self._begin(other, wanted, "going round vehicle {}, which stands in the way")
+            self._go_round(other, wanted)
+            return True
+        other = self._too_close_ahead(wanted, others)
+        if other is not None:
+            self._begin(other, wanted, "waiting: vehicle {} is too close ahead")
+            self._hold()
+            return True
+        if not busy:
+            return False
+        now = ctx.time
+        self._clear_since = now if self._clear_since is None else self._clear_since
+        if now - self._clear_since < CLEAR_FOR:
+            return True
+        ctx.say(f"Traffic: clear of vehicle {self.giving_way_to}; carrying on")
+        self.giving_way_to, self._sent, self._clear_since, self._detour, self._said = None, None, None, None, None
+        self.carry_on()
+        return False
+
+    def _begin(self, other: Traffic, wanted: tuple[float, float], what: str) -> None:
+        """Say once what it does for which team-mate; the velocity it wanted is kept till the way is clear."""
+        self._clear_since = None
+        if self.giving_way_to is None:
+            self._wanted = wanted
+            self.times += 1
+        key = (other.vehicle, what)
+        if key != self._said:
+            x, y = self.ctx.position
+            self.ctx.say(f"Traffic: {what.format(other.vehicle)} at ({x:.1f}, {y:.1f})")
+            self._said = key
+        self.giving_way_to = other.vehicle
+
+    def _hold(self) -> None:
+        self._send(self.ctx.position)
+
+    def _send(self, target: tuple[float, float]) -> None:
+        if self._sent is None or math.dist(target, self._sent) > 0.5:
+            self.ctx.goto(target)
+            self._sent = target
+
+    def _go_round(self, other: Traffic, wanted: tuple[float, float]) -> None:
+        """Fly to the point beside the team-mate, the margin and a metre off it on the side this vehicle is
+        already on (seen along the way it wants to go); then the mission plans on from there."""
+        ctx = self.ctx
+        x, y = ctx.position
+        speed = math.hypot(*wanted)
+        ux, uy = (wanted[0] / speed, wanted[1] / speed) if speed > 0 else (0.0, 1.0)
+        rx, ry = x - other.x, y - other.y
+        along = rx * ux + ry * uy
+        nx, ny = rx - along * ux, ry - along * uy
+        off = math.hypot(nx, ny)
+        nx, ny = (nx / off, ny / off) if off > 0.1 else (uy, -ux)  # right on its line: round its right
+        reach = self._margin(other) + ASIDE
+        beside = (other.x + nx * reach, other.y + ny * reach)
+        if not (ctx.inside(beside) and ctx.is_clear(beside)):
+            beside = (other.x - nx * reach, other.y - ny * reach)  # the other side
+            if not (ctx.inside(beside) and ctx.is_clear(beside)):
+                self._hold()
+                return
+        self._detour = (beside, ctx.time + DETOUR_FOR)
+        self._send(beside)
+
+    def _detouring(self) -> bool:
+        """Still on the way round (not there yet, and not for too long)."""
+        beside, until = self._detour
+        if self.ctx.distance_to(beside) > DETOUR_REACHED and self.ctx.time < until:
+            return True
+        self._detour = None
+        return False
+
+    def _margin(self, other: Traffic) -> float:
+        return self.ctx.settings.separation + self.ctx.radius + other.radius
+
+    def _intent(self) -> tuple[float, float]:
+        """The velocity the vehicle is about to fly: towards its autopilot's target at the cruise speed."""
+        navigation = self.ctx.fc.navigation
+        if navigation.heading is None:
+            return 0.0, 0.0
+        speed = self.ctx.settings.speed
+        return speed * math.sin(navigation.heading), speed * math.cos(navigation.heading)
+
+    def _conflict(self, wanted: tuple[float, float], other: Traffic) -> bool:
+        """Whether the two would come within the margin over the horizon, each keeping its velocity (this
+        vehicle's until its target, ``reach`` away)."""
+        pose = self.ctx.fc.pose
+        reach = self.ctx.fc.navigation.reach
+        speed = math.hypot(*wanted)
+        mine = np.minimum(_TIMES, reach / speed) if speed > 0 and math.isfinite(reach) else _TIMES
+        dx = (pose.x + wanted[0] * mine) - (other.x + other.vx * _TIMES)
+        dy = (pose.y + wanted[1] * mine) - (other.y + other.vy * _TIMES)
+        dz = pose.z - other.z
+        return bool((dx * dx + dy * dy + dz * dz).min() < self._margin(other) ** 2)
+
+    def _too_close_ahead(self, wanted: tuple[float, float], others: list[Traffic]) -> Traffic | None:
+        """A team-mate already within the margin that this vehicle would move closer to."""
+        pose = self.ctx.fc.pose
+        for other in others:
+            dx, dy = other.x - pose.x, other.y - pose.y
+            if (math.dist((pose.x, pose.y, pose.z), (other.x, other.y, other.z)) < self._margin(other)
+                    and dx * (wanted[0] - other.vx) + dy * (wanted[1] - other.vy) > 0):
+                return other
+        return None
+
+    def _keep_out_of(self, other: Traffic) -> None:
+        """Hold here, or step aside when the team-mate's track (a team-mate standing still: the team-mate
+        itself) is within the margin and a metre."""
+        ctx = self.ctx
+        x, y = ctx.position
+        ox, oy = x - other.x, y - other.y  # from the team-mate to here
+        speed = math.hypot(other.vx, other.vy)
+        if speed > MOVING:  # off its track, level with here
+            ux, uy = other.vx / speed, other.vy / speed
+            along = ox * ux + oy * uy
+            ox, oy = ox - along * ux, oy - along * uy
+        off = math.hypot(ox, oy)
+        if off < 0.1:  # right on it: to the right of its way (east of a team-mate standing still), as both agree
+            ox, oy, off = (uy, -ux, 1.0) if speed > MOVING else (1.0, 0.0, 1.0)
+        need = self._margin(other) + ASIDE - off
+        target = (x, y)
+        if need > 0:
+            aside = (x + ox / off * need, y + oy / off * need)
+            if ctx.inside(aside) and ctx.is_clear(aside):
+                target = aside
+        self._send(target)
+
+
+def team_mates(fc) -> list[Traffic]:
+    """The other vehicles of the flight controller's team (a MAVLink flight controller tells of none yet)."""
+    report = getattr(fc, "traffic", None)
+    return report() if report is not None else []
+
+
+def someone_elses(ctx: Context, point: tuple[float, float]) -> bool:
+    """Whether a team-mate stands nearer to ``point`` than this vehicle does: its share of the area to search
+    (the team splits the area by who is nearest, a Voronoi split on where each is now)."""
+    others = team_mates(ctx.fc)
+    if not others:
+        return False
+    mine = ctx.distance_to(point)
+    return any(math.hypot(point[0] - o.x, point[1] - o.y) < mine for o in others)
