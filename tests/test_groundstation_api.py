@@ -45,6 +45,7 @@ from harness import (
 from PIL import Image
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
+from groundstation.commands import PROBE_ABOVE, Command, execute, solid_at
 from groundstation.security import is_loopback
 from vehicle.mapping.picture import HOME
 from vehicle.protocol.geodesy import Datum
@@ -413,10 +414,51 @@ def test_goto_with_an_agent_is_planned_round_what_its_map_knows(api, flyer):
     goto_and_wait(api, 1, 0.0, 0.0, tolerance=0.5, sim_timeout=120)
 
 
-def test_goto_into_a_known_obstacle_is_refused_with_the_reason(api, flyer):
+@pytest.fixture
+def sent_gotos(station, monkeypatch):
+    """The Go here targets the station sends (``Link.command_int``, spied on and called through)."""
+    link, sent = station.station.link, []
+    send = link.command_int
+    monkeypatch.setattr(link, "command_int", lambda *args, **kwargs: sent.append(args) or send(*args, **kwargs))
+    return sent
+
+
+def test_goto_inside_a_building_or_on_an_occupied_cell_is_refused_before_it_is_sent(station, api, flyer, scene,
+                                                                                    sent_gotos):
+    """A target inside a closed solid of the scene, or on a cell the vehicle's map holds occupied, is a 422 that
+    says why; it used to be sent, accepted, and then fail on the vehicle with "no known path"."""
+    airborne(api)
+    goto_and_wait(api, 1, 0.0, 4.0)  # facing the wall north of the start: its sonars map the south face
+    sent_gotos.clear()
+    inside = api.command(1, action="goto", x=0.0, y=WALL_Y + 0.25)
+    assert inside.status_code == 422
+    assert inside.json()["detail"] == ("the target (0.0, 8.2) is inside a building (shape 1): pick a point "
+                                       "outside it")
+    cells = api.get("/api/vehicles/1/map", params={"format": "json"}).json()
+    window, resolution, (west, south) = cells["window"], cells["resolution"], cells["origin"]
+    occupied = [(west + (window["col"] + c + 0.5) / resolution, south + (window["row"] + r + 0.5) / resolution)
+                for r, row in enumerate(cells["values"]) for c, value in enumerate(row)
+                if value >= cells["occupied_at"]]
+    height = station.station.live.height(station.station.live.get(1))
+    outside = [(x, y) for x, y in occupied if solid_at(scene, x, y, height + PROBE_ABOVE) is None]
+    assert outside, "the sonars marked no occupied cell outside the wall"
+    x, y = outside[0]
+    on_cell = api.command(1, action="goto", x=x, y=y)
+    assert on_cell.status_code == 422
+    assert on_cell.json()["detail"] == (f"the target ({x:.1f}, {y:.1f}) is on an occupied cell of vehicle 1's map: "
+                                        "pick a point its map shows free or unknown")
+    assert sent_gotos == []  # neither reached the vehicle
+    goto_and_wait(api, 1, 0.0, 0.0)  # a free target is sent, and flown to
+    assert len(sent_gotos) == 1
+
+
+def test_goto_into_a_known_obstacle_sent_by_another_station_is_refused_by_the_agent(station, api, flyer):
+    """Past this station's check (as another ground station would send it), the agent refuses it and says why."""
     airborne(api)
     goto_and_wait(api, 1, 0.0, 4.0)
-    assert api.command(1, action="goto", x=0.0, y=WALL_Y + 0.25).json()["result"] == "denied"
+    running = station.station
+    goto = Command(action="goto", x=0.0, y=WALL_Y + 0.25)
+    assert execute(running.link, running.live.get(1), goto, running.live.datum, time.time()) == "denied"
     told = api.wait_vehicle(1, lambda v: any("Go here refused" in m["text"] for m in v["messages"]),
                             sim_timeout=10, what="the reason")
     refusal = next(m for m in told["messages"] if "Go here refused" in m["text"])

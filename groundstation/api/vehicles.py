@@ -9,7 +9,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import PlainTextResponse
 
 from groundstation.api.common import log
-from groundstation.commands import Command, execute, outside_space
+from groundstation.commands import Command, blocked, execute, outside_space
 from groundstation.link import LinkError
 from vehicle.protocol.waypoints import WaypointError, mission_text, parse_mission
 
@@ -57,7 +57,8 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
         guards.live_only()
         v = guards.vehicle_or_404(sysid)
         if body.action == "goto":
-            refusal = outside_space(station.fleet, v, body.x, body.y, station.scene)
+            refusal = (outside_space(station.fleet, v, body.x, body.y, station.scene)
+                       or blocked(station.fleet, v, body.x, body.y, station.scene))
             if refusal:
                 raise HTTPException(422, refusal)
         try:

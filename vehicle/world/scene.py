@@ -60,6 +60,7 @@ class Scene:
     start: tuple[float, float, float] | None = None  # Viewpoint "Start": x, y and the height of the eye
     start_heading: float | None = None  # compass degrees of its view direction; None if vertical
     hints: dict[str, str] = field(default_factory=dict)  # "name=value" strings of a WorldInfo's info
+    object_names: list[str] = field(default_factory=list)  # per Shape instance: the nearest DEF name ("": none)
     _prepared: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @functools.cached_property
@@ -141,6 +142,8 @@ class _Builder:
         self.vertices: list[np.ndarray] = []
         self.faces: list[np.ndarray] = []
         self.colors: list[tuple[int, ...]] = []
+        self.names: list[str] = []  # of the DEF'd nodes being walked, innermost last
+        self.object_names: list[str] = []
         self.skipped: Counter[str] = Counter()
         self.files = [_absolute(path)]  # the Inline chain being walked, to refuse cycles
         self.parsed: dict[Path, list[Node]] = {}
@@ -184,7 +187,13 @@ class _Builder:
             raise node.error(f"more than {MAX_INSTANCES} node instances after DEF/USE expansion")
         handler = self.handlers.get(node.type)
         if handler is not None:
-            handler(node, matrix, depth)
+            if node.name:  # what a person calls the shapes inside (a DEF'd Transform: "Office")
+                self.names.append(node.name)
+            try:
+                handler(node, matrix, depth)
+            finally:
+                if node.name:
+                    self.names.pop()
         elif node.type not in _NON_GEOMETRIC:
             self.skipped[f"unsupported node {node.type}"] += 1
 
@@ -256,6 +265,7 @@ class _Builder:
         self.vertices.append(world)
         self.faces.append(faces)
         self.colors.append(_color(_node(shape, "appearance")))
+        self.object_names.append(self.names[-1] if self.names else "")
 
     def _viewpoint(self, node: Node, matrix: np.ndarray, depth: int) -> None:
         """The first Viewpoint DEF'd as Start gives the default start position and heading."""
@@ -294,6 +304,7 @@ class _Builder:
             start=self.start,
             start_heading=self.start_heading,
             hints=self.hints,
+            object_names=self.object_names,
         )
 
 
