@@ -14,7 +14,9 @@ state and the latest message), with the log's clock.
 
 from __future__ import annotations
 
+import math
 import time
+from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
 from groundstation.replay import Replay
@@ -90,13 +92,11 @@ class TelemetryLabels:
 def telemetry_text(v: dict, clock: str) -> str:
     """The page's panel for one vehicle (``Fleet.describe``'s dict), as lines of text."""
     agent = v["agent"]
-    battery = v["battery"]
     position = v["position"]
     lines = [
         f"{v['sysid']} {v['type']}  {v['mode']}  {'ARMED' if v['armed'] else 'disarmed'}",
         f"alt {_number(position['alt'])} m  {_number(v['speed'])} m/s  heading {_number(v['heading'], 0)}°",
-        "battery " + ("-" if battery is None else f"{battery['voltage']:.1f} V"
-                      + (f" {battery['remaining']}%" if battery["remaining"] is not None else "")),
+        f"battery {battery_text(v['battery'])}",
     ]
     if agent is not None:
         why = f" ({agent['reason']})" if agent["reason"] and agent["state"] != "RUNNING" else ""
@@ -106,6 +106,31 @@ def telemetry_text(v: dict, clock: str) -> str:
         lines.append(message if len(message) <= MESSAGE_CHARS else message[:MESSAGE_CHARS - 1] + "…")
     lines.append(clock)
     return "\n".join(lines)
+
+
+def battery_text(battery: dict | None) -> str:
+    """A battery as the page says it (``batteryText`` in ``static/common.js``, and a test holds the two to the
+    same text): "12.3 V, 87 %", the voltage rounded as JavaScript's ``toFixed(1)``, the percentage left out when
+    unknown (MAVLink's -1, or None)."""
+    if not battery:
+        return "–"
+    parts = []
+    voltage, remaining = battery.get("voltage"), battery.get("remaining")
+    if _finite(voltage):
+        parts.append(f"{_fixed(voltage)} V")
+    if _finite(remaining) and remaining >= 0:
+        parts.append(f"{math.floor(remaining + 0.5)} %")  # Math.round
+    return ", ".join(parts) or "–"
+
+
+def _finite(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _fixed(value: float, digits: int = 1) -> str:
+    """JavaScript's ``toFixed`` (halves of the exact value away from zero), never "-0.0": the page's ``fmt``."""
+    text = str(Decimal(value).quantize(Decimal(1).scaleb(-digits), rounding=ROUND_HALF_UP))
+    return text.lstrip("-") if Decimal(text) == 0 else text
 
 
 def _number(value: float | None, digits: int = 1) -> str:

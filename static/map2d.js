@@ -2,360 +2,358 @@
 // merged), every vehicle in its colour with its heading, trail, waypoints and planned path; a scale bar, a
 // north arrow, the coordinates under the cursor and a distance tool (Measure, then click two points).
 // Drag to pan, wheel to zoom towards the cursor. Scene metres: x east, y north. Pictures come as PNG data
-// URLs from /api/map2d/*; vehicles from the status frames app.js receives ("station-status" events).
-(() => {
-  "use strict";
+// URLs from /api/map2d/*; vehicles from the status frames ("station-status", see common.js).
 
-  const POLL_MS = 2000;  // memory maps and trails
-  const $ = (sel) => document.querySelector(sel);
-  const isNum = (v) => typeof v === "number" && Number.isFinite(v);
-  const colourRe = /^#[0-9a-f]{6}$/i;
+import { $, EVENTS, fmt, getJson, isNum, on } from "./common.js";
 
-  const canvas = $("#map2d");
-  const ctx = canvas.getContext("2d");
-  const view = { cx: 0, cy: 0, scale: 4, fitted: false };  // centre (m) and pixels per metre
-  let scene = null;      // {bounds, img}
-  let overlay = null;    // {bounds, img}
-  let trails = {};
-  let vehicles = [];
-  let mode = null;
-  let measuring = false;
-  let measure = [];      // up to two [x, y]
-  let drag = null;
-  let cursor = null;
-  const map2d = { view, measure, get distance() { return distance(); } };
-  window.map2d = map2d;  // what the map shows, for tests and the page's other scripts
+const POLL_MS = 2000;  // memory maps and trails
+const colourRe = /^#[0-9a-f]{6}$/i;
 
-  function image(url) {
-    return new Promise((resolve) => {
-      const img = new Image();
-      img.onload = () => resolve(img);
-      img.onerror = () => resolve(null);
-      img.src = url;
-    });
+const canvas = $("#map2d");
+const ctx = canvas.getContext("2d");
+const view = { cx: 0, cy: 0, scale: 4, fitted: false };  // centre (m) and pixels per metre
+let scene = null;      // {bounds, img}
+let overlay = null;    // {bounds, img}
+let trails = {};
+let vehicles = [];
+let mode = null;
+let measuring = false;
+let measure = [];      // up to two [x, y]
+let drag = null;
+let cursor = null;
+const map2d = { view, measure, get distance() { return distance(); } };
+window.map2d = map2d;  // what the map shows, for tests and the page's other scripts
+
+function image(url) {
+  return new Promise((resolve) => {
+    const img = new Image();
+    img.onload = () => resolve(img);
+    img.onerror = () => resolve(null);
+    img.src = url;
+  });
+}
+
+function validBounds(b) {
+  return Array.isArray(b) && b.length === 4 && b.every(isNum) && b[2] > b[0] && b[3] > b[1];
+}
+
+async function loadScene() {
+  const found = await getJson("/api/map2d/scene");
+  scene = found && validBounds(found.bounds) && typeof found.image === "string"
+    ? { bounds: found.bounds, img: await image(found.image) } : null;
+  if (!view.fitted) fit();
+  draw();
+}
+
+let lastOverlayUrl = "";
+async function loadOverlay() {
+  const layer = $("#map2d-layer").value;
+  const which = layer === "merged" ? "merged" : layer === "selected" && Number.isInteger(window.selectedVehicle)
+    ? String(window.selectedVehicle) : null;
+  // asked for only once the status frames say such a map exists (the station answers 404 before, and the
+  // browser logs every 404 as an error in the console)
+  const held = mapsHeld();
+  const exists = which === "merged" ? held.length > 0 : held.includes(which);
+  const found = exists ? await getJson(`/api/map2d/maps/${which}`) : null;
+  if (!found || !validBounds(found.bounds) || typeof found.image !== "string") {
+    overlay = null;
+    lastOverlayUrl = "";
+  } else if (found.image !== lastOverlayUrl) {
+    lastOverlayUrl = found.image;
+    overlay = { bounds: found.bounds, img: await image(found.image), which };
   }
+  canvas.dataset.overlay = overlay ? overlay.which : "";
+  draw();
+}
 
-  async function getJson(path) {
-    try {
-      const res = await fetch(path, { credentials: "same-origin" });
-      return res.ok ? await res.json() : null;
-    } catch {
-      return null;
-    }
+/** The vehicles (system ids, as text) whose status says they hold a memory map. */
+function mapsHeld() {
+  return vehicles.filter((v) => v.map && isNum(v.map.occupied)).map((v) => String(v.sysid));
+}
+
+async function loadTrails() {
+  const found = await getJson("/api/map2d/trails");
+  trails = found && typeof found === "object" ? found : {};
+  draw();
+}
+
+function poll() {
+  if (document.hidden || $("#map2d-pane").classList.contains("collapsed")) return;
+  loadOverlay();
+  loadTrails();
+}
+
+// ---- geometry -------------------------------------------------------------------------------
+function size() {
+  const rect = canvas.getBoundingClientRect();
+  const ratio = window.devicePixelRatio || 1;
+  const w = Math.max(1, Math.round(rect.width * ratio)), h = Math.max(1, Math.round(rect.height * ratio));
+  if (canvas.width !== w || canvas.height !== h) {
+    canvas.width = w;
+    canvas.height = h;
   }
+  return { w: rect.width, h: rect.height, ratio };
+}
 
-  function validBounds(b) {
-    return Array.isArray(b) && b.length === 4 && b.every(isNum) && b[2] > b[0] && b[3] > b[1];
+function toScreen(x, y) {
+  const { w, h } = size();
+  return [w / 2 + (x - view.cx) * view.scale, h / 2 - (y - view.cy) * view.scale];
+}
+
+function toScene(px, py) {
+  const { w, h } = size();
+  return [view.cx + (px - w / 2) / view.scale, view.cy - (py - h / 2) / view.scale];
+}
+
+function fit() {
+  let b = scene && scene.bounds;
+  if (!b) {
+    const points = vehicles.filter((v) => v.position).map((v) => [v.position.x, v.position.y]);
+    if (!points.length) return;
+    const xs = points.map((p) => p[0]), ys = points.map((p) => p[1]);
+    b = [Math.min(...xs) - 20, Math.min(...ys) - 20, Math.max(...xs) + 20, Math.max(...ys) + 20];
   }
+  const { w, h } = size();
+  view.cx = (b[0] + b[2]) / 2;
+  view.cy = (b[1] + b[3]) / 2;
+  view.scale = Math.max(0.01, Math.min(w / (b[2] - b[0]), h / (b[3] - b[1])) * 0.95);
+  view.fitted = true;
+}
 
-  async function loadScene() {
-    const found = await getJson("/api/map2d/scene");
-    scene = found && validBounds(found.bounds) && typeof found.image === "string"
-      ? { bounds: found.bounds, img: await image(found.image) } : null;
-    if (!view.fitted) fit();
-    draw();
-  }
+function distance() {
+  return measure.length === 2 ? Math.hypot(measure[1][0] - measure[0][0], measure[1][1] - measure[0][1]) : null;
+}
 
-  let lastOverlayUrl = "";
-  async function loadOverlay() {
-    const layer = $("#map2d-layer").value;
-    const which = layer === "merged" ? "merged" : layer === "selected" && Number.isInteger(window.selectedVehicle)
-      ? String(window.selectedVehicle) : null;
-    const found = which ? await getJson(`/api/map2d/maps/${which}`) : null;
-    if (!found || !validBounds(found.bounds) || typeof found.image !== "string") {
-      overlay = null;
-      lastOverlayUrl = "";
-    } else if (found.image !== lastOverlayUrl) {
-      lastOverlayUrl = found.image;
-      overlay = { bounds: found.bounds, img: await image(found.image), which };
-    }
-    canvas.dataset.overlay = overlay ? overlay.which : "";
-    draw();
-  }
+// ---- drawing ------------------------------------------------------------------------------
+function drawImage(picture) {
+  if (!picture || !picture.img) return;
+  const [west, south, east, north] = picture.bounds;
+  const [x0, y0] = toScreen(west, north);
+  const [x1, y1] = toScreen(east, south);
+  ctx.imageSmoothingEnabled = false;
+  ctx.drawImage(picture.img, x0, y0, x1 - x0, y1 - y0);
+}
 
-  async function loadTrails() {
-    const found = await getJson("/api/map2d/trails");
-    trails = found && typeof found === "object" ? found : {};
-    draw();
-  }
+function colourOf(v) {
+  return typeof v.colour === "string" && colourRe.test(v.colour) ? v.colour : "#8d99a6";
+}
 
-  function poll() {
-    if (document.hidden || $("#map2d-pane").classList.contains("collapsed")) return;
-    loadOverlay();
-    loadTrails();
-  }
+function polyline(points, colour, width, dash) {
+  if (!Array.isArray(points) || points.length < 2) return;
+  ctx.strokeStyle = colour;
+  ctx.lineWidth = width;
+  ctx.setLineDash(dash || []);
+  ctx.beginPath();
+  points.forEach((p, i) => {
+    if (!Array.isArray(p) || !isNum(p[0]) || !isNum(p[1])) return;
+    const [sx, sy] = toScreen(p[0], p[1]);
+    if (i === 0) ctx.moveTo(sx, sy); else ctx.lineTo(sx, sy);
+  });
+  ctx.stroke();
+  ctx.setLineDash([]);
+}
 
-  // ---- geometry -------------------------------------------------------------------------------
-  function size() {
-    const rect = canvas.getBoundingClientRect();
-    const ratio = window.devicePixelRatio || 1;
-    const w = Math.max(1, Math.round(rect.width * ratio)), h = Math.max(1, Math.round(rect.height * ratio));
-    if (canvas.width !== w || canvas.height !== h) {
-      canvas.width = w;
-      canvas.height = h;
-    }
-    return { w: rect.width, h: rect.height, ratio };
-  }
-
-  function toScreen(x, y) {
-    const { w, h } = size();
-    return [w / 2 + (x - view.cx) * view.scale, h / 2 - (y - view.cy) * view.scale];
-  }
-
-  function toScene(px, py) {
-    const { w, h } = size();
-    return [view.cx + (px - w / 2) / view.scale, view.cy - (py - h / 2) / view.scale];
-  }
-
-  function fit() {
-    let b = scene && scene.bounds;
-    if (!b) {
-      const points = vehicles.filter((v) => v.position).map((v) => [v.position.x, v.position.y]);
-      if (!points.length) return;
-      const xs = points.map((p) => p[0]), ys = points.map((p) => p[1]);
-      b = [Math.min(...xs) - 20, Math.min(...ys) - 20, Math.max(...xs) + 20, Math.max(...ys) + 20];
-    }
-    const { w, h } = size();
-    view.cx = (b[0] + b[2]) / 2;
-    view.cy = (b[1] + b[3]) / 2;
-    view.scale = Math.max(0.01, Math.min(w / (b[2] - b[0]), h / (b[3] - b[1])) * 0.95);
-    view.fitted = true;
-  }
-
-  function distance() {
-    return measure.length === 2 ? Math.hypot(measure[1][0] - measure[0][0], measure[1][1] - measure[0][1]) : null;
-  }
-
-  // ---- drawing ------------------------------------------------------------------------------
-  function drawImage(picture) {
-    if (!picture || !picture.img) return;
-    const [west, south, east, north] = picture.bounds;
-    const [x0, y0] = toScreen(west, north);
-    const [x1, y1] = toScreen(east, south);
-    ctx.imageSmoothingEnabled = false;
-    ctx.drawImage(picture.img, x0, y0, x1 - x0, y1 - y0);
-  }
-
-  function colourOf(v) {
-    return typeof v.colour === "string" && colourRe.test(v.colour) ? v.colour : "#8d99a6";
-  }
-
-  function polyline(points, colour, width, dash) {
-    if (!Array.isArray(points) || points.length < 2) return;
-    ctx.strokeStyle = colour;
-    ctx.lineWidth = width;
-    ctx.setLineDash(dash || []);
-    ctx.beginPath();
-    points.forEach((p, i) => {
-      if (!Array.isArray(p) || !isNum(p[0]) || !isNum(p[1])) return;
-      const [sx, sy] = toScreen(p[0], p[1]);
-      if (i === 0) ctx.moveTo(sx, sy); else ctx.lineTo(sx, sy);
-    });
-    ctx.stroke();
-    ctx.setLineDash([]);
-  }
-
-  function drawVehicle(v) {
-    const p = v.position;
-    if (!p || !isNum(p.x) || !isNum(p.y)) return;
-    const [sx, sy] = toScreen(p.x, p.y);
-    const selected = v.sysid === window.selectedVehicle;
-    const heading = (isNum(v.heading) ? v.heading : 0) * Math.PI / 180;
-    ctx.save();
-    ctx.translate(sx, sy);
-    if (selected) {
-      ctx.strokeStyle = "#ffffff";
-      ctx.lineWidth = 2;
-      ctx.beginPath();
-      ctx.arc(0, 0, 13, 0, Math.PI * 2);
-      ctx.stroke();
-    }
-    ctx.rotate(heading);
-    ctx.fillStyle = colourOf(v);
-    ctx.strokeStyle = "#0b0e11";
-    ctx.lineWidth = 1.5;
-    ctx.beginPath();
-    ctx.moveTo(0, -10);
-    ctx.lineTo(7, 8);
-    ctx.lineTo(0, 4);
-    ctx.lineTo(-7, 8);
-    ctx.closePath();
-    ctx.fill();
-    ctx.stroke();
-    ctx.restore();
-    ctx.fillStyle = colourOf(v);
-    ctx.font = "bold 11px system-ui, sans-serif";
-    ctx.fillText(String(v.sysid), sx + 12, sy - 8);
-  }
-
-  /** A scale bar of a round length (1, 2 or 5 x 10^n m) about a fifth of the map wide. */
-  function drawScale(w, h) {
-    const target = w / 5 / view.scale;
-    const power = 10 ** Math.floor(Math.log10(target));
-    const metres = [5, 2, 1].map((f) => f * power).find((m) => m <= target) || power;
-    const px = metres * view.scale;
-    const x = 12, y = h - 14;
+function drawVehicle(v) {
+  const p = v.position;
+  if (!p || !isNum(p.x) || !isNum(p.y)) return;
+  const [sx, sy] = toScreen(p.x, p.y);
+  const selected = v.sysid === window.selectedVehicle;
+  const heading = (isNum(v.heading) ? v.heading : 0) * Math.PI / 180;
+  ctx.save();
+  ctx.translate(sx, sy);
+  if (selected) {
     ctx.strokeStyle = "#ffffff";
     ctx.lineWidth = 2;
     ctx.beginPath();
-    ctx.moveTo(x, y - 5);
-    ctx.lineTo(x, y);
-    ctx.lineTo(x + px, y);
-    ctx.lineTo(x + px, y - 5);
+    ctx.arc(0, 0, 13, 0, Math.PI * 2);
     ctx.stroke();
-    ctx.fillStyle = "#ffffff";
-    ctx.font = "11px system-ui, sans-serif";
-    ctx.fillText(metres >= 1000 ? `${metres / 1000} km` : `${metres} m`, x + px + 6, y + 3);
-    canvas.dataset.scale = String(metres);
   }
+  ctx.rotate(heading);
+  ctx.fillStyle = colourOf(v);
+  ctx.strokeStyle = "#0b0e11";
+  ctx.lineWidth = 1.5;
+  ctx.beginPath();
+  ctx.moveTo(0, -10);
+  ctx.lineTo(7, 8);
+  ctx.lineTo(0, 4);
+  ctx.lineTo(-7, 8);
+  ctx.closePath();
+  ctx.fill();
+  ctx.stroke();
+  ctx.restore();
+  ctx.fillStyle = colourOf(v);
+  ctx.font = "bold 11px system-ui, sans-serif";
+  ctx.fillText(String(v.sysid), sx + 12, sy - 8);
+}
 
-  function drawNorth(w) {
-    const x = w - 22, y = 30;
-    ctx.fillStyle = "#ffffff";
+/** A scale bar of a round length (1, 2 or 5 x 10^n m) about a fifth of the map wide. */
+function drawScale(w, h) {
+  const target = w / 5 / view.scale;
+  const power = 10 ** Math.floor(Math.log10(target));
+  const metres = [5, 2, 1].map((f) => f * power).find((m) => m <= target) || power;
+  const px = metres * view.scale;
+  const x = 12, y = h - 14;
+  ctx.strokeStyle = "#ffffff";
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.moveTo(x, y - 5);
+  ctx.lineTo(x, y);
+  ctx.lineTo(x + px, y);
+  ctx.lineTo(x + px, y - 5);
+  ctx.stroke();
+  ctx.fillStyle = "#ffffff";
+  ctx.font = "11px system-ui, sans-serif";
+  ctx.fillText(metres >= 1000 ? `${metres / 1000} km` : `${metres} m`, x + px + 6, y + 3);
+  canvas.dataset.scale = String(metres);
+}
+
+function drawNorth(w) {
+  const x = w - 22, y = 30;
+  ctx.fillStyle = "#ffffff";
+  ctx.beginPath();
+  ctx.moveTo(x, y - 14);
+  ctx.lineTo(x + 7, y + 6);
+  ctx.lineTo(x, y + 1);
+  ctx.lineTo(x - 7, y + 6);
+  ctx.closePath();
+  ctx.fill();
+  ctx.font = "bold 12px system-ui, sans-serif";
+  ctx.textAlign = "center";
+  ctx.fillText("N", x, y + 20);
+  ctx.textAlign = "start";
+}
+
+function drawMeasure() {
+  if (!measure.length) return;
+  ctx.strokeStyle = "#e8a33d";
+  ctx.fillStyle = "#e8a33d";
+  ctx.lineWidth = 2;
+  const points = measure.map((p) => toScreen(p[0], p[1]));
+  for (const [sx, sy] of points) {
     ctx.beginPath();
-    ctx.moveTo(x, y - 14);
-    ctx.lineTo(x + 7, y + 6);
-    ctx.lineTo(x, y + 1);
-    ctx.lineTo(x - 7, y + 6);
-    ctx.closePath();
+    ctx.arc(sx, sy, 4, 0, Math.PI * 2);
     ctx.fill();
-    ctx.font = "bold 12px system-ui, sans-serif";
-    ctx.textAlign = "center";
-    ctx.fillText("N", x, y + 20);
-    ctx.textAlign = "start";
   }
-
-  function drawMeasure() {
-    if (!measure.length) return;
-    ctx.strokeStyle = "#e8a33d";
-    ctx.fillStyle = "#e8a33d";
-    ctx.lineWidth = 2;
-    const points = measure.map((p) => toScreen(p[0], p[1]));
-    for (const [sx, sy] of points) {
-      ctx.beginPath();
-      ctx.arc(sx, sy, 4, 0, Math.PI * 2);
-      ctx.fill();
-    }
-    if (points.length === 2) {
-      ctx.beginPath();
-      ctx.moveTo(...points[0]);
-      ctx.lineTo(...points[1]);
-      ctx.stroke();
-      const d = distance();
-      ctx.font = "bold 12px system-ui, sans-serif";
-      ctx.fillText(`${d.toFixed(1)} m`, (points[0][0] + points[1][0]) / 2 + 6, (points[0][1] + points[1][1]) / 2 - 6);
-    }
-  }
-
-  function draw() {
-    const { w, h, ratio } = size();
-    ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
-    ctx.fillStyle = "#0b0e11";
-    ctx.fillRect(0, 0, w, h);
-    drawImage(scene);
-    drawImage(overlay);
-    for (const v of vehicles) {
-      polyline(trails[String(v.sysid)], colourOf(v), 1.5);
-      polyline(v.waypoints, "rgba(255, 255, 255, 0.7)", 1, [4, 4]);
-      for (const p of Array.isArray(v.waypoints) ? v.waypoints : []) {
-        if (!Array.isArray(p) || !isNum(p[0]) || !isNum(p[1])) continue;
-        const [sx, sy] = toScreen(p[0], p[1]);
-        ctx.strokeStyle = "#ffffff";
-        ctx.strokeRect(sx - 3, sy - 3, 6, 6);
-      }
-      polyline(v.path, "#ffd23f", 2);
-    }
-    for (const v of vehicles) drawVehicle(v);
-    drawMeasure();
-    drawScale(w, h);
-    drawNorth(w);
-  }
-
-  // ---- interaction --------------------------------------------------------------------------
-  function local(event) {
-    const rect = canvas.getBoundingClientRect();
-    return [event.clientX - rect.left, event.clientY - rect.top];
-  }
-
-  function showDistance() {
+  if (points.length === 2) {
+    ctx.beginPath();
+    ctx.moveTo(...points[0]);
+    ctx.lineTo(...points[1]);
+    ctx.stroke();
     const d = distance();
-    $("#map2d-distance").textContent = d == null ? (measuring ? (measure.length ? "click the second point"
-      : "click the first point") : "") : `distance ${d.toFixed(1)} m`;
+    ctx.font = "bold 12px system-ui, sans-serif";
+    ctx.fillText(`${fmt(d)} m`, (points[0][0] + points[1][0]) / 2 + 6, (points[0][1] + points[1][1]) / 2 - 6);
   }
+}
 
-  canvas.addEventListener("pointerdown", (event) => {
-    drag = { start: local(event), cx: view.cx, cy: view.cy, moved: false };
-    canvas.setPointerCapture(event.pointerId);
-  });
-  canvas.addEventListener("pointermove", (event) => {
-    const [px, py] = local(event);
-    cursor = toScene(px, py);
-    $("#map2d-cursor").textContent = `x ${cursor[0].toFixed(1)} m, y ${cursor[1].toFixed(1)} m`;
-    if (drag) {
-      const dx = px - drag.start[0], dy = py - drag.start[1];
-      if (Math.hypot(dx, dy) > 4) drag.moved = true;
-      if (drag.moved) {
-        view.cx = drag.cx - dx / view.scale;
-        view.cy = drag.cy + dy / view.scale;
-        draw();
-      }
+function draw() {
+  const { w, h, ratio } = size();
+  ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
+  ctx.fillStyle = "#0b0e11";
+  ctx.fillRect(0, 0, w, h);
+  drawImage(scene);
+  drawImage(overlay);
+  for (const v of vehicles) {
+    polyline(trails[String(v.sysid)], colourOf(v), 1.5);
+    polyline(v.waypoints, "rgba(255, 255, 255, 0.7)", 1, [4, 4]);
+    for (const p of Array.isArray(v.waypoints) ? v.waypoints : []) {
+      if (!Array.isArray(p) || !isNum(p[0]) || !isNum(p[1])) continue;
+      const [sx, sy] = toScreen(p[0], p[1]);
+      ctx.strokeStyle = "#ffffff";
+      ctx.strokeRect(sx - 3, sy - 3, 6, 6);
     }
-  });
-  canvas.addEventListener("pointerup", (event) => {
-    const wasDrag = drag && drag.moved;
-    drag = null;
-    if (wasDrag || !measuring) return;
-    const [px, py] = local(event);
-    if (measure.length >= 2) measure.length = 0;
-    measure.push(toScene(px, py));
-    showDistance();
-    draw();
-  });
-  canvas.addEventListener("wheel", (event) => {
-    event.preventDefault();
-    const [px, py] = local(event);
-    const before = toScene(px, py);
-    view.scale = Math.max(0.01, Math.min(500, view.scale * Math.exp(-event.deltaY * 0.0015)));
-    const after = toScene(px, py);  // keep the point under the cursor where it was
-    view.cx += before[0] - after[0];
-    view.cy += before[1] - after[1];
-    draw();
-  }, { passive: false });
+    polyline(v.path, "#ffd23f", 2);
+  }
+  for (const v of vehicles) drawVehicle(v);
+  drawMeasure();
+  drawScale(w, h);
+  drawNorth(w);
+}
 
-  $("#map2d-measure").addEventListener("click", () => {
-    measuring = !measuring;
-    measure.length = 0;
-    $("#map2d-measure").setAttribute("aria-pressed", String(measuring));
-    canvas.classList.toggle("measuring", measuring);
-    showDistance();
-    draw();
-  });
-  $("#map2d-fit").addEventListener("click", () => { fit(); draw(); });
-  $("#map2d-layer").addEventListener("change", loadOverlay);
-  $("#map2d-toggle").addEventListener("click", () => {
-    const pane = $("#map2d-pane");
-    const collapsed = pane.classList.toggle("collapsed");
-    $("#map2d-toggle").setAttribute("aria-expanded", String(!collapsed));
-    $("#map2d-toggle").textContent = collapsed ? "+" : "–";
-    $("#map2d-toggle").title = collapsed ? "Show the 2D map" : "Hide the 2D map";
-    if (!collapsed) { poll(); draw(); }
-  });
-  window.addEventListener("resize", draw);
-  window.addEventListener("vehicle-selected", () => { loadOverlay(); draw(); });
-  window.addEventListener("station-status", (event) => {
-    const msg = event.detail || {};
-    vehicles = (Array.isArray(msg.vehicles) ? msg.vehicles : []).filter((v) => v && Number.isInteger(v.sysid));
-    const replay = msg.replay && msg.replay.scene ? JSON.stringify(msg.replay.scene) : "";
-    const now = `${msg.mode}|${replay}`;
-    if (now !== mode) {  // live and each replay may show another scene
-      mode = now;
-      view.fitted = false;
-      loadScene();
-      poll();
+// ---- interaction --------------------------------------------------------------------------
+function local(event) {
+  const rect = canvas.getBoundingClientRect();
+  return [event.clientX - rect.left, event.clientY - rect.top];
+}
+
+function showDistance() {
+  const d = distance();
+  $("#map2d-distance").textContent = d == null ? (measuring ? (measure.length ? "click the second point"
+    : "click the first point") : "") : `distance ${fmt(d)} m`;
+}
+
+canvas.addEventListener("pointerdown", (event) => {
+  drag = { start: local(event), cx: view.cx, cy: view.cy, moved: false };
+  canvas.setPointerCapture(event.pointerId);
+});
+canvas.addEventListener("pointermove", (event) => {
+  const [px, py] = local(event);
+  cursor = toScene(px, py);
+  $("#map2d-cursor").textContent = `x ${fmt(cursor[0])} m, y ${fmt(cursor[1])} m`;
+  if (drag) {
+    const dx = px - drag.start[0], dy = py - drag.start[1];
+    if (Math.hypot(dx, dy) > 4) drag.moved = true;
+    if (drag.moved) {
+      view.cx = drag.cx - dx / view.scale;
+      view.cy = drag.cy + dy / view.scale;
+      draw();
     }
-    if (!view.fitted) fit();
-    draw();
-  });
-  setInterval(poll, POLL_MS);
+  }
+});
+canvas.addEventListener("pointerup", (event) => {
+  const wasDrag = drag && drag.moved;
+  drag = null;
+  if (wasDrag || !measuring) return;
+  const [px, py] = local(event);
+  if (measure.length >= 2) measure.length = 0;
+  measure.push(toScene(px, py));
+  showDistance();
   draw();
-})();
+});
+canvas.addEventListener("wheel", (event) => {
+  event.preventDefault();
+  const [px, py] = local(event);
+  const before = toScene(px, py);
+  view.scale = Math.max(0.01, Math.min(500, view.scale * Math.exp(-event.deltaY * 0.0015)));
+  const after = toScene(px, py);  // keep the point under the cursor where it was
+  view.cx += before[0] - after[0];
+  view.cy += before[1] - after[1];
+  draw();
+}, { passive: false });
+
+$("#map2d-measure").addEventListener("click", () => {
+  measuring = !measuring;
+  measure.length = 0;
+  $("#map2d-measure").setAttribute("aria-pressed", String(measuring));
+  canvas.classList.toggle("measuring", measuring);
+  showDistance();
+  draw();
+});
+$("#map2d-fit").addEventListener("click", () => { fit(); draw(); });
+$("#map2d-layer").addEventListener("change", loadOverlay);
+$("#map2d-toggle").addEventListener("click", () => {
+  const pane = $("#map2d-pane");
+  const collapsed = pane.classList.toggle("collapsed");
+  $("#map2d-toggle").setAttribute("aria-expanded", String(!collapsed));
+  $("#map2d-toggle").textContent = collapsed ? "+" : "–";
+  $("#map2d-toggle").title = collapsed ? "Show the 2D map" : "Hide the 2D map";
+  if (!collapsed) { poll(); draw(); }
+});
+window.addEventListener("resize", draw);
+on(EVENTS.selected, () => { loadOverlay(); draw(); });
+on(EVENTS.status, (msg) => {
+  const held = mapsHeld().join();
+  vehicles = msg.vehicles.filter((v) => Number.isInteger(v.sysid));
+  if (mapsHeld().join() !== held) loadOverlay();  // a map appeared (or went): no need to wait for the poll
+  const replay = msg.replay && msg.replay.scene ? JSON.stringify(msg.replay.scene) : "";
+  const now = `${msg.mode}|${replay}`;
+  if (now !== mode) {  // live and each replay may show another scene
+    mode = now;
+    view.fitted = false;
+    loadScene();
+    poll();
+  }
+  if (!view.fitted) fit();
+  draw();
+});
+setInterval(poll, POLL_MS);
+draw();

@@ -1,328 +1,310 @@
 // The operator's view, panel side: which vehicle is selected (each vehicle in its own colour), the selected
 // vehicle's instruments (attitude, heading, altitude, speed and climb, battery, its sonars as a proximity
-// view) and a banner for every message at WARNING or worse. It draws from the frames app.js receives
-// ("station-status" events) and says which vehicle is selected with window.selectedVehicle and a
-// "vehicle-selected" event ({detail: {sysid}}), which the 2D map, the plots and the 3D view follow.
+// view) and a banner for every message at WARNING or worse. It draws from the status frames ("station-status")
+// and says which vehicle is selected with window.selectedVehicle and a "vehicle-selected" event ({sysid}),
+// which the 2D map, the plots, the 3D view and "Go here" follow (see common.js).
 // Strings from vehicles go in with textContent only.
-(() => {
-  "use strict";
 
-  const WARNING = 4;          // MAVLink severity: WARNING, and 0..3 are worse
-  const SEVERE = 3;           // ERROR or worse
-  const WARNINGS_SHOWN = 3;
-  const WARNING_RECENT_S = 120;  // older warnings are not brought up when the page opens
-  const $ = (sel) => document.querySelector(sel);
-  const isNum = (v) => typeof v === "number" && Number.isFinite(v);
-  const fmt = (v, digits = 1) => (isNum(v) ? v.toFixed(digits) : "–");
-  const colourRe = /^#[0-9a-f]{6}$/i;
+import { $, EVENTS, batteryText, el, emit, fmt, isNum, on } from "./common.js";
 
-  const MISSING_MS = 15000;
-  let vehicles = [];
-  let missingSince = null;
-  const dismissed = new Set();
-  window.selectedVehicle = null;
+const WARNING = 4;          // MAVLink severity: WARNING, and 0..3 are worse
+const SEVERE = 3;           // ERROR or worse
+const WARNINGS_SHOWN = 3;
+const WARNING_RECENT_S = 120;  // older warnings are not brought up when the page opens
+const colourRe = /^#[0-9a-f]{6}$/i;
 
-  function el(tag, className, text) {
-    const e = document.createElement(tag);
-    if (className) e.className = className;
-    if (text !== undefined) e.textContent = text;
-    return e;
-  }
+const MISSING_MS = 15000;
+let vehicles = [];
+let missingSince = null;
+const dismissed = new Set();
+window.selectedVehicle = null;
 
-  function colourOf(v) {
-    return v && typeof v.colour === "string" && colourRe.test(v.colour) ? v.colour : "#8d99a6";
-  }
+function colourOf(v) {
+  return v && typeof v.colour === "string" && colourRe.test(v.colour) ? v.colour : "#8d99a6";
+}
 
-  function nameOf(v) {
-    return `${v.sysid} ${v.type ? String(v.type) : "vehicle"}`;
-  }
+function nameOf(v) {
+  return `${v.sysid} ${v.type ? String(v.type) : "vehicle"}`;
+}
 
-  // ---- selection ------------------------------------------------------------------------------
-  function select(sysid) {
-    if (window.selectedVehicle === sysid) return;
-    window.selectedVehicle = sysid;
-    const target = $("#target-vehicle");  // "Go here" follows the selection
-    if (target && sysid != null && Array.from(target.options).some((o) => o.value === String(sysid))) {
-      target.value = String(sysid);
-    }
-    renderFleet();
-    renderInstruments();
-    window.dispatchEvent(new CustomEvent("vehicle-selected", { detail: { sysid } }));
-  }
+// ---- selection ------------------------------------------------------------------------------
+function select(sysid) {
+  if (window.selectedVehicle === sysid) return;
+  window.selectedVehicle = sysid;
+  renderFleet();
+  renderInstruments();
+  emit(EVENTS.selected, { sysid });
+}
 
-  function renderFleet() {
-    const list = $("#fleet-list");
-    const key = JSON.stringify(vehicles.map((v) => [v.sysid, v.type, v.mode, v.colour,
-      v.agent && v.agent.state, v.agent && v.agent.reason, v.sysid === window.selectedVehicle]));
-    if (list.dataset.key !== key) {
-      list.dataset.key = key;
-      list.replaceChildren(...vehicles.map((v) => {
-        const li = el("li");
-        const button = el("button", "fleet-item");
-        button.type = "button";
-        button.dataset.sysid = String(v.sysid);
-        button.setAttribute("aria-pressed", String(v.sysid === window.selectedVehicle));
-        const dot = el("span", "swatch-dot");
-        dot.style.background = colourOf(v);
-        const reason = v.agent && v.agent.reason ? `: ${String(v.agent.reason).slice(0, 80)}` : "";
-        const agent = v.agent && v.agent.state ? ` · mission ${String(v.agent.state)}${reason}` : "";
-        button.append(dot, el("span", "fleet-name", nameOf(v)), el("span", "fleet-mode", `${v.mode ?? "–"}${agent}`));
-        button.addEventListener("click", () => select(v.sysid));
-        li.append(button);
-        return li;
-      }));
-      if (!vehicles.length) list.append(el("li", "empty", "No vehicles yet"));
-    }
-    // The vehicle cards (app.js) in the same colours, the selected one outlined.
-    for (const v of vehicles) {
-      const card = document.querySelector(`.vehicle-card[data-sysid="${v.sysid}"]`);
-      if (!card) continue;
-      card.style.borderLeftColor = colourOf(v);
-      card.classList.toggle("selected", v.sysid === window.selectedVehicle);
-    }
-  }
-
-  // ---- warnings -------------------------------------------------------------------------------
-  function renderWarnings(now) {
-    const found = [];
-    for (const v of vehicles) {
-      for (const m of Array.isArray(v.messages) ? v.messages : []) {
-        if (!m || !isNum(m.severity) || m.severity > WARNING || !isNum(m.time)) continue;
-        if (isNum(now) && now - m.time > WARNING_RECENT_S) continue;
-        const key = `${v.sysid}|${m.time}|${m.text}`;
-        if (!dismissed.has(key)) found.push({ key, v, m });
-      }
-    }
-    found.sort((a, b) => b.m.time - a.m.time);
-    const shown = found.slice(0, WARNINGS_SHOWN);
-    const banner = $("#warning-banner");
-    const key = JSON.stringify(shown.map((w) => w.key));
-    if (banner.dataset.key === key) return;
-    banner.dataset.key = key;
-    banner.replaceChildren(...shown.map(({ key: id, v, m }) => {
-      const li = el("li", m.severity <= SEVERE ? "severe" : "warning");
-      const text = el("span", "warning-text");
-      const who = el("strong", "warning-who", `${nameOf(v)}:`);
-      who.style.color = colourOf(v);
-      text.append(who, document.createTextNode(String(m.text ?? "")));
-      const close = el("button", "btn btn-small", "Dismiss");
-      close.type = "button";
-      close.addEventListener("click", () => {
-        dismissed.add(id);
-        banner.dataset.key = "";
-        renderWarnings(now);
-      });
-      li.append(text, close);
+function renderFleet() {
+  const list = $("#fleet-list");
+  const key = JSON.stringify(vehicles.map((v) => [v.sysid, v.type, v.mode, v.colour,
+    v.agent && v.agent.state, v.agent && v.agent.reason, v.sysid === window.selectedVehicle]));
+  if (list.dataset.key !== key) {
+    list.dataset.key = key;
+    list.replaceChildren(...vehicles.map((v) => {
+      const li = el("li");
+      const button = el("button", "fleet-item");
+      button.type = "button";
+      button.dataset.sysid = String(v.sysid);
+      button.setAttribute("aria-pressed", String(v.sysid === window.selectedVehicle));
+      const dot = el("span", "swatch-dot");
+      dot.style.background = colourOf(v);
+      const reason = v.agent && v.agent.reason ? `: ${String(v.agent.reason).slice(0, 80)}` : "";
+      const agent = v.agent && v.agent.state ? ` · mission ${String(v.agent.state)}${reason}` : "";
+      button.append(dot, el("span", "fleet-name", nameOf(v)), el("span", "fleet-mode", `${v.mode ?? "–"}${agent}`));
+      button.addEventListener("click", () => select(v.sysid));
+      li.append(button);
       return li;
     }));
-    banner.hidden = shown.length === 0;
+    if (!vehicles.length) list.append(el("li", "empty", "No vehicles yet"));
   }
-
-  // ---- instruments ----------------------------------------------------------------------------
-  function selected() {
-    return vehicles.find((v) => v.sysid === window.selectedVehicle) || null;
+  // The vehicle cards (vehicles.js) in the same colours, the selected one outlined.
+  for (const v of vehicles) {
+    const card = document.querySelector(`.vehicle-card[data-sysid="${v.sysid}"]`);
+    if (!card) continue;
+    card.style.borderLeftColor = colourOf(v);
+    card.classList.toggle("selected", v.sysid === window.selectedVehicle);
   }
+}
 
-  function renderInstruments() {
-    const v = selected();
-    $("#instruments").hidden = !v;
-    if (!v) return;
-    const title = $("#instruments-vehicle");
-    title.textContent = nameOf(v);
-    title.style.color = colourOf(v);
-    const alt = v.position && v.position.alt;
-    $("#readout-altitude").textContent = isNum(alt) ? `${fmt(alt)} m` : "–";
-    $("#readout-speed").textContent = isNum(v.speed) ? `${fmt(v.speed)} m/s` : "–";
-    $("#readout-climb").textContent = isNum(v.climb) ? `${v.climb >= 0 ? "+" : ""}${fmt(v.climb)} m/s` : "–";
-    $("#readout-heading").textContent = isNum(v.heading) ? `${Math.round(v.heading) % 360}°` : "–";
-    const b = v.battery;
-    $("#readout-battery").textContent = !b ? "–" :
-      `${fmt(b.voltage)} V${isNum(b.remaining) && b.remaining >= 0 ? ` · ${b.remaining}%` : ""}` +
-      `${isNum(b.current) ? ` · ${fmt(b.current)} A` : ""}`;
-    const sonars = Array.isArray(v.sonar) ? v.sonar : [];
-    $("#readout-sonar").textContent = sonars.length ? sonars.map((s) =>
-      `${Math.round(s.bearing ?? 0)}°: ${isNum(s.distance) && isNum(s.max_range) && s.distance < s.max_range
-        ? `${fmt(s.distance)} m` : "clear"}`).join(" · ") : "none heard";
-    const att = v.attitude || {};
-    $("#readout-attitude").textContent = isNum(att.roll) && isNum(att.pitch)
-      ? `roll ${fmt(att.roll)}°, pitch ${fmt(att.pitch)}°` : "–";
-    drawAttitude($("#attitude"), isNum(att.roll) ? att.roll : 0, isNum(att.pitch) ? att.pitch : 0);
-    drawCompass($("#compass"), isNum(v.heading) ? v.heading : null, colourOf(v));
-    drawProximity($("#proximity"), sonars, colourOf(v));
-  }
-
-  /** An artificial horizon: sky and ground turned by the roll and shifted by the pitch, the aircraft fixed. */
-  function drawAttitude(canvas, roll, pitch) {
-    const ctx = canvas.getContext("2d");
-    const w = canvas.width, h = canvas.height, r = w / 2;
-    const perDegree = r / 35;
-    ctx.save();
-    ctx.clearRect(0, 0, w, h);
-    ctx.beginPath();
-    ctx.arc(r, r, r - 1, 0, Math.PI * 2);
-    ctx.clip();
-    ctx.translate(r, r);
-    ctx.rotate(-roll * Math.PI / 180);
-    const shift = Math.max(-90, Math.min(90, pitch)) * perDegree;
-    ctx.fillStyle = "#3a7bd5";
-    ctx.fillRect(-2 * w, -4 * h + shift, 4 * w, 4 * h);
-    ctx.fillStyle = "#8a5a2b";
-    ctx.fillRect(-2 * w, shift, 4 * w, 4 * h);
-    ctx.strokeStyle = "#ffffff";
-    ctx.lineWidth = 2;
-    ctx.beginPath();
-    ctx.moveTo(-w, shift);
-    ctx.lineTo(w, shift);
-    ctx.stroke();
-    ctx.lineWidth = 1;
-    ctx.fillStyle = "#ffffff";
-    ctx.font = "9px system-ui, sans-serif";
-    for (let p = -30; p <= 30; p += 10) {  // the pitch ladder
-      if (!p) continue;
-      const y = shift - p * perDegree;
-      const half = Math.abs(p) % 20 ? 10 : 18;
-      ctx.beginPath();
-      ctx.moveTo(-half, y);
-      ctx.lineTo(half, y);
-      ctx.stroke();
-      ctx.fillText(String(Math.abs(p)), half + 3, y + 3);
+// ---- warnings -------------------------------------------------------------------------------
+function renderWarnings(now) {
+  const found = [];
+  for (const v of vehicles) {
+    for (const m of Array.isArray(v.messages) ? v.messages : []) {
+      if (!m || !isNum(m.severity) || m.severity > WARNING || !isNum(m.time)) continue;
+      if (isNum(now) && now - m.time > WARNING_RECENT_S) continue;
+      const key = `${v.sysid}|${m.time}|${m.text}`;
+      if (!dismissed.has(key)) found.push({ key, v, m });
     }
-    ctx.restore();
-    ctx.strokeStyle = "#ffd23f";  // the aircraft, fixed
-    ctx.lineWidth = 3;
-    ctx.beginPath();
-    ctx.moveTo(r - 36, r);
-    ctx.lineTo(r - 12, r);
-    ctx.lineTo(r - 6, r + 6);
-    ctx.moveTo(r + 36, r);
-    ctx.lineTo(r + 12, r);
-    ctx.lineTo(r + 6, r + 6);
-    ctx.stroke();
-    ctx.fillStyle = "#ffd23f";
-    ctx.fillRect(r - 2, r - 2, 4, 4);
   }
+  found.sort((a, b) => b.m.time - a.m.time);
+  const shown = found.slice(0, WARNINGS_SHOWN);
+  const banner = $("#warning-banner");
+  const key = JSON.stringify(shown.map((w) => w.key));
+  if (banner.dataset.key === key) return;
+  banner.dataset.key = key;
+  banner.replaceChildren(...shown.map(({ key: id, v, m }) => {
+    const li = el("li", m.severity <= SEVERE ? "severe" : "warning");
+    const text = el("span", "warning-text");
+    const who = el("strong", "warning-who", `${nameOf(v)}:`);
+    who.style.color = colourOf(v);
+    text.append(who, document.createTextNode(String(m.text ?? "")));
+    const close = el("button", "btn btn-small", "Dismiss");
+    close.type = "button";
+    close.addEventListener("click", () => {
+      dismissed.add(id);
+      banner.dataset.key = "";
+      renderWarnings(now);
+    });
+    li.append(text, close);
+    return li;
+  }));
+  banner.hidden = shown.length === 0;
+}
 
-  /** A compass rose turning under a fixed lubber line: the heading read at the top. */
-  function drawCompass(canvas, heading, colour) {
-    const ctx = canvas.getContext("2d");
-    const w = canvas.width, r = w / 2;
-    ctx.clearRect(0, 0, w, w);
-    ctx.fillStyle = "#0b0e11";
+// ---- instruments ----------------------------------------------------------------------------
+function selected() {
+  return vehicles.find((v) => v.sysid === window.selectedVehicle) || null;
+}
+
+function renderInstruments() {
+  const v = selected();
+  $("#instruments").hidden = !v;
+  if (!v) return;
+  const title = $("#instruments-vehicle");
+  title.textContent = nameOf(v);
+  title.style.color = colourOf(v);
+  const alt = v.position && v.position.alt;
+  $("#readout-altitude").textContent = isNum(alt) ? `${fmt(alt)} m` : "–";
+  $("#readout-speed").textContent = isNum(v.speed) ? `${fmt(v.speed)} m/s` : "–";
+  $("#readout-climb").textContent = isNum(v.climb) ? `${v.climb >= 0 ? "+" : ""}${fmt(v.climb)} m/s` : "–";
+  $("#readout-heading").textContent = isNum(v.heading) ? `${Math.round(v.heading) % 360}°` : "–";
+  const b = v.battery;
+  $("#readout-battery").textContent = batteryText(b) + (b && isNum(b.current) ? ` · ${fmt(b.current)} A` : "");
+  const sonars = Array.isArray(v.sonar) ? v.sonar : [];
+  $("#readout-sonar").textContent = sonars.length ? sonars.map((s) =>
+    `${Math.round(s.bearing ?? 0)}°: ${isNum(s.distance) && isNum(s.max_range) && s.distance < s.max_range
+      ? `${fmt(s.distance)} m` : "clear"}`).join(" · ") : "none heard";
+  const att = v.attitude || {};
+  $("#readout-attitude").textContent = isNum(att.roll) && isNum(att.pitch)
+    ? `roll ${fmt(att.roll)}°, pitch ${fmt(att.pitch)}°` : "–";
+  drawAttitude($("#attitude"), isNum(att.roll) ? att.roll : 0, isNum(att.pitch) ? att.pitch : 0);
+  drawCompass($("#compass"), isNum(v.heading) ? v.heading : null, colourOf(v));
+  drawProximity($("#proximity"), sonars, colourOf(v));
+}
+
+/** An artificial horizon: sky and ground turned by the roll and shifted by the pitch, the aircraft fixed. */
+function drawAttitude(canvas, roll, pitch) {
+  const ctx = canvas.getContext("2d");
+  const w = canvas.width, h = canvas.height, r = w / 2;
+  const perDegree = r / 35;
+  ctx.save();
+  ctx.clearRect(0, 0, w, h);
+  ctx.beginPath();
+  ctx.arc(r, r, r - 1, 0, Math.PI * 2);
+  ctx.clip();
+  ctx.translate(r, r);
+  ctx.rotate(-roll * Math.PI / 180);
+  const shift = Math.max(-90, Math.min(90, pitch)) * perDegree;
+  ctx.fillStyle = "#3a7bd5";
+  ctx.fillRect(-2 * w, -4 * h + shift, 4 * w, 4 * h);
+  ctx.fillStyle = "#8a5a2b";
+  ctx.fillRect(-2 * w, shift, 4 * w, 4 * h);
+  ctx.strokeStyle = "#ffffff";
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.moveTo(-w, shift);
+  ctx.lineTo(w, shift);
+  ctx.stroke();
+  ctx.lineWidth = 1;
+  ctx.fillStyle = "#ffffff";
+  ctx.font = "9px system-ui, sans-serif";
+  for (let p = -30; p <= 30; p += 10) {  // the pitch ladder
+    if (!p) continue;
+    const y = shift - p * perDegree;
+    const half = Math.abs(p) % 20 ? 10 : 18;
     ctx.beginPath();
-    ctx.arc(r, r, r - 1, 0, Math.PI * 2);
-    ctx.fill();
-    ctx.save();
-    ctx.translate(r, r);
-    ctx.rotate(-(heading ?? 0) * Math.PI / 180);
-    ctx.strokeStyle = "#8d99a6";
-    ctx.fillStyle = "#dde3ea";
-    ctx.textAlign = "center";
-    ctx.textBaseline = "middle";
-    ctx.font = "bold 12px system-ui, sans-serif";
-    for (let d = 0; d < 360; d += 10) {
-      const a = d * Math.PI / 180;
-      const long = d % 30 === 0;
-      ctx.beginPath();
-      ctx.moveTo(Math.sin(a) * (r - 3), -Math.cos(a) * (r - 3));
-      ctx.lineTo(Math.sin(a) * (r - (long ? 12 : 7)), -Math.cos(a) * (r - (long ? 12 : 7)));
-      ctx.stroke();
-      if (d % 90 === 0) {
-        ctx.fillStyle = d === 0 ? "#f06a6a" : "#dde3ea";
-        ctx.fillText("NESW"[d / 90], Math.sin(a) * (r - 22), -Math.cos(a) * (r - 22));
-      }
+    ctx.moveTo(-half, y);
+    ctx.lineTo(half, y);
+    ctx.stroke();
+    ctx.fillText(String(Math.abs(p)), half + 3, y + 3);
+  }
+  ctx.restore();
+  ctx.strokeStyle = "#ffd23f";  // the aircraft, fixed
+  ctx.lineWidth = 3;
+  ctx.beginPath();
+  ctx.moveTo(r - 36, r);
+  ctx.lineTo(r - 12, r);
+  ctx.lineTo(r - 6, r + 6);
+  ctx.moveTo(r + 36, r);
+  ctx.lineTo(r + 12, r);
+  ctx.lineTo(r + 6, r + 6);
+  ctx.stroke();
+  ctx.fillStyle = "#ffd23f";
+  ctx.fillRect(r - 2, r - 2, 4, 4);
+}
+
+/** A compass rose turning under a fixed lubber line: the heading read at the top. */
+function drawCompass(canvas, heading, colour) {
+  const ctx = canvas.getContext("2d");
+  const w = canvas.width, r = w / 2;
+  ctx.clearRect(0, 0, w, w);
+  ctx.fillStyle = "#0b0e11";
+  ctx.beginPath();
+  ctx.arc(r, r, r - 1, 0, Math.PI * 2);
+  ctx.fill();
+  ctx.save();
+  ctx.translate(r, r);
+  ctx.rotate(-(heading ?? 0) * Math.PI / 180);
+  ctx.strokeStyle = "#8d99a6";
+  ctx.fillStyle = "#dde3ea";
+  ctx.textAlign = "center";
+  ctx.textBaseline = "middle";
+  ctx.font = "bold 12px system-ui, sans-serif";
+  for (let d = 0; d < 360; d += 10) {
+    const a = d * Math.PI / 180;
+    const long = d % 30 === 0;
+    ctx.beginPath();
+    ctx.moveTo(Math.sin(a) * (r - 3), -Math.cos(a) * (r - 3));
+    ctx.lineTo(Math.sin(a) * (r - (long ? 12 : 7)), -Math.cos(a) * (r - (long ? 12 : 7)));
+    ctx.stroke();
+    if (d % 90 === 0) {
+      ctx.fillStyle = d === 0 ? "#f06a6a" : "#dde3ea";
+      ctx.fillText("NESW"[d / 90], Math.sin(a) * (r - 22), -Math.cos(a) * (r - 22));
     }
-    ctx.restore();
-    ctx.fillStyle = colour;  // the vehicle, nose up
+  }
+  ctx.restore();
+  ctx.fillStyle = colour;  // the vehicle, nose up
+  ctx.beginPath();
+  ctx.moveTo(r, r - 18);
+  ctx.lineTo(r + 10, r + 12);
+  ctx.lineTo(r, r + 6);
+  ctx.lineTo(r - 10, r + 12);
+  ctx.closePath();
+  ctx.fill();
+  ctx.fillStyle = "#ffd23f";
+  ctx.beginPath();
+  ctx.moveTo(r, 12);
+  ctx.lineTo(r - 5, 2);
+  ctx.lineTo(r + 5, 2);
+  ctx.fill();
+  ctx.fillStyle = "#ffffff";
+  ctx.font = "bold 13px system-ui, sans-serif";
+  ctx.textAlign = "center";
+  ctx.fillText(heading == null ? "–" : `${String(Math.round(heading) % 360).padStart(3, "0")}°`, r, r + 36);
+  ctx.textAlign = "start";
+}
+
+/** The colour of a sonar sector by how near its echo is (as QGroundControl's proximity radar). */
+function proximityColour(s) {
+  if (!isNum(s.distance) || !isNum(s.max_range) || s.distance >= s.max_range) return "rgba(98, 196, 124, 0.35)";
+  if (s.distance < 1.5) return "#f0403a";
+  if (s.distance < 3) return "#f08a24";
+  if (s.distance < 6) return "#e8d23d";
+  return "#62c47c";
+}
+
+/** The sonars seen from above, nose up: each a sector at its bearing and beam width, as long as its echo
+ * (clear to its range when there is none), coloured by distance. */
+function drawProximity(canvas, sonars, colour) {
+  const ctx = canvas.getContext("2d");
+  const w = canvas.width, r = w / 2;
+  const range = Math.max(1, ...sonars.map((s) => (isNum(s.max_range) ? s.max_range : 0)));
+  const scale = (r - 6) / range;
+  ctx.clearRect(0, 0, w, w);
+  ctx.fillStyle = "#0b0e11";
+  ctx.beginPath();
+  ctx.arc(r, r, r - 1, 0, Math.PI * 2);
+  ctx.fill();
+  ctx.strokeStyle = "#2b333d";
+  for (const f of [0.25, 0.5, 0.75, 1]) {
     ctx.beginPath();
-    ctx.moveTo(r, r - 18);
-    ctx.lineTo(r + 10, r + 12);
-    ctx.lineTo(r, r + 6);
-    ctx.lineTo(r - 10, r + 12);
+    ctx.arc(r, r, (r - 6) * f, 0, Math.PI * 2);
+    ctx.stroke();
+  }
+  for (const s of sonars) {
+    if (!s || !isNum(s.bearing)) continue;
+    const half = Math.max(6, isNum(s.beam) ? s.beam / 2 : 10) * Math.PI / 180;  // narrow beams still show
+    const a = s.bearing * Math.PI / 180 - Math.PI / 2;  // canvas angle: 0 east, clockwise; bearing 0 is up
+    const near = isNum(s.distance) && isNum(s.max_range) && s.distance < s.max_range;
+    const length = Math.max(4, (near ? s.distance : (isNum(s.max_range) ? s.max_range : range)) * scale);
+    ctx.fillStyle = proximityColour(s);
+    ctx.beginPath();
+    ctx.moveTo(r, r);
+    ctx.arc(r, r, length, a - half, a + half);
     ctx.closePath();
     ctx.fill();
-    ctx.fillStyle = "#ffd23f";
-    ctx.beginPath();
-    ctx.moveTo(r, 12);
-    ctx.lineTo(r - 5, 2);
-    ctx.lineTo(r + 5, 2);
-    ctx.fill();
-    ctx.fillStyle = "#ffffff";
-    ctx.font = "bold 13px system-ui, sans-serif";
-    ctx.textAlign = "center";
-    ctx.fillText(heading == null ? "–" : `${String(Math.round(heading) % 360).padStart(3, "0")}°`, r, r + 36);
-    ctx.textAlign = "start";
   }
+  ctx.fillStyle = colour;
+  ctx.beginPath();
+  ctx.moveTo(r, r - 8);
+  ctx.lineTo(r + 5, r + 6);
+  ctx.lineTo(r - 5, r + 6);
+  ctx.fill();
+  ctx.fillStyle = "#8d99a6";
+  ctx.font = "10px system-ui, sans-serif";
+  ctx.textAlign = "center";
+  ctx.fillText(`${Math.round(range)} m`, r, w - 6);
+  ctx.textAlign = "start";
+}
 
-  /** The colour of a sonar sector by how near its echo is (as QGroundControl's proximity radar). */
-  function proximityColour(s) {
-    if (!isNum(s.distance) || !isNum(s.max_range) || s.distance >= s.max_range) return "rgba(98, 196, 124, 0.35)";
-    if (s.distance < 1.5) return "#f0403a";
-    if (s.distance < 3) return "#f08a24";
-    if (s.distance < 6) return "#e8d23d";
-    return "#62c47c";
+// ---- the stream ----------------------------------------------------------------------------
+on(EVENTS.status, (msg) => {
+  vehicles = (Array.isArray(msg.vehicles) ? msg.vehicles : []).filter((v) => v && Number.isInteger(v.sysid));
+  const ids = vehicles.map((v) => v.sysid);
+  // The first vehicle heard is selected until the operator picks one; a selected vehicle that goes missing
+  // (a replay seeking before it was heard, a link down) stays selected a while, then the first is.
+  if (ids.includes(window.selectedVehicle)) {
+    missingSince = null;
+  } else if (window.selectedVehicle == null) {
+    if (ids.length) select(ids[0]);
+  } else if (ids.length) {
+    missingSince = missingSince ?? performance.now();
+    if (performance.now() - missingSince > MISSING_MS) select(ids[0]);
   }
-
-  /** The sonars seen from above, nose up: each a sector at its bearing and beam width, as long as its echo
-   * (clear to its range when there is none), coloured by distance. */
-  function drawProximity(canvas, sonars, colour) {
-    const ctx = canvas.getContext("2d");
-    const w = canvas.width, r = w / 2;
-    const range = Math.max(1, ...sonars.map((s) => (isNum(s.max_range) ? s.max_range : 0)));
-    const scale = (r - 6) / range;
-    ctx.clearRect(0, 0, w, w);
-    ctx.fillStyle = "#0b0e11";
-    ctx.beginPath();
-    ctx.arc(r, r, r - 1, 0, Math.PI * 2);
-    ctx.fill();
-    ctx.strokeStyle = "#2b333d";
-    for (const f of [0.25, 0.5, 0.75, 1]) {
-      ctx.beginPath();
-      ctx.arc(r, r, (r - 6) * f, 0, Math.PI * 2);
-      ctx.stroke();
-    }
-    for (const s of sonars) {
-      if (!s || !isNum(s.bearing)) continue;
-      const half = Math.max(6, isNum(s.beam) ? s.beam / 2 : 10) * Math.PI / 180;  // narrow beams still show
-      const a = s.bearing * Math.PI / 180 - Math.PI / 2;  // canvas angle: 0 east, clockwise; bearing 0 is up
-      const near = isNum(s.distance) && isNum(s.max_range) && s.distance < s.max_range;
-      const length = Math.max(4, (near ? s.distance : (isNum(s.max_range) ? s.max_range : range)) * scale);
-      ctx.fillStyle = proximityColour(s);
-      ctx.beginPath();
-      ctx.moveTo(r, r);
-      ctx.arc(r, r, length, a - half, a + half);
-      ctx.closePath();
-      ctx.fill();
-    }
-    ctx.fillStyle = colour;
-    ctx.beginPath();
-    ctx.moveTo(r, r - 8);
-    ctx.lineTo(r + 5, r + 6);
-    ctx.lineTo(r - 5, r + 6);
-    ctx.fill();
-    ctx.fillStyle = "#8d99a6";
-    ctx.font = "10px system-ui, sans-serif";
-    ctx.textAlign = "center";
-    ctx.fillText(`${Math.round(range)} m`, r, w - 6);
-    ctx.textAlign = "start";
-  }
-
-  // ---- the stream ----------------------------------------------------------------------------
-  window.addEventListener("station-status", (event) => {
-    const msg = event.detail || {};
-    vehicles = (Array.isArray(msg.vehicles) ? msg.vehicles : []).filter((v) => v && Number.isInteger(v.sysid));
-    const ids = vehicles.map((v) => v.sysid);
-    // The first vehicle heard is selected until the operator picks one; a selected vehicle that goes missing
-    // (a replay seeking before it was heard, a link down) stays selected a while, then the first is.
-    if (ids.includes(window.selectedVehicle)) {
-      missingSince = null;
-    } else if (window.selectedVehicle == null) {
-      if (ids.length) select(ids[0]);
-    } else if (ids.length) {
-      missingSince = missingSince ?? performance.now();
-      if (performance.now() - missingSince > MISSING_MS) select(ids[0]);
-    }
-    renderFleet();
-    renderInstruments();
-    renderWarnings(msg.time);
-  });
-})();
+  renderFleet();
+  renderInstruments();
+  renderWarnings(msg.time);
+});

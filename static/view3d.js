@@ -3,6 +3,8 @@
 // "station-socket" event); the station moves this viewer's camera alone, and answers with what it now
 // does ("view") or why not ("view-error"). No inline script, no eval: the page's policy forbids both.
 
+import { $, EVENTS, on } from "./common.js";
+
 const MODES = ["orbit", "follow", "onboard", "top"];
 const KEYS = { 1: "orbit", 2: "follow", 3: "onboard", 4: "top" };
 const ACTION_KEYS = { f: "fit", v: "vehicle" };
@@ -16,8 +18,6 @@ const view = {
   vehicles: [],
   zoom: null,            // {x, y, steps} not yet sent
 };
-
-const $ = (sel, root = document) => root.querySelector(sel);
 
 function send(request) {
   if (view.send) view.send(request);
@@ -149,24 +149,22 @@ function main() {
   $("#map-opacity").addEventListener("change", () => send({ type: "layers", opacity: opacity() }));
   window.addEventListener("keydown", onKey);
 
-  document.addEventListener("station-socket", (event) => {
-    view.send = event.detail && typeof event.detail.send === "function" ? event.detail.send : null;
+  on(EVENTS.socket, ({ send: socketSend }) => {
+    view.send = typeof socketSend === "function" ? socketSend : null;
     sendAll();  // a new socket (the station may have restarted): tell it everything again
   });
-  document.addEventListener("station-vehicles", (event) => {
-    view.vehicles = Array.isArray(event.detail) ? event.detail.filter((v) => v && Number.isInteger(v.sysid)) : [];
+  on(EVENTS.status, (msg) => {
+    view.vehicles = msg.vehicles.filter((v) => Number.isInteger(v.sysid));
     select();
   });
-  // the panel's selection (operator.js fires this on window with {sysid}; window hears it from document too)
-  window.addEventListener("vehicle-selected", (event) => {
-    const detail = event.detail;
-    const sysid = Number(detail && typeof detail === "object" ? detail.sysid : detail);
+  // the panel's selection (operator.js)
+  on(EVENTS.selected, (detail) => {
+    const sysid = Number(detail.sysid);
     if (!Number.isInteger(sysid)) return;
     view.chosen = sysid;
     select();
   });
-  document.addEventListener("station-view", (event) => {
-    const msg = event.detail || {};
+  on(EVENTS.view, (msg) => {
     if (msg.type === "view-error") {
       showError(`3D view: ${String(msg.detail ?? "refused")}`);
     } else {

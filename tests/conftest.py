@@ -34,6 +34,24 @@ def browser():
         chromium.close()
 
 
+@pytest.fixture(scope="module")
+def scene():
+    """The default scene, one per test module (a module may define its own)."""
+    from harness import load_default_scene
+
+    return load_default_scene()
+
+
+@pytest.fixture(scope="module")
+def station(scene, tmp_path_factory, request):
+    """One ground station for a module of browser tests: ``scene``, recordings in a temporary folder, and the
+    module's ``TOKEN`` as the operator's (a module may define its own)."""
+    from harness import RunningStation
+
+    with RunningStation(scene, tmp_path_factory.mktemp("recordings"), request.module.TOKEN) as running:
+        yield running
+
+
 @pytest.fixture
 def box():
     """The VRML text of a Box: ``box(x, y, z, sx, sy, sz, rotation="")``."""

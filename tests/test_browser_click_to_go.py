@@ -1,6 +1,6 @@
 # ruff: noqa: F811 - the fixtures imported from test_browser are used by name
 """Browser tests of click-to-go and of the 3D view's proxy when a page closes (they share
-tests/test_browser.py's fixtures: one ground station, one Chromium)."""
+tests/test_browser.py's fixtures and conftest's: one ground station, one Chromium)."""
 
 from __future__ import annotations
 
@@ -21,8 +21,6 @@ from test_browser import (  # noqa: E402, F401 - fixtures are used by name
     copters,
     flyer,
     press,
-    scene,
-    station,
     wait_sim,
     wait_wall,
 )

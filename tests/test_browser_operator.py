@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from harness import CHROMIUM, RunningStation, load_default_scene, start_sim, wait_wall
+from harness import CHROMIUM, RunningStation, start_sim, wait_wall
 from PIL import Image
 
 from vehicle.agent.settings import Settings
@@ -43,17 +43,6 @@ UI_TIMEOUT = 20_000
 SCREENSHOTS = Path(os.environ.get("SCREENSHOTS_DIR") or tempfile.mkdtemp())  # static/ for the README's
 
 expect.set_options(timeout=UI_TIMEOUT)
-
-
-@pytest.fixture(scope="module")
-def scene():
-    return load_default_scene()
-
-
-@pytest.fixture(scope="module")
-def station(scene, tmp_path_factory):
-    with RunningStation(scene, tmp_path_factory.mktemp("recordings"), TOKEN) as running:
-        yield running
 
 
 @pytest.fixture(scope="module")

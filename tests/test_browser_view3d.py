@@ -94,8 +94,7 @@ class View:
         self.page.on("websocket", self._socket)
 
     def _error(self, error) -> None:
-        if "Evaluating a string as JavaScript violates" not in str(error):  # viser's splat sorter: expected
-            self.errors.append(str(error))
+        self.errors.append(str(error))
 
     def _socket(self, socket) -> None:
         if "/viz" in socket.url:

@@ -323,7 +323,7 @@ def test_an_export_carries_the_recordings_scene_and_a_telemetry_label(exported):
     lines = panels[-1].splitlines()
     assert lines[0] == "1 copter  GUIDED  disarmed"  # the simulated copter waits on the ground
     assert re.fullmatch(r"alt -?0\.\d m  0\.\d m/s  heading \d+°", lines[1]), lines
-    assert re.fullmatch(r"battery \d+\.\d V \d+%", lines[2]), lines
+    assert re.fullmatch(r"battery \d+\.\d V, \d+ %", lines[2]), lines
     assert lines[3].startswith("agent WAITING browse"), lines
     assert re.fullmatch(r"\d\d:\d\d:\d\d UTC, \+\d+\.\d s", lines[-1]), lines
     clocks = [float(re.search(r"\+([\d.]+) s", text).group(1)) for text in panels]

@@ -1,0 +1,255 @@
+// A card per vehicle: its mode, the onboard agent's state, position, speed, heading, battery, link, mission,
+// map, clock and last messages, with its commands (Abort, Return home, GUIDED, Resume, Arm, Land, Take off,
+// Kill). Cards follow the status frames ("station-status"); commands need the operator's token and live mode.
+
+import {
+  $, EVENTS, batteryText, commandBlocker, el, fmt, isNum, on, postWithAck, setEnabled, setText, showAck, showHint,
+  vehicleName,
+} from "./common.js";
+
+const KILL_CONFIRM_MS = 5000;
+const MAX_MESSAGES = 5;
+const BATTERY_LOW = 20;  // % left at or below which a vehicle's battery is shown as low
+
+// What each vehicle button sends. `body(card)` builds the JSON for POST .../commands.
+const ACTIONS = {
+  abort: { label: "Abort", help: "Stop the mission and hold position",
+           body: () => ({ action: "abort" }) },
+  rtl: { label: "Return home", help: "Return to launch",
+         body: () => ({ action: "rtl" }) },
+  guided: { label: "GUIDED", help: "Switch to GUIDED mode",
+            body: () => ({ action: "set_mode", mode: "GUIDED" }) },
+  resume: { label: "AUTO / Resume", help: "Resume the mission",
+            body: () => ({ action: "resume" }) },
+  arm: { label: "Arm", help: "Arm the motors",
+         body: () => ({ action: "arm" }) },
+  takeoff: { label: "Take off", help: "Take off to the altitude on the right",
+             body: (card) => ({ action: "takeoff", altitude: takeoffAltitude(card) }) },
+  land: { label: "Land", help: "Land where the vehicle is",
+          body: () => ({ action: "land" }) },
+  kill: { label: "Kill", help: "Stop the motors at once (a flying copter falls). Click twice to confirm.",
+          body: () => ({ action: "kill", confirm: true }) },
+};
+
+const cards = new Map();  // sysid -> card element
+let auth = "none";
+let mode = "live";
+
+function clockTime(unixSeconds) {
+  if (!isNum(unixSeconds)) return "";
+  return new Date(unixSeconds * 1000).toLocaleTimeString([], { hour12: false });
+}
+
+function updateCardControls(card) {
+  const reason = commandBlocker(auth, mode);
+  for (const button of card.querySelectorAll("button[data-action]")) {
+    const action = button.dataset.action;
+    if (reason && action === "kill") resetKill(button);
+    setEnabled(button, reason, ACTIONS[action].help);
+  }
+  card.querySelector(".takeoff-altitude").disabled = Boolean(reason);
+  showHint(card.querySelector(".command-hint"), reason);
+}
+
+function updateControls() {
+  for (const card of cards.values()) updateCardControls(card);
+}
+
+function takeoffAltitude(card) {
+  return Number(card.querySelector(".takeoff-altitude").value);
+}
+
+function resetKill(button) {
+  clearTimeout(button._killTimer);
+  button._killTimer = null;
+  button.classList.remove("confirming");
+  setText(button, ACTIONS.kill.label);
+}
+
+/** Kill is irreversible in the air: the first click only arms a 5 s confirmation. */
+function onKillClick(card, button) {
+  if (!button._killTimer) {
+    button.classList.add("confirming");
+    button.textContent = "Confirm kill?";
+    button._killTimer = setTimeout(() => resetKill(button), KILL_CONFIRM_MS);
+    return;
+  }
+  resetKill(button);
+  sendCommand(card, "kill");
+}
+
+function sendCommand(card, action) {
+  const sysid = card.dataset.sysid;
+  const ack = card.querySelector(".ack");
+  const { label, body } = ACTIONS[action];
+  const payload = body(card);
+  if (action === "takeoff" && !(payload.altitude > 0)) {
+    showAck(ack, label, "enter a take-off altitude above 0 m", "bad");
+    return;
+  }
+  postWithAck(ack, label, `/api/vehicles/${encodeURIComponent(sysid)}/commands`, payload);
+}
+
+function createCard(sysid) {
+  const card = $("#vehicle-template").content.firstElementChild.cloneNode(true);
+  card.dataset.sysid = String(sysid);
+  const commands = card.querySelector(".commands");
+  commands.setAttribute("aria-label", `Commands for vehicle ${sysid}`);
+  commands.addEventListener("click", (event) => {
+    const button = event.target.closest("button[data-action]");
+    if (!button || button.disabled) return;
+    if (button.dataset.action === "kill") onKillClick(card, button);
+    else sendCommand(card, button.dataset.action);
+  });
+  // Escape backs out of a pending kill confirmation.
+  card.addEventListener("keydown", (event) => {
+    if (event.key === "Escape") resetKill(card.querySelector('[data-action="kill"]'));
+  });
+  updateCardControls(card);
+  return card;
+}
+
+function positionText(p) {
+  if (!p) return "–";
+  const part = (name, v) => (isNum(v) ? `${name} ${fmt(v)} m` : `${name} –`);
+  return `${part("x", p.x)}, ${part("y", p.y)}, ${part("alt", p.z)}`;
+}
+
+function headingText(h) {
+  if (!isNum(h)) return "–";
+  return `${((Math.round(h) % 360) + 360) % 360}°`;
+}
+
+function progressText(m) {
+  if (!m || !isNum(m.total) || m.total <= 0) return "no mission";
+  return `item ${isNum(m.current) ? m.current : "–"} / ${m.total}`;
+}
+
+function mapText(m) {
+  if (!m || !isNum(m.occupied)) return "–";
+  const source = m.source ? ` (${m.source})` : "";
+  return `${m.occupied} occupied cells${source}`;
+}
+
+/** The last MAX_MESSAGES STATUSTEXTs, newest first (the server lists them oldest first). */
+function recentMessages(messages) {
+  if (!Array.isArray(messages)) return [];
+  const list = messages.slice().reverse();
+  if (list.every((m) => m && isNum(m.time))) list.sort((a, b) => b.time - a.time);
+  return list.slice(0, MAX_MESSAGES);
+}
+
+function renderMessages(ul, messages) {
+  const list = recentMessages(messages);
+  // Cheap change check so the list is not rebuilt 4 times a second.
+  const key = JSON.stringify(list.map((m) => [m && m.time, m && m.severity, m && m.text]));
+  if (ul.dataset.key === key) return;
+  ul.dataset.key = key;
+  ul.replaceChildren();
+  if (!list.length) {
+    ul.append(el("li", "none", "no messages"));
+    return;
+  }
+  for (const m of list) {
+    const severe = m && isNum(m.severity) && m.severity <= 3;  // EMERGENCY..ERROR
+    const li = el("li", severe ? "severe" : "");
+    li.append(el("time", "msg-time", clockTime(m && m.time)), el("span", "msg-text", String((m && m.text) ?? "")));
+    ul.append(li);
+  }
+}
+
+/** The onboard agent's own state beside the autopilot's mode: a mission running, paused (and why), ended. */
+function renderAgent(card, agent) {
+  const badge = card.querySelector(".agent-state");
+  const line = card.querySelector(".agent");
+  if (!agent || typeof agent !== "object") {
+    badge.hidden = true;
+    setText(line, "no onboard agent heard");
+    return;
+  }
+  const state = String(agent.state ?? "");
+  const reason = agent.reason ? String(agent.reason) : "";
+  badge.hidden = false;
+  setText(badge, state ? state.toUpperCase() : "–");
+  badge.className = `agent-state ${state}`;
+  badge.title = reason ? `onboard mission ${state}: ${reason}` : `onboard mission ${state}`;
+  const where = agent.companion ? "companion" : "onboard";
+  setText(line, `${agent.mission ?? "?"} ${state}${reason ? ` (${reason})` : ""} · ${agent.phase ?? "?"} · ${where}`);
+}
+
+function renderCard(card, v) {
+  setText(card.querySelector(".vehicle-title"), vehicleName(v));
+  setText(card.querySelector(".mode"), v.mode ? String(v.mode) : "–");
+  renderAgent(card, v.agent);
+  const armed = card.querySelector(".armed");
+  setText(armed, v.armed == null ? "–" : v.armed ? "ARMED" : "disarmed");
+  armed.classList.toggle("is-armed", v.armed === true);
+
+  setText(card.querySelector(".position"), positionText(v.position));
+  setText(card.querySelector(".speed"), isNum(v.speed) ? `${fmt(v.speed)} m/s` : "–");
+  setText(card.querySelector(".heading"), headingText(v.heading));
+  const battery = card.querySelector(".battery");
+  setText(battery, batteryText(v.battery));
+  battery.title = v.battery && isNum(v.battery.current) ? `current ${fmt(v.battery.current)} A` : "";
+  // ArduPilot warns at its low level, and our simulator at 20 %: the card says so before the failsafe acts
+  battery.classList.toggle("low", !!v.battery && isNum(v.battery.remaining) && v.battery.remaining >= 0
+    && v.battery.remaining <= BATTERY_LOW);
+
+  const link = v.link || {};
+  const lost = link.state === "lost";
+  const age = isNum(link.heartbeat_age) ? `${fmt(link.heartbeat_age)} s` : "–";
+  const signed = link.signed ? " · signed" : "";
+  setText(card.querySelector(".link"), lost ? "LINK LOST" : link.state ? `link ${link.state} · ${age}${signed}` : "–");
+  card.classList.toggle("lost", lost);
+  const banner = card.querySelector(".lost-banner");
+  banner.hidden = !lost;
+  setText(banner, lost ? `LINK LOST — no heartbeat for ${age}` : "");
+  card.querySelector(".link").title = link.signed ? "its messages carry a valid MAVLink 2 signature" : "";
+
+  // Another ground station commanding the same vehicle: the operator must know orders may not be theirs.
+  const other = v.other_gcs;
+  const otherBanner = card.querySelector(".other-gcs-banner");
+  otherBanner.hidden = !other;
+  setText(otherBanner, other ? `Another ground station (system ${other.sysid}) is commanding this vehicle: ` +
+    `${other.last}, ${fmt(other.age)} s ago` : "");
+
+  setText(card.querySelector(".progress-item"), progressText(v.mission));
+  setText(card.querySelector(".progress-status"), v.status ? String(v.status) : "");
+  setText(card.querySelector(".map"), mapText(v.map));
+  setText(card.querySelector(".sim-time"), isNum(v.time_boot_s) ? `t = ${fmt(v.time_boot_s)} s` : "–");
+  renderMessages(card.querySelector(".messages"), v.messages);
+}
+
+function renderVehicles(vehicles) {
+  const container = $("#vehicles");
+  const seen = new Set();
+  for (const v of vehicles) {
+    const key = String(v.sysid);
+    seen.add(key);
+    let card = cards.get(key);
+    if (!card) {
+      card = createCard(v.sysid);
+      cards.set(key, card);
+    }
+    renderCard(card, v);
+    container.append(card);  // append moves existing cards into sorted order (no-op if in place)
+  }
+  for (const [key, card] of cards) {
+    if (!seen.has(key)) {
+      card.remove();
+      cards.delete(key);
+    }
+  }
+  $("#no-vehicles").hidden = vehicles.length > 0;
+}
+
+on(EVENTS.auth, (detail) => {
+  auth = detail.auth;
+  updateControls();
+});
+on(EVENTS.status, (msg) => {
+  mode = msg.mode;
+  renderVehicles(msg.vehicles);
+  updateControls();
+});
+window.addEventListener("DOMContentLoaded", () => renderVehicles([]));
