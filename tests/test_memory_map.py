@@ -7,7 +7,6 @@ import pytest
 from PIL import Image
 
 from vehicle.mapping.memory_map import (
-    ARC_SHARE,
     FREE,
     FREE_SPREAD,
     NO_ECHO_CLEARS,
@@ -582,15 +581,12 @@ def along(m: MemoryMap, angle: float, distance: float, origin=(0.05, 0.05)) -> t
 def test_a_cone_marks_its_sides_free_up_to_the_echo_and_at_most_side_reach(fine):
     """A sonar hears the nearest echo in its cone, so the cone is free up to it: lines at most a cell apart up
     to FREE_SPREAD of the half-angle either side, to a cell short of the echo and SIDE_REACH at most; the echo
-    is on the arc of its cone, whose unknown cells share it (ARC_SHARE each): two echoes make them occupied."""
+    is on the arc of its cone, and when nothing on it is known, its centre cell takes it."""
     origin = np.array([[0.05, 0.05, 4.0]])
     half = 0.3
     side = FREE_SPREAD * half
     fine.add_readings(origin, np.array([EAST]), np.array([6.0]), np.array([40.0]), beams=np.array([half]))
-    arc = [along(fine, angle, 6.0) for angle in np.linspace(-half, half, 9)]
-    assert all(fine.grid[cell] == ARC_SHARE for cell in arc) and fine.detections == 0
-    fine.add_readings(origin, np.array([EAST]), np.array([6.0]), np.array([40.0]), beams=np.array([half]))
-    assert all(fine.occupied[cell] for cell in arc)
+    assert fine.occupied[along(fine, 0.0, 6.0)] and fine.detections == 1
     for angle in np.linspace(-side, side, 7):
         assert fine.free[along(fine, angle, 3.0)] and fine.free[along(fine, angle, 5.8)]
         assert not fine.free[along(fine, angle, 6.3)]  # not past the echo
@@ -616,9 +612,12 @@ def test_an_occupied_cell_on_the_arc_explains_the_echo_alone(fine):
     doorway = along(fine, 0.0, 4.0)
     fine.add_readings(origin, np.array([EAST]), np.array([4.0]), np.array([40.0]), beams=np.array([half]))
     assert fine.grid[frame] == MemoryMap.OCCUPIED_AT + MemoryMap.HIT and fine.grid[doorway] == 0
-    fine.grid[frame] = MemoryMap.FREE_AT  # seen free since: the rest of the arc shares the echo
+    fine.grid[frame] = MemoryMap.FREE_AT  # seen free since: the centre of the arc takes the echo
     fine.add_readings(origin, np.array([EAST]), np.array([4.0]), np.array([40.0]), beams=np.array([half]))
-    assert fine.grid[frame] == MemoryMap.FREE_AT and fine.grid[doorway] == ARC_SHARE
+    assert fine.grid[frame] == MemoryMap.FREE_AT and fine.grid[doorway] == MemoryMap.HIT
+    fine.grid[doorway] = MemoryMap.FREE_AT  # the centre known free too: the nearest unknown cell to it
+    fine.add_readings(origin, np.array([EAST]), np.array([4.0]), np.array([40.0]), beams=np.array([half]))
+    assert fine.grid[doorway] == MemoryMap.FREE_AT and fine.detections == 1
 
 
 def test_a_cone_without_echo_clears_unknown_cells_but_leaves_walls_alone(fine):

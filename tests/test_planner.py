@@ -204,3 +204,67 @@ def test_from_off_the_map_the_path_comes_straight_back_onto_it_first(outside):
 def test_a_goal_off_the_map_has_no_path():
     m = MemoryMap((0.0, 0.0), space_size=10.0, resolution=5.0)
     assert MapPlanner(m, RADIUS).plan((0.0, 0.0), (30.0, 0.0), padding=0.2) == (None, 0)
+
+
+# ---- reachable targets are found, unreachable ones refused with the reason ---------------------------------
+def known_map() -> MemoryMap:
+    """The default map (+-100 m at 10 cells/m around the origin), every cell seen free."""
+    m = MemoryMap((0.0, 0.0))
+    m.grid[:] = MemoryMap.FREE_AT
+    return m
+
+
+def wall(m: MemoryMap, y: float, x0: float | None, x1: float | None, value: int = MemoryMap.OCCUPIED_AT) -> None:
+    """Cells along y from x0 to x1 (None: the map's edge) set to ``value``."""
+    row = m.cell_of(0.0, y)[0]
+    m.grid[row, 0 if x0 is None else m.cell_of(x0, 0.0)[1]:m.size if x1 is None else m.cell_of(x1, 0.0)[1] + 1] = value
+
+
+def test_a_way_round_a_wall_that_leaves_every_window_is_found():
+    """A wall 5 m north from the map's west edge to x = 55 m: the only way round passes its east end, beyond
+    the 40 m window around start and goal; the whole map is searched before giving up."""
+    m = known_map()
+    wall(m, 5.0, None, 55.0)
+    planner = MapPlanner(m, RADIUS, avoid_margin=0.1)
+    path, _ = planner.plan((0.0, 0.0), (0.0, 10.0), padding=0.5)
+    assert path is not None, planner.reason
+    assert max(x for x, _ in path) > 55.0 and path[-1] == (0.0, 10.0)
+    assert all(planner.is_clear(point, 0.5) for point in path)  # with the padding: the way round is wide open
+
+
+def test_a_gap_between_seen_walls_that_the_sonar_has_not_looked_into_is_planned_through():
+    """Two walls 5 m north with a 1.6 m gap whose cells are unknown: presuming the unseen to be more wall
+    closes it, so it is planned through without that presumption (the sonar checks it on the way) rather
+    than refused with "no known path" (a Go here to an open spot beyond was refused so)."""
+    m = known_map()
+    wall(m, 5.0, None, -0.8)
+    wall(m, 5.0, 0.8, None)
+    wall(m, 5.0, -0.7, 0.7, value=0)
+    planner = MapPlanner(m, RADIUS, avoid_margin=0.1)
+    path, level = planner.plan((0.0, 0.0), (0.0, 10.0), padding=0.5)
+    assert path is not None and level == 2, planner.reason
+    assert all(abs(x) < 0.8 for x, y in path if 4.5 < y < 5.5) or len(path) == 1
+
+
+def ring(m: MemoryMap, centre: tuple[float, float], radius: float) -> None:
+    for angle in np.linspace(0, 2 * math.pi, 2000):
+        m.grid[m.cell_of(centre[0] + radius * math.cos(angle), centre[1] + radius * math.sin(angle))] = 20
+
+
+@pytest.mark.parametrize(("start", "goal", "reason"), [
+    ((0.0, 0.0), (20.0, 0.0), "the target is enclosed by known obstacles"),
+    ((20.0, 0.0), (0.0, 0.0), "the vehicle is enclosed by known obstacles"),
+    ((0.0, 0.0), (23.0, 0.0), "the target is on an occupied cell"),
+    ((0.0, 0.0), (22.8, 0.0), "the target is within 0.35 m of a known obstacle"),
+])
+def test_an_unreachable_target_is_refused_with_the_reason(start, goal, reason):
+    """A closed ring 3 m in radius around (20, 0): nothing crosses it, whatever the padding."""
+    m = known_map()
+    ring(m, (20.0, 0.0), 3.0)
+    planner = MapPlanner(m, RADIUS, avoid_margin=0.1)
+    path, _ = planner.plan(start, goal, padding=0.5, relax=True)
+    assert path is None and planner.reason == reason
+    m.grid[m.cell_of(17.0, 0.0)[0] - 6:m.cell_of(17.0, 0.0)[0] + 7, m.cell_of(17.0, 0.0)[1]] = MemoryMap.FREE_AT
+    if "occupied" not in reason and "within" not in reason:  # a doorway 1.3 m wide in the ring: now it is found
+        path, _ = planner.plan(start, goal, padding=0.5)
+        assert path is not None and path[-1] == goal, planner.reason

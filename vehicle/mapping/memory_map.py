@@ -17,8 +17,10 @@ one grid at one resolution (so the streamed map, its pictures and the
 planner's windows are unchanged) and it fixes the cause, not the scale. An
 echo's arc is sampled every half cell; cells known free cannot explain it, an
 occupied cell on it (a door frame seen face on) explains it alone, and
-otherwise the unknown cells share its evidence (``ARC_SHARE`` each at
-least), which the free lines through the doorway from nearer poses clear.
+otherwise the unknown cell nearest the centre line takes it, which the free
+lines through the doorway from nearer poses clear if it was wrong. (Sharing
+the evidence among all unknown cells of the arc was tried: it blurred an
+oblique wall up to a metre in front of itself.)
 The free part of a cone is filled with lines at most a cell apart (up to
 ``FREE_SPREAD`` of its half-angle and ``SIDE_REACH``), so that a doorway
 seen through is free cell for cell, as planning through it needs.
@@ -44,7 +46,6 @@ LIMIT = 30  # saturation, so a long-seen wall can still fade within a few passes
 FLOOR = -3  # free evidence saturates at once: a newcomer shows up at its first echo, and
 # free cells change only once, which keeps the streamed map small
 OCCUPIED_AT = 6  # at or above: occupied
-ARC_SHARE = 3  # the least evidence each unknown cell of an unexplained echo's arc gains (two echoes: occupied)
 FREE_AT = -3  # at or below: free
 NO_ECHO_CLEARS = 15.0  # m: a reading without echo is evidence of free space only this far
 # (a surface met at a grazing angle returns no echo either, so "nothing" is weak evidence)

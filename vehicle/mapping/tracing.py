@@ -16,7 +16,7 @@ import math
 import numba
 import numpy as np
 
-from vehicle.mapping.memory_map import ARC_SHARE, FLOOR, FREE_AT, FREE_SPREAD, HIT, LIMIT, MISS, OCCUPIED_AT, SIDE_REACH
+from vehicle.mapping.memory_map import FLOOR, FREE_AT, FREE_SPREAD, HIT, LIMIT, MISS, OCCUPIED_AT, SIDE_REACH
 
 
 @numba.njit(cache=True)
@@ -209,11 +209,11 @@ def project(grid, ever_hit, size, x0, y0, resolution, band, origins, directions,
 
 @numba.njit(cache=True)
 def _explain(grid, arcs, arc_cells, echoes):
-    """The cells each echo adds evidence to, and how much: an echo at range r comes from somewhere on the arc
-    of its cone at r. Cells known free cannot explain it; if some cell of the arc is occupied already, it
-    explains the echo and gains HIT; else the cells still unknown share HIT (each at least ARC_SHARE), so
-    an arc from afar that spans a doorway marks its cells weakly and the free rays through the doorway
-    from nearer clear them. An arc whose every cell is known free marks its centre cell (something new)."""
+    """The cells each echo adds evidence to (HIT each): an echo at range r comes from somewhere on the arc of
+    its cone at r. Cells known free cannot explain it; occupied cells on the arc (a door frame seen face on)
+    explain it alone; else the unknown cell nearest the centre line takes it; an arc whose every cell is
+    known free marks its centre cell (something new). So a cone that spans a doorway beside a frame already
+    seen marks nothing in the doorway, and one marked wrongly is cleared by the free lines through it."""
     targets = np.empty(len(arc_cells), dtype=np.int64)
     gains = np.empty(len(arc_cells), dtype=np.int64)
     used = 0
@@ -243,17 +243,23 @@ def _explain(grid, arcs, arc_cells, echoes):
                 hits += 1
             continue
         hits += 1
-        share = HIT if occupied else max(HIT // unknown, ARC_SHARE)
+        if not occupied:  # the unknown cell nearest the centre line (where the beam is strongest) takes it
+            middle = (first + last - 1) / 2.0
+            best = -1
+            for k in range(first, last):
+                cell = arc_cells[k]
+                if cell >= 0 and grid[cell] > FREE_AT and (best < 0 or abs(k - middle) < abs(best - middle)):
+                    best = k
+            targets[used], gains[used] = arc_cells[best], HIT
+            used += 1
+            continue
         previous = -2
         for k in range(first, last):
             cell = arc_cells[k]
-            if cell < 0 or cell == previous:
-                previous = cell
-                continue
-            previous = cell
-            if grid[cell] >= OCCUPIED_AT if occupied else grid[cell] > FREE_AT:
-                targets[used], gains[used] = cell, share
+            if cell >= 0 and cell != previous and grid[cell] >= OCCUPIED_AT:
+                targets[used], gains[used] = cell, HIT
                 used += 1
+            previous = cell
     return targets[:used], gains[:used], hits
 
 
