@@ -233,6 +233,72 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bounds(text: str) -> tuple[float, float, float, float]:
+    parts = text.split(",")
+    values = [options.finite(part) for part in parts] if len(parts) == 4 else None
+    if values is None:
+        raise argparse.ArgumentTypeError(f"expected X0,Y0,X1,Y1 in metres, not {text!r}")
+    return tuple(values)
+
+
+def cmd_rti_reconstruct(args: argparse.Namespace) -> int:
+    """A thin face over vehicle.tomography: read, image, write the JSON (and the picture)."""
+    import json
+
+    from vehicle.tomography.imaging import reconstruct
+    from vehicle.tomography.links import read_links
+    from vehicle.tomography.picture import draw
+
+    records = read_links(args.links)
+    calibration = read_links(args.calibration) if args.calibration else None
+    for source in (records, calibration):
+        for warning in source.warnings() if source else ():
+            print(f"warning: {warning}", file=sys.stderr)
+    result = reconstruct(records, calibration, args.calibration_seconds, args.bounds, args.cell, args.window,
+                         args.peaks, args.solver, args.model, span=args.smooth)
+    Path(args.json).write_text(json.dumps(result.to_json(images=args.images)) + "\n", encoding="utf-8")
+    if args.png:
+        draw(result, args.png)
+    peaks = sum(bool(frame["peaks"]) for frame in result.frames)
+    print(f"rti: {len(result.frames)} frame(s) of {result.grid.nx} x {result.grid.ny} cells of {result.grid.cell:g} m, "
+          f"{peaks} with a peak; {result.info['links']['paths']} paths, "
+          f"{result.info['links']['drifted_paths']} drifted -> {args.json}", flush=True)
+    return 0
+
+
+def _rti_commands(commands) -> None:
+    rti = commands.add_parser("rti", help="radio tomographic imaging from link signal strengths")
+    actions = rti.add_subparsers(dest="action", required=True)
+    rec = actions.add_parser("reconstruct", help="images of what stands in the area, from a LINKS.csv[.gz]",
+                             description="Attenuation images from link records (t,tx,rx,tx_x,tx_y,rx_x,rx_y,rssi,"
+                                         "channel); see docs/rti.md.")
+    rec.add_argument("links", help="link records, CSV or gzipped CSV")
+    calibration = rec.add_mutually_exclusive_group()
+    calibration.add_argument("--calibration", metavar="EMPTY.csv", help="records measured with the area empty")
+    calibration.add_argument("--calibration-seconds", type=options.positive, metavar="S",
+                             help="take the first S seconds of LINKS as the empty area (default: estimate each "
+                                  "link's empty level from the whole file)")
+    rec.add_argument("--bounds", type=_bounds, metavar="X0,Y0,X1,Y1",
+                     help="the imaged area in metres (default: the radios' bounding box)")
+    rec.add_argument("--cell", type=options.positive, metavar="M",
+                     help="pixel side in metres (default: about 50 pixels along the longer side, at least 0.1)")
+    rec.add_argument("--window", type=options.positive, metavar="S",
+                     help="one image per window of S seconds (default: one image of the whole file)")
+    rec.add_argument("--peaks", type=options.whole(0), default=3, metavar="K",
+                     help="at most K peaks per image, strongest first (default %(default)s)")
+    rec.add_argument("--smooth", type=options.whole(1), default=3, metavar="N",
+                     help="average each window's measurements with its neighbours', N windows in all "
+                          "(default %(default)s; 1 = none)")
+    rec.add_argument("--solver", choices=["ls", "tv"], default="ls",
+                     help="regularised least squares with a spatial prior, or total variation (default %(default)s)")
+    rec.add_argument("--model", choices=["ellipse", "exponential"], default="ellipse",
+                     help="weight model (default %(default)s)")
+    rec.add_argument("--json", required=True, metavar="OUT.json", help="where the frames go")
+    rec.add_argument("--images", action="store_true", help="put each frame's image (rows of values) in the JSON")
+    rec.add_argument("--png", metavar="OUT.png", help="draw the image (the mean of the frames) with the radios")
+    rec.set_defaults(run=cmd_rti_reconstruct)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="groundstation", description="Web ground station with a live 3D view.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -267,6 +333,7 @@ def main(argv: list[str] | None = None) -> int:
                         "this file (default: the scene the recording names, looked up by name and hash)")
     _server_options(replay)
     replay.set_defaults(run=cmd_replay)
+    _rti_commands(commands)
 
     args = parser.parse_args(options.glue_negative_points(sys.argv[1:] if argv is None else argv))
     from groundstation.replay import ReplayError

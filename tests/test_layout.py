@@ -29,9 +29,10 @@ ALLOWED = {  # package -> what it may import from the project (itself always)
     "vehicle.world": {"vehicle", "vehicle.protocol", "vehicle.mapping"},
     "vehicle.sim": {"vehicle", "vehicle.protocol", "vehicle.mapping", "vehicle.world"},
     "vehicle.agent": {"vehicle", "vehicle.protocol", "vehicle.mapping", "vehicle.world"},
+    "vehicle.tomography": {"vehicle", "vehicle.protocol"},
     "vehicle.lab": {"vehicle", "vehicle.protocol", "vehicle.mapping", "vehicle.world", "vehicle.sim",
-                    "vehicle.agent"},
-    "groundstation": {"vehicle", "vehicle.protocol", "vehicle.mapping", "vehicle.world"},
+                    "vehicle.agent", "vehicle.tomography"},
+    "groundstation": {"vehicle", "vehicle.protocol", "vehicle.mapping", "vehicle.world", "vehicle.tomography"},
 }
 
 

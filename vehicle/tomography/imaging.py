@@ -1,0 +1,249 @@
+"""From link records to images, one per time window: attenuations, drift, solving, peaks and the track.
+
+Per window, a link-channel's attenuation is its empty-area level minus the mean of its RSS in the window; a
+path's measurement (the unordered pair of positions: both directions see the same obstacles) is the mean over
+its anti-faded channels that were heard. A path not heard at all in a window is left out of that window's
+solve (it is not assumed unchanged: a missing packet says nothing about the path); the linear map is cached per
+set of present paths, so the usual full set costs one matrix-vector product per frame.
+
+Drift: a path whose median attenuation over the file is not predicted by the other paths (its leave-one-out
+residual more than DRIFT_SIGMAS robust standard deviations off) has changed since calibration: a person
+standing still is seen by every path through them, a drifted radio by its own links only. Its channels are
+recalibrated on the file's own median, and it no longer paints a blob beside its radios.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.ndimage import maximum_filter
+
+from vehicle.tomography.calibration import Levels, channel_weights, empty_levels, file_levels, group_mean
+from vehicle.tomography.links import LinkTable, Records, link_table
+from vehicle.tomography.solvers import RegularisedLS, tv_discrepancy
+from vehicle.tomography.tracking import Tracker
+from vehicle.tomography.weights import LAMBDA, Grid, WeightCache, default_cell
+
+CORRELATION = 0.5  # m: the prior's correlation distance, about a person's width, the size of what we image
+DRIFT_SIGMAS = 3.0
+NOISE_FLOOR = 0.5  # dB: half the 1 dB step radios report RSS in; smaller deviations are no evidence of drift
+SOLVERS = ("ls", "tv")
+SMOOTH = 3  # windows: the centred moving average of each path's measurement (see smooth)
+
+
+def smooth(Y: np.ndarray, span: int) -> np.ndarray:
+    """Each window's path measurements averaged with the windows around it (``span`` in all, centred), over the
+    readings that were heard: a person moves little in a few seconds while the noise of a one-second window
+    (one or two readings per channel) falls by sqrt(span). Paths heard in none of them stay NaN."""
+    if span <= 1 or len(Y) < 2:
+        return Y
+    present = np.isfinite(Y)
+    kernel = np.ones(span)
+    num = np.apply_along_axis(np.convolve, 0, np.where(present, Y, 0.0), kernel, mode="same")
+    den = np.apply_along_axis(np.convolve, 0, present.astype(float), kernel, mode="same")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0.5, num / np.maximum(den, 1e-12), np.nan)
+
+
+class Imager:
+    """Images of one grid from path measurements: the library's live face (the station calls it per window)."""
+
+    def __init__(self, grid: Grid, model: str = "ellipse", lam: float = LAMBDA, delta: float = CORRELATION,
+                 maps: int = 32):
+        self.grid, self.delta = grid, delta
+        self.weights = WeightCache(grid, model, lam)
+        self._centres = grid.centres()
+        self._maps: OrderedDict[bytes, tuple[RegularisedLS, object]] = OrderedDict()
+        self._size = maps
+
+    def linear_map(self, paths: np.ndarray, sigma: np.ndarray) -> tuple[RegularisedLS, object]:
+        """The regularised least-squares map of a set of paths, its rows divided by each path's noise standard
+        deviation ``sigma`` (so that the noise is white), and that weight matrix; cached."""
+        key = np.round(paths, 3).tobytes() + np.round(sigma, 3).tobytes()
+        if key not in self._maps:
+            W = sp.diags(1.0 / sigma) @ self.weights.matrix(paths)
+            self._maps[key] = (RegularisedLS(W.tocsr(), self._centres, self.delta), W)
+            while len(self._maps) > self._size:
+                self._maps.popitem(last=False)
+        self._maps.move_to_end(key)
+        return self._maps[key]
+
+    def image(self, paths: np.ndarray, y: np.ndarray, sigma: np.ndarray | None = None, alpha: float | None = None,
+              solver: str = "ls"):
+        """(image (ny, nx), alpha, residual rms in noise standard deviations) for measurements ``y`` (dB) of
+        ``paths`` with noise ``sigma`` (dB); alpha by GCV on this frame alone when not given."""
+        sigma = np.ones(len(y)) if sigma is None else sigma
+        lmap, W = self.linear_map(paths, sigma)
+        y = y / sigma
+        if alpha is None:
+            alpha, _ = lmap.gcv(lmap.project(y))
+        if solver == "tv":
+            target = float(np.sum((y - lmap.fitted(y, alpha)) ** 2))
+            x, _, _ = tv_discrepancy(W, y, self.grid.shape, target, x0=np.clip(lmap.solve(y, alpha), 0, None))
+            fit = W @ x
+        else:
+            x = lmap.solve(y, alpha)
+            fit = lmap.fitted(y, alpha)
+        rms = float(np.sqrt(np.mean((y - fit) ** 2))) if len(y) else 0.0
+        return x.reshape(self.grid.shape), alpha, rms
+
+
+def find_peaks(image: np.ndarray, grid: Grid, count: int, separation: float) -> list[dict]:
+    """The image's own local maxima above zero, at least ``separation`` apart, strongest first, at most
+    ``count``."""
+    if count <= 0:
+        return []
+    radius = max(1, int(round(separation / grid.cell)))
+    yy, xx = np.mgrid[-radius:radius + 1, -radius:radius + 1]
+    footprint = xx ** 2 + yy ** 2 <= radius ** 2
+    local = (image == maximum_filter(image, footprint=footprint, mode="constant", cval=-np.inf)) & (image > 0)
+    iy, ix = np.nonzero(local)
+    order = np.argsort(-image[iy, ix], kind="stable")[:count]
+    x0, y0 = grid.bounds[:2]
+    return [{"x": round(x0 + (ix[i] + 0.5) * grid.cell, 3), "y": round(y0 + (iy[i] + 0.5) * grid.cell, 3),
+             "value": round(float(image[iy[i], ix[i]]), 4)} for i in order]
+
+
+@dataclass
+class Result:
+    grid: Grid
+    window: float | None
+    frames: list[dict]
+    mean_image: np.ndarray
+    radios: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    def to_json(self, images: bool = False) -> dict:
+        frames = self.frames if images else [{k: v for k, v in f.items() if k != "image"} for f in self.frames]
+        return {"bounds": [round(v, 4) for v in self.grid.bounds], "cell": self.grid.cell, "window": self.window,
+                "grid": [self.grid.nx, self.grid.ny], **self.info, "frames": frames}
+
+
+def window_measurements(records: Records, table: LinkTable, levels: Levels, weights: np.ndarray,
+                        start: float, window: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Frame start times and the (frames x paths) measurements, NaN where a path was not heard."""
+    use = (records.t >= start) & (weights[table.row_lc] > 0)
+    t, lc = records.t[use], table.row_lc[use]
+    attenuation = levels.empty[lc] - records.rssi[use]
+    if window:
+        frame = np.floor((t - start) / window + 1e-9).astype(np.int64)
+        frames = int(frame.max()) + 1 if len(frame) else 0
+    else:
+        frame, frames = np.zeros(len(t), np.int64), 1
+    n_lc, n_path = len(table.lc_keys), len(table.paths)
+    mean_lc, _ = group_mean(frame * n_lc + lc, attenuation, frames * n_lc)
+    mean_lc = mean_lc.reshape(frames, n_lc)
+    heard = np.isfinite(mean_lc)
+    w = np.where(heard, weights[None, :], 0.0)
+    sums = np.zeros((frames, n_path))
+    norms = np.zeros((frames, n_path))
+    np.add.at(sums.T, table.lc_path, (np.where(heard, mean_lc, 0.0) * w).T)
+    np.add.at(norms.T, table.lc_path, w.T)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        y = np.where(norms > 0, sums / np.maximum(norms, 1e-12), np.nan)
+    times = start + np.arange(frames) * (window or 0.0)
+    return times, y
+
+
+def reconstruct(records: Records, calibration: Records | None = None, calibration_seconds: float | None = None,
+                bounds: tuple[float, float, float, float] | None = None, cell: float | None = None,
+                window: float | None = None, peaks: int = 3, solver: str = "ls", model: str = "ellipse",
+                drift: bool = True, span: int = SMOOTH) -> Result:
+    """The whole method on one file (see the module's docstring and docs/rti.md)."""
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r} (one of {', '.join(SOLVERS)})")
+    if window is not None and not (window > 0 and math.isfinite(window)):
+        raise ValueError(f"window {window:g} must be a positive number of seconds")
+    start = float(records.t.min())
+    if calibration_seconds is not None:
+        if not calibration_seconds > 0:
+            raise ValueError(f"calibration seconds {calibration_seconds:g} must be positive")
+        early = records.t < start + calibration_seconds
+        if early.all():
+            raise ValueError(f"{records.path}: --calibration-seconds {calibration_seconds:g} takes the whole file "
+                             f"({records.t.max() - start:.1f} s), leaving nothing to image")
+        calibration = records.select(early)
+        start += calibration_seconds
+    if bounds is None:
+        ends = np.vstack([records.tx, records.rx])
+        bounds = (*ends.min(axis=0).tolist(), *ends.max(axis=0).tolist())
+    grid = Grid(tuple(float(v) for v in bounds), float(cell) if cell else default_cell(bounds))
+    table = link_table(records)
+    levels = empty_levels(records, table, calibration)
+    weights = channel_weights(table, levels.fade)
+    times, Y = window_measurements(records, table, levels, weights, start, window)
+    sigma = np.ones(len(table.paths))  # paths weigh alike: see docs/rti.md on weighting by the empty-area noise
+    imager = Imager(grid, model)
+    alpha = choose_alpha(imager, table.paths, Y, sigma)
+    drifted = np.zeros(len(table.paths), bool)
+    if drift and levels.calibrated.any():
+        drifted = drifted_paths(imager, table.paths, Y, sigma, alpha)
+        if drifted.any():
+            redo = drifted[table.lc_path]
+            levels.empty[redo] = file_levels(records, table)[redo]
+            times, Y = window_measurements(records, table, levels, weights, start, window)
+    Y = smooth(Y, span if window else 1)
+    alpha = choose_alpha(imager, table.paths, Y, sigma)  # on what is imaged: smoothing lowered the noise
+    frames, tracker = [], Tracker()
+    total = np.zeros(grid.shape)
+    for time, y in zip(times, Y, strict=True):
+        present = np.isfinite(y)
+        frame = {"t": round(float(time), 3), "paths": int(present.sum())}
+        if present.any():
+            image, _, rms = imager.image(table.paths[present], y[present], sigma[present], alpha, solver)
+            total += image
+            frame["peaks"] = find_peaks(image, grid, peaks, CORRELATION)
+            frame["max"] = round(float(image.max()), 4)
+            frame["residual_db"] = round(rms, 3)
+            frame["image"] = image
+        else:
+            frame["peaks"] = []
+        if window:
+            best = frame["peaks"][0] if frame["peaks"] else None
+            frame["track"] = tracker.step(window, (best["x"], best["y"]) if best else None)
+        frames.append(frame)
+    info = {
+        "solver": solver, "model": model, "smooth_windows": span if window else None, "alpha": alpha,
+        "correlation_m": CORRELATION, "lambda_m": LAMBDA,
+        "links": {"link_channels": len(table.lc_keys), "paths": len(table.paths),
+                  "calibrated": int(levels.calibrated.sum()), "channels_used": int((weights > 0).sum()),
+                  "drifted_paths": int(drifted.sum())},
+        "path_loss": {"p0_dbm": round(levels.path_loss[0], 2), "exponent": round(levels.path_loss[1], 3)},
+        "skipped": dict(records.skipped),
+    }
+    return Result(grid, window, frames, total / max(1, len(frames)), records.radios(), info)
+
+
+def choose_alpha(imager: Imager, paths: np.ndarray, Y: np.ndarray, sigma: np.ndarray) -> float:
+    """alpha by GCV pooled over the frames that heard the most common set of paths (the noise-to-prior ratio
+    is the data's, not the frame's: one value serves every set)."""
+    present = np.isfinite(Y)
+    if not present.any():
+        return 1.0
+    sets, counts = np.unique(present, axis=0, return_counts=True)
+    usual = sets[int(np.argmax(np.where(sets.any(axis=1), counts, 0)))]
+    rows = Y[(present == usual).all(axis=1)][:, usual]
+    lmap, _ = imager.linear_map(paths[usual], sigma[usual])
+    alpha, _ = lmap.gcv(lmap.project((rows / sigma[usual]).T))
+    return alpha
+
+
+def drifted_paths(imager: Imager, paths: np.ndarray, Y: np.ndarray, sigma: np.ndarray, alpha: float) -> np.ndarray:
+    """Paths whose median attenuation over the file the other paths do not predict (see the module's
+    docstring)."""
+    with np.errstate(all="ignore"):
+        median = np.nanmedian(np.where(np.isfinite(Y), Y, np.nan), axis=0) if len(Y) else np.zeros(len(paths))
+    known = np.isfinite(median)
+    out = np.zeros(len(paths), bool)
+    if known.sum() < 4:
+        return out
+    lmap, _ = imager.linear_map(paths[known], sigma[known])
+    loo = lmap.loo_residuals(median[known] / sigma[known], alpha) * sigma[known]
+    centre = np.median(loo)
+    spread = max(1.4826 * float(np.median(np.abs(loo - centre))), NOISE_FLOOR)
+    out[np.nonzero(known)[0]] = np.abs(loo - centre) > DRIFT_SIGMAS * spread
+    return out
