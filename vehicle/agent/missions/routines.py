@@ -149,7 +149,8 @@ class Travel:
             if self.path is None and not self._scanned_near():
                 return self.too_close()  # scan, then plan again
             if self.path is None:
-                self.reason = f"no known path to ({self.goal[0]:.1f}, {self.goal[1]:.1f})"
+                why = ctx.planner.reason
+                self.reason = f"no known path to ({self.goal[0]:.1f}, {self.goal[1]:.1f})" + (f": {why}" if why else "")
                 ctx.planned_path = []
                 return Status.STOPPED
         while len(self.path) > 1 and ctx.distance_to(self.path[0]) < PATH_POINT_REACHED:
