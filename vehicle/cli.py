@@ -48,9 +48,9 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--mission", required=mission_required, type=str.lower, choices=list(MISSIONS),
                         help="; ".join(f"{name}: {text}" for name, text in MISSIONS.items()))
     parser.add_argument("--vehicle", default="copter", choices=["rover", "copter"])
-    parser.add_argument("--start", type=_point, metavar="X,Y[,Z]",
+    parser.add_argument("--start", type=_point, metavar="X,Y[,Z]", action="append",
                         help="start in scene metres (default: the scene's Start); with Z, on the highest surface "
-                             "below Z (a floor under a roof)")
+                             "below Z (a floor under a roof); a team (experiment --vehicles N) takes one per vehicle")
     parser.add_argument("--heading", type=options.finite, help="start heading, compass degrees (0 = north)")
     parser.add_argument("--altitude", type=options.finite, help="operating altitude above the start's ground, m")
     parser.add_argument("--set", dest="assignments", action="append", default=[], metavar="NAME=VALUE",
@@ -66,6 +66,21 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
                         help="where the scene origin lies on Earth, degrees and metres above sea level (default: "
                              "the scene's datum hint, else ArduPilot's simulator home -35.363261,149.165230,584)")
+
+
+def _one_start(args: argparse.Namespace) -> tuple[float, ...] | None:
+    """The start of a lone vehicle: --start given once at most."""
+    if args.start and len(args.start) > 1:
+        raise ValueError(f"--start given {len(args.start)} times for one vehicle (a team: --vehicles N)")
+    return args.start[0] if args.start else None
+
+
+def _system_ids(text: str) -> list[int]:
+    """``1,2,3``: a team's MAVLink system ids."""
+    try:
+        return [options.system_id(v) for v in text.split(",")]
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(f"--sysids wants system ids 1 to 255 separated by commas: {error}") from None
 
 
 def settings_from(args: argparse.Namespace, scene, **extra):
@@ -113,8 +128,10 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     settings = settings_from(args, scene, time_limit=args.time_limit)
     datum = Datum.of_scene(scene.hints, args.datum)
     waypoints = load_positions(args.waypoints, datum) if args.waypoints else None
-    experiment = Experiment(args.scene, args.mission, args.vehicle, args.start, args.heading, settings, args.seed,
-                            waypoints, args.sensors, datum)
+    if args.vehicles is not None or args.sysids is not None:
+        return _team_experiment(args, scene, settings, datum, waypoints)
+    experiment = Experiment(args.scene, args.mission, args.vehicle, _one_start(args), args.heading, settings,
+                            args.seed, waypoints, args.sensors, datum)
     log = None
     if args.log:
         from vehicle.lab.log import ExperimentLog
@@ -147,6 +164,44 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     return 0 if result["outcome"] != "error" else 1
 
 
+def _team_experiment(args: argparse.Namespace, scene, settings, datum, waypoints) -> int:
+    """``vehicle experiment --vehicles N``: the team is made (and refused, exit 2) before anything flies."""
+    from vehicle.lab.experiment import Experiment, run_team
+    from vehicle.lab.stepper import simulate_team
+
+    count = args.vehicles if args.vehicles is not None else len(args.sysids)
+    if args.sysids is not None and len(args.sysids) != count:
+        raise ValueError(f"--sysids names {len(args.sysids)} vehicles, --vehicles {count}")
+    if args.start and len(args.start) != count:
+        raise ValueError(f"--start given {len(args.start)} times for a team of {count}: once per vehicle, or not")
+    if args.log or args.map_out:
+        raise ValueError("--log and --map-out are for one vehicle; a team's run reports in its JSON")
+    stepper = simulate_team(scene, args.mission, count, args.vehicle, settings, args.start, args.sysids,
+                            [waypoints] * count if waypoints else None, seed=args.seed, suite=args.sensors,
+                            datum=datum)
+    experiment = Experiment(args.scene, args.mission, args.vehicle, None, args.heading, settings, args.seed,
+                            waypoints, args.sensors, datum)
+    result = run_team(experiment, stepper)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{result['mission']} in {result['scene']} ({result['team']} {result['vehicle']}s): "
+              f"{result['outcome']} - {result['reason'] or 'all finished'}")
+        for v in result["vehicles"]:
+            print(f"  vehicle {v['sysid']}: {v['outcome']} - {v['reason']}; {v['detections']} occupied cells, "
+                  f"{v['distance_m']:.1f} m flown, gave way {v['gave_way']} times, closest to the scene "
+                  f"{_metres(v['closest_scene_m'])}")
+        shared = "shared" if result["share_maps"] else "not shared"
+        print(f"team: {result['detections']} occupied cells together (maps {shared}); "
+              f"closest approach between vehicles {_metres(result['closest_vehicles_m'])}; "
+              f"{result['sim_time_s']:.1f} s simulated in {result['wall_time_s']:.2f} s")
+    return 0 if result["outcome"] != "error" else 1
+
+
+def _metres(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f} m"
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     from vehicle.lab.experiment import warm_up
     from vehicle.lab.live import SimOptions, SimVehicle
@@ -170,9 +225,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     items = load_mission(args.waypoints) if args.waypoints else None
     waypoints = positions(items, datum) if items else (
         parse_points(scene.hints["waypoints"]) if "waypoints" in scene.hints else None)
-    stepper = simulate(scene, None if autopilot else args.mission, args.vehicle, settings, args.start, args.heading,
-                       waypoints, autostart=args.autostart, seed=args.seed, sensors=sensor_suite(args.sensors),
-                       datum=datum)
+    stepper = simulate(scene, None if autopilot else args.mission, args.vehicle, settings, _one_start(args),
+                       args.heading, waypoints, autostart=args.autostart, seed=args.seed,
+                       sensors=sensor_suite(args.sensors), datum=datum)
     world = stepper.simulation
     if items:
         world.autopilot.set_mission(items)
@@ -271,6 +326,11 @@ def main(argv: list[str] | None = None) -> int:
     experiment.add_argument("--json", action="store_true", help="print the result as one JSON object")
     experiment.add_argument("--map-out", metavar="DIR", help="write the final memory map (.npy and .png)")
     experiment.add_argument("--log", metavar="FILE.tlog", help="write the run as a MAVLink telemetry log")
+    experiment.add_argument("--vehicles", type=options.whole(1, 8), metavar="N",
+                            help="fly a team of N (1 to 8) in one world, on the spots around the start (or one "
+                                 "--start each); the JSON reports every vehicle and the closest approaches")
+    experiment.add_argument("--sysids", type=_system_ids, metavar="ID,ID,...",
+                            help="the team's MAVLink system ids (default 1 ... N); the lower id has the right of way")
     experiment.set_defaults(run=cmd_experiment)
 
     sim = commands.add_parser("sim", help="a simulated vehicle with its onboard agent, live on MAVLink")

@@ -1,4 +1,4 @@
-"""One headless mission on simulated time: scene + vehicle + agent, stepped until an outcome.
+"""One headless mission on simulated time: scene + vehicle + agent (or a team of them), stepped until an outcome.
 
 The result is a plain dict (the JSON that ``vehicle experiment --json`` prints);
 everything in it but ``wall_time_s`` is a function of the arguments and seed.
@@ -14,7 +14,7 @@ from pathlib import Path
 
 from vehicle import __version__
 from vehicle.agent.settings import Settings
-from vehicle.lab.stepper import Stepper, simulate
+from vehicle.lab.stepper import Stepper, TeamStepper, simulate
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.rangefinder import Reading
 from vehicle.protocol.waypoints import parse_points
@@ -175,3 +175,69 @@ def warm_up() -> float:
     settings = Settings().updated({"space_size": 12, "time_limit": 40})
     run_experiment(Experiment("warm-up.wrl", "pathfind", settings=settings, waypoints=[(0.0, 9.0)]), scene=scene)
     return time.perf_counter() - started
+
+
+def run_team(experiment: Experiment, stepper: TeamStepper) -> dict:
+    """Fly a team (``simulate_team``, made and checked by the caller before anything starts) to its outcome:
+    every vehicle done or wrecked, or the time limit. A vehicle that crashes is reported as such and the rest
+    fly on. The result has what a lone run reports, per vehicle, and the team's figures."""
+    started = time.perf_counter()
+    settings = experiment.settings
+    team = stepper.team
+    result = {"mission": experiment.mission, "scene": Path(experiment.scene).name, "vehicle": experiment.vehicle,
+              "sensors": experiment.sensors, "seed": experiment.seed, "version": __version__,
+              "settings": settings.model_dump(), "resolution": settings.resolution, "team": len(team),
+              "share_maps": stepper.share_maps}
+    limit = settings.time_limit
+    try:
+        while team.time < limit:
+            stepper.step()
+            if stepper.monitor_due and all(agent.done or sim.collision is not None
+                                           for agent, sim in zip(stepper.agents, team.simulations, strict=True)):
+                break
+        error = None
+    except Exception as failure:  # noqa: BLE001 - a failure is an outcome of the run, reported, not raised
+        error = f"{type(failure).__name__}: {failure}"
+    vehicles = [_vehicle_result(stepper, index, limit, error) for index in range(len(team))]
+    outcomes = [v["outcome"] for v in vehicles]
+    overall = next((o for o in ("error", "collision", "timeout", "stopped") if o in outcomes), "finished")
+    reasons = [f"vehicle {v['sysid']}: {v['reason']}" for v in vehicles if v["outcome"] == overall]
+    result.update(outcome=overall, reason="; ".join(reasons), vehicles=vehicles,
+                  sim_time_s=round(team.time, 3), distance_m=round(sum(v["distance_m"] for v in vehicles), 2),
+                  detections=_team_detections(stepper), cells_ever_hit=sum(v["cells_ever_hit"] for v in vehicles),
+                  closest_vehicles_m=None if len(team) < 2 else round(team.closest_gap, 3),
+                  closest_pair=list(team.closest_pair) if team.closest_pair else None,
+                  cells_shared=stepper.cells_shared)
+    result["wall_time_s"] = round(time.perf_counter() - started, 3)
+    return result
+
+
+def _vehicle_result(stepper: TeamStepper, index: int, limit: float, error: str | None) -> dict:
+    """What a lone run reports, for one vehicle of a team, and its closest approach to the scene's walls."""
+    sim, agent = stepper.team.simulations[index], stepper.agents[index]
+    if error is not None:
+        outcome, reason = "error", error
+    elif sim.collision is not None:
+        outcome, reason = "collision", sim.collision.describe()
+    elif agent.done:
+        outcome, reason = agent.outcome, agent.reason
+    else:
+        outcome, reason = "timeout", f"time limit of {limit:g} s reached in phase {agent.phase.value}"
+    gap = stepper.team.scene_gaps[index].gap
+    return {"sysid": stepper.team.ids[index], "outcome": outcome, "reason": reason,
+            "start": [round(sim.home[0], 3), round(sim.home[1], 3)], "distance_m": round(sim.distance_travelled, 2),
+            "final_position": [round(float(v), 2) for v in sim.pose.xyz()],
+            "detections": agent.map.detections, "cells_ever_hit": agent.map.cells_ever_hit,
+            "closest_scene_m": None if gap is None else round(gap, 3), "gave_way": agent.give_way.times,
+            "messages": list(agent.messages)[-20:]}
+
+
+def _team_detections(stepper: TeamStepper) -> int:
+    """Occupied cells of the team's maps together (a cell found by two counts once), in scene cells."""
+    cells = set()
+    for agent in stepper.agents:
+        m = agent.map
+        rows, cols = map(list, m.occupied.nonzero())
+        cells.update((round(m.origin[0] * m.resolution) + c, round(m.origin[1] * m.resolution) + r)
+                     for r, c in zip(rows, cols, strict=True))
+    return len(cells)

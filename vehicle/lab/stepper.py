@@ -20,6 +20,7 @@ from vehicle.sim.onboard import SimController
 from vehicle.sim.simulation import PlacementError, Simulation
 from vehicle.sim.team import Team
 from vehicle.world.scene import Scene
+from vehicle.world.suites import DEFAULT_SUITE, sensor_suite
 
 
 class Stepper:
@@ -122,9 +123,10 @@ class TeamStepper:
 def simulate_team(scene: Scene, mission: str, count: int, kind: str = "copter", settings: Settings | None = None,
                   starts: list[tuple[float, ...]] | None = None, ids: list[int] | None = None,
                   waypoints: list[list[tuple[float, float]] | None] | None = None, seed: int = 0,
-                  **options) -> TeamStepper:
+                  suite: str = DEFAULT_SUITE, **options) -> TeamStepper:
     """``count`` vehicles in ``scene`` flying ``mission``, each with its agent; ``starts`` (default: the team's
-    spots around the scene's start), ``ids`` (default 1 ... count). Vehicle k's sensor noise has seed + k.
+    spots around the scene's start), ``ids`` (default 1 ... count); each carries the sensor ``suite``, and
+    vehicle k's sensor noise has seed + k.
     Raises PlacementError for a team that cannot be (see ``Team``)."""
     settings = settings or Settings()
     if count < 1:
@@ -133,7 +135,7 @@ def simulate_team(scene: Scene, mission: str, count: int, kind: str = "copter", 
     if len(starts) != count:
         raise PlacementError(f"{len(starts)} starts for {count} vehicles")
     simulations = [Simulation(scene, kind, start, cruise_speed=settings.speed, wp_radius=settings.closeness,
-                              seed=seed + k, **options) for k, start in enumerate(starts)]
+                              seed=seed + k, sensors=sensor_suite(suite), **options) for k, start in enumerate(starts)]
     return TeamStepper(Team(simulations, ids), mission, settings, waypoints)
 
 

@@ -7,6 +7,8 @@ onto it, which keeps it around the outside of objects. We add two things: goals
 near places already visited are not considered, and goals among unknown cells
 score higher, so it keeps finding new ground (the next room, the far side of a
 building). It ends when no goal is left, or when its time budget is spent.
+In a team each vehicle keeps to the goals nearer to it than to any team-mate
+(a Voronoi split on where they are now), so the team spreads out.
 
 Which sweep headings lie in the arcs beside each echo is one loop over all
 pairs of a sweep (a few hundred readings): numpy built it from a dozen n x n
@@ -23,6 +25,7 @@ import numpy as np
 from vehicle.agent.missions.base import Mission, Status
 from vehicle.agent.missions.routines import Scan, ServoScan, Travel, scan
 from vehicle.agent.monitor import sweep_profile
+from vehicle.agent.traffic import someone_elses
 
 OPEN_ARC = (math.radians(10), math.radians(40))  # where "beside" an echo is, either side
 OPEN_WEIGHT = 0.5
@@ -101,7 +104,7 @@ class Search(Mission):
             goal = (x + ux * (distance - standoff) + sx * standoff, y + uy * (distance - standoff) + sy * standoff)
             if any(math.hypot(goal[0] - vx, goal[1] - vy) < self.visited_radius for vx, vy in self.visited):
                 continue
-            if not ctx.is_clear(goal) or not ctx.inside(goal):
+            if not ctx.is_clear(goal) or not ctx.inside(goal) or someone_elses(ctx, goal):
                 continue
             score = promise[i] + UNKNOWN_WEIGHT * self._unknown_around(goal)
             if score > best_score or (score == best_score and i < best_index):
