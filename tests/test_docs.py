@@ -70,6 +70,17 @@ def help_options(module, program: str, name: str, capsys) -> set[str]:
     return set(re.findall(r"^  (--[a-z][-a-z]*)", text, flags=re.MULTILINE)) - {"--help"}
 
 
+@pytest.mark.parametrize(("module", "program"), [(vehicle.cli, "vehicle"), (groundstation.cli, "groundstation")])
+def test_docs_commands_has_a_section_for_every_subcommand(module, program, capsys):
+    with pytest.raises(SystemExit):
+        module.main(["--help"])
+    listed = re.search(r"\{([a-z,]+)\}", capsys.readouterr().out).group(1).split(",")
+    headings = re.findall(r"^### `(\S+) (\S+)`$", (ROOT / "docs" / "commands.md").read_text(encoding="utf-8"),
+                          flags=re.MULTILINE)
+    assert {name for prog, name in headings if prog == program} == set(listed)
+    assert {(program, name) for _, program_, name in SUBCOMMANDS if program_ == program} <= set(headings)
+
+
 @pytest.mark.parametrize(("module", "program", "name"), SUBCOMMANDS, ids=[f"{p} {n}" for _, p, n in SUBCOMMANDS])
 def test_docs_commands_names_every_option_of_each_command(module, program, name, capsys):
     text = (ROOT / "docs" / "commands.md").read_text(encoding="utf-8")
