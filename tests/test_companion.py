@@ -900,7 +900,7 @@ def test_an_agent_whose_mission_never_started_exits_non_zero_saying_why(monkeypa
     port = free_udp_port()
     if ending == "deadline":
         monkeypatch.setattr(process, "START_TIMEOUT", 4.0)
-        extra, why = (), "the mission did not start within 4 s: "
+        extra, why = ("--duration", "60"), "the mission did not start within 4 s: "
     else:
         extra, why = ("--duration", "6"), ""
     with ScriptedAutopilot(port) as fake:
