@@ -170,6 +170,11 @@ class Simulation:
         self.collision = contact
         self.autopilot.armed = False
 
+    @property
+    def reading_due(self) -> bool:
+        """The sonars read at the end of this step (a wreck's never do)."""
+        return self.collision is None and self.time + 1e-9 >= self._next_reading
+
     def sense(self, bodies: Bodies | None = None) -> list[Reading]:
         """The second half of a step: the sonar readings, when one is due (``bodies``: the team-mates around)."""
         if self.collision is not None or self.time + 1e-9 < self._next_reading:

@@ -53,6 +53,9 @@ class Team:
         self.closest_gap = math.inf  # m between the surfaces of the two bodies that came closest
         self.closest_pair: tuple[int, int] | None = None
         self.scene_gaps = [_SceneGap(s) for s in simulations]
+        self._pairs = np.triu_indices(len(simulations), 1)
+        self._reach = self.radii[self._pairs[0]] + self.radii[self._pairs[1]]
+        self._ids = np.array(ids)
 
     def __len__(self) -> int:
         return len(self.simulations)
@@ -71,9 +74,10 @@ class Team:
         if len(self.simulations) > 1:
             self._collide(moves)
         centres = self._centres()
-        for gap, centre in zip(self.scene_gaps, centres, strict=True):
-            gap.note(centre)
-        return [s.sense(self.others(i, centres)) for i, s in enumerate(self.simulations)]
+        for gap, centre, simulation in zip(self.scene_gaps, centres, self.simulations, strict=True):
+            if simulation.reading_due:  # ten times a second is enough for a figure
+                gap.note(centre)
+        return [s.sense(self.others(i, centres)) if s.reading_due else [] for i, s in enumerate(self.simulations)]
 
     def others(self, index: int, centres: np.ndarray | None = None) -> Bodies | None:
         """Every body but vehicle ``index``'s (wrecks too: they still stand in the way)."""
@@ -81,7 +85,7 @@ class Team:
             return None
         keep = np.arange(len(self.simulations)) != index
         centres = self._centres() if centres is None else centres
-        return Bodies(np.array(self.ids)[keep], centres[keep], self.radii[keep])
+        return Bodies(self._ids[keep], centres[keep], self.radii[keep])
 
     def _collide(self, moves: list) -> None:
         """Check every pair over the step just taken (a wreck stands where it lies); note the closest."""
@@ -94,14 +98,14 @@ class Team:
             starts.append(move[0])
             ends.append(move[1])
         starts, ends = np.array(starts, dtype=np.float64), np.array(ends, dtype=np.float64)
-        first, second = np.triu_indices(len(sims), 1)
+        first, second = self._pairs
         gap0 = starts[second] - starts[first]  # (pairs, 3): the second's centre seen from the first's
         change = (ends[second] - ends[first]) - gap0
         speed2 = np.einsum("ij,ij->i", change, change)
         with np.errstate(divide="ignore", invalid="ignore"):
             when = np.where(speed2 > 1e-18, np.clip(-np.einsum("ij,ij->i", gap0, change) / speed2, 0.0, 1.0), 0.0)
         nearest = np.linalg.norm(gap0 + when[:, None] * change, axis=1)
-        reach = self.radii[first] + self.radii[second]
+        reach = self._reach
         gaps = nearest - reach
         pair = int(np.argmin(gaps))
         if gaps[pair] < self.closest_gap:

@@ -1,0 +1,138 @@
+"""A team in one world: its speed, its safety over many runs, and what it finds together.
+
+1. Simulated seconds per wall second of teams of 1, 2, 4 and 8 copters flying
+   Search in the default scene in this one process, beside a lone vehicle
+   (``simulate``, as before teams) in the same run. Goals: a team of 1 within
+   5 % of the lone vehicle; a team of N at least 1/N of it (a vehicle in a team
+   costs no more than a lone one).
+2. Many team runs (2 to 8 copters, the project's scenes, random starts around
+   the scene's start, Search and Pathfind): collisions between vehicles or with
+   the scene (goal: none) and the closest approach between vehicles.
+3. Occupied cells found by a team of 4 and by one vehicle in the same simulated
+   time in the default scene (goal: 2.5 times).
+
+Run: python bench/team.py [--runs 40] [--seconds 120]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import random
+import time
+
+from common import DEFAULT_SCENE, ROOT, table
+
+from vehicle.agent.settings import Settings
+from vehicle.lab.experiment import Experiment, run_team, warm_up
+from vehicle.lab.stepper import TEAM_SPOTS, simulate, simulate_team
+from vehicle.sim.simulation import PlacementError
+from vehicle.world.scene import load_scene
+
+SCENES = [DEFAULT_SCENE, ROOT / "scenes" / "trees.wrl", ROOT / "scenes" / "house.wrl"]
+
+
+def speed(scene, seconds: float) -> list[list[object]]:
+    """Simulated seconds per wall second of a lone vehicle and of teams, each flying Search for ``seconds``."""
+    settings = Settings().updated({"time_limit": seconds + 60})
+    rows = []
+    lone = simulate(scene, "search", "copter", settings)
+    started = time.perf_counter()
+    lone.run(seconds)
+    lone_rate = seconds / (time.perf_counter() - started)
+    rows.append(["lone vehicle", f"{lone_rate:.0f}x", "1.00", "-"])
+    for count in (1, 2, 4, 8):
+        stepper = simulate_team(scene, "search", count, settings=settings)
+        started = time.perf_counter()
+        while stepper.team.time < seconds - 1e-9:
+            stepper.step()
+        rate = seconds / (time.perf_counter() - started)
+        goal = 0.95 if count == 1 else 1 / count
+        rows.append([f"team of {count}", f"{rate:.0f}x", f"{rate / lone_rate:.2f}",
+                     f">= {goal:.2f} {'met' if rate / lone_rate >= goal else 'MISSED'}"])
+    return rows
+
+
+def many_runs(runs: int, seconds: float, seed: int = 1) -> tuple[list[list[object]], dict]:
+    """``runs`` team runs of random size, scene, mission and starts; returns rows per scene and the totals."""
+    chooser = random.Random(seed)
+    scenes = {path: load_scene(path) for path in SCENES}
+    totals = {"runs": 0, "vehicle collisions": 0, "scene collisions": 0, "closest": math.inf, "refused starts": 0}
+    per_scene: dict[str, list] = {}
+    while totals["runs"] < runs:
+        path = chooser.choice(SCENES)
+        scene = scenes[path]
+        count = chooser.randint(2, 8)
+        mission = chooser.choice(["search", "pathfind"])
+        x0, y0 = (scene.start or (0.0, 0.0))[:2]
+        dx, dy = chooser.uniform(-3, 3), chooser.uniform(-3, 3)
+        spots = chooser.sample(TEAM_SPOTS, count)
+        starts = [(x0 + dx + sx, y0 + dy + sy) for sx, sy in spots]
+        settings = load_settings_of(scene).updated({"time_limit": seconds})
+        try:
+            stepper = simulate_team(scene, mission, count, settings=settings, starts=starts, seed=totals["runs"])
+        except PlacementError:  # a start inside an obstacle: drawn again
+            totals["refused starts"] += 1
+            continue
+        result = run_team(Experiment(str(path), mission, settings=settings, seed=totals["runs"]), stepper)
+        totals["runs"] += 1
+        crashes = [v for v in result["vehicles"] if v["outcome"] == "collision"]
+        by_vehicle = sum("vehicles" in v["reason"] for v in crashes)
+        totals["vehicle collisions"] += by_vehicle
+        totals["scene collisions"] += len(crashes) - by_vehicle
+        totals["closest"] = min(totals["closest"], result["closest_vehicles_m"])
+        row = per_scene.setdefault(path.name, [0, 0, 0, math.inf])
+        row[0] += 1
+        row[1] += by_vehicle
+        row[2] += len(crashes) - by_vehicle
+        row[3] = min(row[3], result["closest_vehicles_m"])
+    rows = [[name, n, v, s, f"{closest:.2f} m"] for name, (n, v, s, closest) in sorted(per_scene.items())]
+    return rows, totals
+
+
+def load_settings_of(scene) -> Settings:
+    from vehicle.agent.settings import load_settings
+
+    return load_settings(scene_hints=scene.hints)
+
+
+def coverage(scene, seconds: float) -> list[list[object]]:
+    """Occupied cells of one vehicle and of a team of 4, flying Search for the same simulated time."""
+    settings = Settings().updated({"time_limit": seconds})
+    rows = []
+    for count in (1, 4):
+        stepper = simulate_team(scene, "search", count, settings=settings)
+        result = run_team(Experiment(str(DEFAULT_SCENE), "search", settings=settings), stepper)
+        rows.append([count, result["detections"], result["sim_time_s"]])
+    ratio = rows[1][1] / max(rows[0][1], 1)
+    rows.append(["ratio", f"{ratio:.2f}", f"goal >= 2.5 {'met' if ratio >= 2.5 else 'MISSED'}"])
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=40, help="team runs for the safety figures (the issue asks 200)")
+    parser.add_argument("--seconds", type=float, default=120.0, help="simulated seconds of each safety run")
+    parser.add_argument("--speed-seconds", type=float, default=120.0, help="simulated seconds of each speed run")
+    parser.add_argument("--coverage-seconds", type=float, default=300.0, help="simulated seconds of the coverage runs")
+    args = parser.parse_args()
+    warm_up()
+    scene = load_scene(DEFAULT_SCENE)
+    print(f"Speed: Search in {DEFAULT_SCENE.name}, {args.speed_seconds:g} s simulated each, one process")
+    print(table(["who", "sim s / wall s", "of the lone vehicle", "goal"], speed(scene, args.speed_seconds)))
+    print()
+    started = time.perf_counter()
+    rows, totals = many_runs(args.runs, args.seconds)
+    print(f"Safety: {totals['runs']} team runs of 2 to 8 copters, Search or Pathfind, {args.seconds:g} s each, random "
+          f"starts ({totals['refused starts']} drawn inside obstacles and drawn again), "
+          f"{time.perf_counter() - started:.0f} s wall")
+    print(table(["scene", "runs", "vehicle collisions", "scene collisions", "closest approach"], rows))
+    print(f"total: {totals['vehicle collisions']} collisions between vehicles, {totals['scene collisions']} with the "
+          f"scene (goal 0); closest approach between two bodies {totals['closest']:.2f} m")
+    print()
+    print(f"Coverage: Search in {DEFAULT_SCENE.name}, {args.coverage_seconds:g} s simulated")
+    print(table(["vehicles", "occupied cells", "simulated s"], coverage(scene, args.coverage_seconds)))
+
+
+if __name__ == "__main__":
+    main()
