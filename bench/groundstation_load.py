@@ -9,8 +9,9 @@ viser frames can tell which pose a frame shows and how long it took to get
 there. The browser's view follows vehicle 1 (camera mode "follow"), and the
 frames it draws a second are counted in its 3D view (animation frames in the
 view's document, software WebGL as the harness's Chromium flags give it).
-Targets: latency p50 < 30 ms and p99 < 100 ms at 20 Hz; the server under one
-core and 400 MB RSS. Run: python bench/groundstation_load.py [--seconds 30]
+Targets: latency p50 < 10 ms and p99 < 30 ms at 20 Hz (viser alone takes
+about 4 ms; the 3D view sends a pose as it comes); the server under one core
+and 400 MB RSS. Run: python bench/groundstation_load.py [--seconds 30]
 """
 
 from __future__ import annotations
@@ -167,10 +168,11 @@ def main() -> None:
                 page = browser.new_page(viewport={"width": 1200, "height": 760})
                 page.goto(f"http://127.0.0.1:{web}/#token=bench")
                 page.frame_locator("#view").locator("canvas").first.wait_for(timeout=120_000)
-                page.click('#view3d [data-camera-mode="follow"]')  # the camera chases vehicle 1
+                # the camera chases vehicle 1 (the view's frame may be loading: no wait for its navigation)
+                page.click('#view3d [data-camera-mode="follow"]', no_wait_after=True)
                 time.sleep(3.0)
                 view = page.frame_locator("#view").locator("body")
-                view.evaluate(COUNT_FRAMES)
+                view.evaluate(COUNT_FRAMES, timeout=120_000)
                 browser_frames0 = view.evaluate("() => [window.__frames, performance.now()]")
                 cpu0, _ = process_figures(server.pid)
                 started = time.perf_counter()
@@ -196,8 +198,8 @@ def main() -> None:
     print(f"10 vehicles at 20 Hz, 9 websocket viewers + 1 browser, {wall:.0f} s; {frames} frames to the "
           f"viewers; {len(ms)} poses of vehicle 1 timed")
     print(table(["what", "figure", "target"], [
-        ["pose -> viewer frame, p50", f"{np.percentile(ms, 50):.1f} ms" if len(ms) else "-", "< 30 ms"],
-        ["pose -> viewer frame, p99", f"{np.percentile(ms, 99):.1f} ms" if len(ms) else "-", "< 100 ms"],
+        ["pose -> viewer frame, p50", f"{np.percentile(ms, 50):.1f} ms" if len(ms) else "-", "< 10 ms"],
+        ["pose -> viewer frame, p99", f"{np.percentile(ms, 99):.1f} ms" if len(ms) else "-", "< 30 ms"],
         ["browser, follow mode (software WebGL)", f"{browser_fps:.1f} frames/s", "-"],
         ["server CPU", f"{(cpu1 - cpu0) / wall:.2f} core", "< 1 core"],
         ["server RSS", f"{rss:.0f} MB", "< 400 MB"],

@@ -74,6 +74,7 @@ MAX_VEHICLES = 64  # vehicles held at once; each may hold a map of up to 16 MB
 FORGET_AFTER = 600.0  # s of the receiver's clock without a message before a vehicle is forgotten
 # a vehicle's own state, taken only from its autopilot (component AUTOPILOT, whose heartbeat alone makes a
 # vehicle): another part of the system, or a sender that took another component's name, does not move it
+POSES = frozenset({"GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE"})  # what moves a vehicle in a view
 AUTOPILOTS_OWN = frozenset({"GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE", "VFR_HUD", "SYS_STATUS",
                             "HOME_POSITION", "MISSION_CURRENT", "MISSION_ITEM_REACHED"})
 
@@ -231,6 +232,8 @@ class Fleet:
         self._swept = -math.inf  # when silent vehicles were last looked for
         self.own_sysid = own_sysid
         self.stations: OrderedDict[int, float] = OrderedDict()  # other ground stations: sysid -> last heartbeat
+        self.moved: set[int] = set()  # vehicles whose pose changed since a view last took them (``take_moved``)
+        self.pose_news = threading.Event()  # set when one did: a view waits on it to draw a pose as it comes
 
     def clear(self) -> None:
         with self.lock:
@@ -240,6 +243,13 @@ class Fleet:
             self.history.clear()
             self._occupied.clear()
             self.version += 1
+
+    def take_moved(self) -> set[int]:
+        """The vehicles whose pose changed since the last call (a burst of poses is one entry each)."""
+        with self.lock:
+            moved, self.moved = self.moved, set()
+            self.pose_news.clear()
+            return moved
 
     def get(self, sysid: int) -> VehicleState | None:
         return self.vehicles.get(sysid)
@@ -283,6 +293,9 @@ class Fleet:
                 handler(vehicle, message, now)
                 vehicle.version += 1
                 self.version += 1
+                if kind in POSES:
+                    self.moved.add(sysid)
+                    self.pose_news.set()
             if self.history.due(sysid, now) and vehicle.last_heartbeat is not None:
                 self.history.sample(sysid, now, self._sample(vehicle))
 

@@ -1,10 +1,12 @@
 """The 3D view: the scene, the vehicles, their trails, sonar, memory maps, waypoints and planned paths, in viser.
 
 viser runs its own server on a loopback port (the web app reverse-proxies it);
-this module owns what all viewers share. A loop redraws at most ``RATE`` times
-a second, in one atomic batch, and only what changed: poses every frame, trails
-and sonar a few times a second, a map only when it changed. Each client's own
-camera, markers and layer switches are its ``Viewport``'s. Clicking the ground
+this module owns what all viewers share. A pose is sent as it comes: the fleet
+marks the vehicles that moved and wakes the view's thread, which sends every
+moved vehicle's pose in one atomic batch (a burst of messages is one update).
+Trails, sonar and labels follow a few times a second, a map only when it
+changed, and each client's own camera, markers and layer switches (its
+``Viewport``) at most ``RATE`` times a second. Clicking the ground
 proposes a target to that viewer alone (a marker only it sees); sending the
 vehicle there goes through the REST API with the operator token.
 
@@ -36,8 +38,9 @@ from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
 
 CLIENT_MARKER = "/_clients/"  # each client alone gets a hidden node of this name and its id (see proxy.py)
-RATE = 30.0  # frames per second at most (poses); trails, sonar and maps far less often
-SLOW_EVERY = 8  # trails, sonar, maps and labels every this many frames
+RATE = 30.0  # the viewers' cameras and markers, times a second at most (poses go as they come)
+SLOW_PERIOD = 0.25  # s between two drawings of the trails, sonar, maps and labels
+GATHER = 0.002  # s a pose waits for the rest of its burst (its position and attitude come back to back)
 MAP_PIXELS = 512  # a map image is at most this many pixels a side
 LAYER_NODES = ("trails", "beams", "echoes", "paths", "waypoints")  # a vehicle's node in each of these layers
 
@@ -76,7 +79,7 @@ class SceneView:
         self._viewports: dict[int, Viewport] = {}
         self._generation: dict[int, int] = {}  # sysid -> how many times its shared nodes were made
         self._levels: set[float] = {1.0}  # map opacities some viewer uses: each is drawn
-        self._last_frame = time.monotonic()
+        self._last_frame = time.monotonic()  # the viewers' last frame
         self._drawn: dict[int, dict] = {}
         self._draw_lock = threading.Lock()
         self._stop = threading.Event()
@@ -140,6 +143,7 @@ class SceneView:
         with self._draw_lock:
             for sysid in list(self._drawn):
                 self._remove_vehicle(sysid)
+            self.fleet.pose_news.set()  # the loop waits on this fleet's news: it wakes to wait on the new one's
             self.fleet = fleet
 
     def on_target(self, callback: Callable[[int, float, float], None]) -> None:
@@ -166,29 +170,37 @@ class SceneView:
 
     def close(self) -> None:
         self._stop.set()
+        self.fleet.pose_news.set()  # wakes the loop now, not on its next beat
         if self._thread.is_alive():
             self._thread.join(timeout=2)
         with contextlib.redirect_stdout(io.StringIO()):  # nor its "Server stopped"
             self.server.stop()
 
     def _run(self) -> None:
-        frame = 0
+        """Poses as they come (woken by the fleet); the viewers' frames and the slow layers on their beats."""
+        next_frame = next_slow = time.monotonic()
         while not self._stop.is_set():
-            started = time.monotonic()
+            if self.fleet.pose_news.wait(max(0.0, min(next_frame, next_slow) - time.monotonic())):
+                if self._stop.wait(GATHER):  # the rest of the burst joins this update
+                    break
+            now = time.monotonic()
+            slow, frame = now >= next_slow, now >= next_frame
             try:
-                self.draw(slow=frame % SLOW_EVERY == 0)
+                self.draw(slow=slow, frame=frame or slow)
             except Exception as error:  # noqa: BLE001 - a drawing problem must not stop the view
                 print(f"3D view: {type(error).__name__}: {error}")
-            frame += 1
-            self._stop.wait(max(0.0, 1.0 / RATE - (time.monotonic() - started)))
+            if slow:
+                next_slow = now + SLOW_PERIOD
+            if frame or slow:
+                next_frame = now + 1.0 / RATE
 
-    def draw(self, slow: bool = True) -> None:
-        """Bring the scene up to date with the fleet, then each client's view (called by the loop;
-        callable directly in tests)."""
-        now = time.monotonic()
-        dt, self._last_frame = min(now - self._last_frame, 0.5), now
+    def draw(self, slow: bool = True, frame: bool = True) -> None:
+        """Bring the scene up to date with the fleet: the poses of the vehicles that moved (``slow``: of all,
+        and their trails, sonar, maps and labels), then, on a ``frame``, each client's view (called by the
+        loop; callable directly in tests)."""
         with self._draw_lock:
             with self.fleet.lock:
+                moved = self.fleet.take_moved()
                 vehicles = [v for v in self.fleet.vehicles.values() if v.x is not None]
                 gone = set(self._drawn) - {v.sysid for v in vehicles}
                 if slow:
@@ -197,10 +209,14 @@ class SceneView:
                     for sysid in gone:
                         self._remove_vehicle(sysid)
                     for vehicle in vehicles:
-                        self._draw_vehicle(vehicle, colour(vehicle.sysid), slow)
+                        if slow or vehicle.sysid in moved or vehicle.sysid not in self._drawn:
+                            self._draw_vehicle(vehicle, colour(vehicle.sysid), slow)
                 seen = [Vehicle(v.sysid, np.array(self._drawn[v.sysid]["body"].position), v.yaw, v.pitch,
-                                colour(v.sysid)) for v in vehicles]
-            self._draw_viewports(seen, dt)
+                                colour(v.sysid)) for v in vehicles] if frame else []
+            if frame:
+                now = time.monotonic()
+                dt, self._last_frame = min(now - self._last_frame, 0.5), now
+                self._draw_viewports(seen, dt)
         self.server.flush()
 
     def _draw_viewports(self, vehicles: list[Vehicle], dt: float) -> None:

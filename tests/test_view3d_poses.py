@@ -1,0 +1,90 @@
+"""The 3D view sends a pose as it comes, not on its next frame, and a burst of poses as one update.
+
+A real ``SceneView`` (viser on a loopback port) draws a real ``Fleet`` fed real
+pymavlink messages. Its frame and slow beats are stretched to minutes, so only
+the fleet's news of a pose can make it draw: a view that polled would not.
+"""
+
+from __future__ import annotations
+
+import pytest
+from harness import wait_wall
+
+import groundstation.viz as viz
+from groundstation.state import Fleet
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mav import mavlink
+
+DATUM = Datum()
+
+
+class Vehicle:
+    """Packs one autopilot's messages and decodes them, as a link delivers them to the fleet."""
+
+    def __init__(self, sysid: int):
+        self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1)
+        self.parser = mavlink.MAVLink(None)
+
+    def __call__(self, message):
+        return self.parser.decode(bytearray(message.pack(self.packer)))
+
+    def heartbeat(self):
+        return self(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR,
+                                                      mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                                      mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4,
+                                                      mavlink.MAV_STATE_ACTIVE, 3))
+
+    def at(self, x: float, y: float = 0.0):
+        lat, lon = DATUM.to_global(x, y)
+        return self(mavlink.MAVLink_global_position_int_message(1000, int(round(lat * 1e7)), int(round(lon * 1e7)),
+                                                                0, 4000, 0, 0, 0, 0))
+
+
+@pytest.fixture
+def view(monkeypatch):
+    """A running view whose own beats (cameras, trails) come only every few minutes."""
+    monkeypatch.setattr(viz, "RATE", 1 / 300)
+    monkeypatch.setattr(viz, "SLOW_PERIOD", 300.0)
+    fleet = Fleet(DATUM)
+    one = Vehicle(1)
+    fleet.apply(one.heartbeat(), 0.0)
+    fleet.apply(one.at(0.0), 0.0)
+    scene_view = viz.SceneView(fleet, None)
+    drawn: list[int] = []
+    draw_vehicle = scene_view._draw_vehicle
+    scene_view._draw_vehicle = lambda v, colour, slow: (drawn.append(v.sysid), draw_vehicle(v, colour, slow))
+    scene_view.drawn = drawn
+    scene_view.start()
+    try:
+        wait_wall(lambda: 1 in scene_view._drawn, 10, "the first frame")  # the loop's first beat draws it
+        yield scene_view, fleet, one
+    finally:
+        scene_view.close()
+
+
+def body_x(scene_view) -> float:
+    return float(scene_view._drawn[1]["body"].position[0])
+
+
+def test_a_pose_is_sent_as_it_comes_not_on_the_next_frame(view):
+    scene_view, fleet, one = view
+    for x in (3.0, 6.0, 9.0):
+        fleet.apply(one.at(x), 1.0)
+        wait_wall(lambda x=x: abs(body_x(scene_view) - x) < 0.01, 10, f"the view showing x = {x}")
+
+
+def test_a_burst_of_poses_is_one_update_for_each_vehicle_that_moved(view):
+    scene_view, fleet, one = view
+    two, three = Vehicle(2), Vehicle(3)
+    fleet.apply(three.heartbeat(), 1.0)
+    fleet.apply(three.at(-5.0), 1.0)
+    wait_wall(lambda: 3 in scene_view._drawn, 10, "vehicle 3 drawn")
+    with fleet.lock:  # the view wakes, then waits for the lock: everything below arrives as one burst
+        fleet.apply(two.heartbeat(), 1.0)
+        drawn_before = len(scene_view.drawn)
+        for k in range(1, 51):
+            fleet.apply(one.at(0.1 * k), 1.0)
+            fleet.apply(two.at(0.1 * k, 5.0), 1.0)
+    wait_wall(lambda: abs(body_x(scene_view) - 5.0) < 0.01 and 2 in scene_view._drawn, 10, "the burst drawn")
+    assert sorted(scene_view.drawn[drawn_before:]) == [1, 2]  # one update each, not fifty; none for 3
+    assert fleet.moved == set()
