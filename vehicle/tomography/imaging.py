@@ -30,7 +30,9 @@ from vehicle.tomography.weights import LAMBDA, Grid, WeightCache, default_cell
 
 CORRELATION = 0.5  # m: the prior's correlation distance, about a person's width, the size of what we image
 DRIFT_SIGMAS = 3.0
-NOISE_FLOOR = 0.5  # dB: half the 1 dB step radios report RSS in; smaller deviations are no evidence of drift
+DRIFT_ROUNDS = 4
+WORST_SHARE = 2 / 3  # a round takes out the paths within this share of the worst deviation
+DRIFT_MIN_DB = 5.0  # what a person near a link's line does to it in a room: 1 dB typically, 7 dB at the 90th percentile
 SOLVERS = ("ls", "tv")
 SMOOTH = 3  # windows: the centred moving average of each path's measurement (see smooth)
 
@@ -233,17 +235,25 @@ def choose_alpha(imager: Imager, paths: np.ndarray, Y: np.ndarray, sigma: np.nda
 
 
 def drifted_paths(imager: Imager, paths: np.ndarray, Y: np.ndarray, sigma: np.ndarray, alpha: float) -> np.ndarray:
-    """Paths whose median attenuation over the file the other paths do not predict (see the module's
-    docstring)."""
+    """Paths whose median attenuation over the file the other paths do not predict (see the module's docstring).
+    Worst first, a few rounds: a drifted path also spoils the prediction of the paths beside it, so those are
+    judged again once it is out."""
     with np.errstate(all="ignore"):
         median = np.nanmedian(np.where(np.isfinite(Y), Y, np.nan), axis=0) if len(Y) else np.zeros(len(paths))
-    known = np.isfinite(median)
+    active = np.isfinite(median)
     out = np.zeros(len(paths), bool)
-    if known.sum() < 4:
-        return out
-    lmap, _ = imager.linear_map(paths[known], sigma[known])
-    loo = lmap.loo_residuals(median[known] / sigma[known], alpha) * sigma[known]
-    centre = np.median(loo)
-    spread = max(1.4826 * float(np.median(np.abs(loo - centre))), NOISE_FLOOR)
-    out[np.nonzero(known)[0]] = np.abs(loo - centre) > DRIFT_SIGMAS * spread
+    for _ in range(DRIFT_ROUNDS):
+        index = np.nonzero(active)[0]
+        if len(index) < 4:
+            break
+        lmap, _ = imager.linear_map(paths[index], sigma[index])
+        loo = lmap.loo_residuals(median[index] / sigma[index], alpha) * sigma[index]
+        deviation = np.abs(loo - np.median(loo))
+        spread = 1.4826 * float(np.median(deviation))
+        worst = ((deviation > DRIFT_SIGMAS * spread) & (deviation > DRIFT_MIN_DB)
+                 & (deviation >= WORST_SHARE * deviation.max()))
+        if not worst.any():
+            break
+        out[index[worst]] = True
+        active[index[worst]] = False
     return out
