@@ -93,7 +93,9 @@ def test_ellipse_weights_cover_the_line_and_the_cache_reuses_revisited_paths():
     grid = Grid((0.0, 0.0, 4.0, 4.0), 0.2)
     path = np.array([[0.1, 2.0, 3.9, 2.0]])
     row = weight_rows(grid, path).toarray().reshape(grid.shape)
-    assert row[10, :].min() > 0 and row[9:11].sum() == row.sum()  # the two rows of pixels along y = 2 only
+    half_width = np.sqrt(3.9 ** 2 - 3.8 ** 2) / 2  # the ellipse's semi-minor axis for lambda = 0.1 m
+    ys = grid.centres()[:, 1].reshape(grid.shape)
+    assert row[10, 1:-1].min() > 0 and row[np.abs(ys - 2.0) > half_width].sum() == 0
     assert np.isclose(row.max(), 1 / np.sqrt(3.8))
     smooth = weight_rows(grid, path, "exponential").toarray().reshape(grid.shape)
     assert smooth[12].max() > 0 and smooth[12].max() < smooth[10].max()  # fading away from the line
