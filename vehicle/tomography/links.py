@@ -102,7 +102,7 @@ def read_links(path: str | Path) -> Records:
     data = data[keep]
     if not len(data):
         why = "; ".join(f"{count} {SKIP_REASONS[kind]}" for kind, count in skipped.items() if count)
-        last = text.count("\n") + 1
+        last = 1 + max(1, text.count("\n"))  # the last line read, or where the first record belonged
         raise LinkError(f"{name}:{last}: no usable link records" + (f" ({why})" if why else ""))
     return Records(name, data[:, 0], data[:, 1:3], data[:, 3:5], data[:, 5], data[:, 6].astype(np.int64),
                    {k: v for k, v in skipped.items() if v}, first)
