@@ -20,7 +20,9 @@ note, and a writer process (forked, on the other core) makes the messages:
   than 5 s, compressed with zlib's run-length strategy: a log is read from a
   disk, not joined late over a radio link, and that is a tenth of the
   default level's time for the same decoded map), makes the other payloads
-  from the numbers with numpy (the same values as ``Telemetry``'s), and
+  from the numbers with the encoders ``Telemetry`` itself uses (one row at
+  a time live, thousands at once here: ``telemetry.poses``, ``telemetry.huds``,
+  ``rangefinder.distance_sensors``), and
   frames every message (MAVLink 2 header, sequence number, CRC) in one
   compiled loop: no library frames many messages at once, and pymavlink's
   framing is most of its cost.
@@ -47,19 +49,18 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from vehicle.agent.companion import COMPONENT, Companion
+from vehicle.agent.companion import Companion
 from vehicle.lab.stepper import Stepper
 from vehicle.protocol import agent_status
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mapstream import MapStreamer, snapshot_chunks
-from vehicle.protocol.mav import mavlink
-from vehicle.protocol.rangefinder import Reading, orientation_of
+from vehicle.protocol.mav import AUTOPILOT, COMPANION, mavlink
+from vehicle.protocol.rangefinder import DISTANCE_SENSOR_WIRE, Reading, distance_sensors
 from vehicle.protocol.scene_note import SceneNotes, note_text
 from vehicle.protocol.tlog import LOG_EPOCH, TlogWriter
-from vehicle.sim.telemetry import Telemetry
+from vehicle.sim.telemetry import GLOBAL_POSITION_WIRE, LOCAL_POSITION_WIRE, VFR_HUD_WIRE, Telemetry, huds, poses
 
-AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
-COMPONENTS = (AUTOPILOT, COMPONENT)  # each has its own sequence numbers
+COMPONENTS = (AUTOPILOT, COMPANION)  # each has its own sequence numbers
 SNAPSHOT_PERIOD = 10.0  # s of simulated time between map snapshots, at least
 SNAPSHOT_BUDGET = 15000.0  # bytes of map part compressed per simulated second, at most (a bigger map: less often)
 BATCH_STEPS = 100  # steps noted before they go to the writer
@@ -75,20 +76,11 @@ POSES = (_GLOBAL_POSITION, _LOCAL_POSITION, _ATTITUDE)  # sent together, each wi
 POSE_FIELDS = 12  # key, time, x, y, z, yaw, pitch, roll, vx, vy, vz, yaw rate
 HUD_FIELDS = 7  # key, time, speed, yaw, z, vz, flying
 RANGE_FIELDS = 9  # key, time, sensor, distance (NaN: none), yaw offset, pitch, max and min range, beam angle
-# payloads in wire order (pymavlink's struct formats, checked here)
-_GLOBAL_WIRE = np.dtype([("time", "<u4"), ("lat", "<i4"), ("lon", "<i4"), ("alt", "<i4"), ("relative_alt", "<i4"),
-                         ("vx", "<i2"), ("vy", "<i2"), ("vz", "<i2"), ("hdg", "<u2")])
-_SEVEN_WIRE = np.dtype([("time", "<u4")] + [(f"f{i}", "<f4") for i in range(6)])  # LOCAL_POSITION_NED, ATTITUDE
-assert _GLOBAL_POSITION.unpacker.format == "<IiiiihhhH" and _GLOBAL_WIRE.itemsize == _GLOBAL_POSITION.unpacker.size
-assert _LOCAL_POSITION.unpacker.format == _ATTITUDE.unpacker.format == "<Iffffff"
-_HUD_WIRE = np.dtype([("airspeed", "<f4"), ("groundspeed", "<f4"), ("alt", "<f4"), ("climb", "<f4"),
-                      ("heading", "<i2"), ("throttle", "<u2")])
-assert _VFR_HUD.unpacker.format == "<ffffhH"
-_RANGE_WIRE = np.dtype([("time", "<u4"), ("min_distance", "<u2"), ("max_distance", "<u2"), ("current", "<u2"),
-                        ("type", "u1"), ("id", "u1"), ("orientation", "u1"), ("covariance", "u1"),
-                        ("horizontal_fov", "<f4"), ("vertical_fov", "<f4"), ("quaternion", "<f4", 4),
-                        ("signal_quality", "u1")])
-assert _DISTANCE_SENSOR.unpacker.format == "<IHHHBBBBff4fB" and _RANGE_WIRE.itemsize == 39
+# the encoders' payloads are framed here as they are: their layouts must be pymavlink's
+assert _GLOBAL_POSITION.unpacker.format == "<IiiiihhhH" and GLOBAL_POSITION_WIRE.itemsize == 28
+assert _LOCAL_POSITION.unpacker.format == _ATTITUDE.unpacker.format == "<Iffffff" and LOCAL_POSITION_WIRE.itemsize == 28
+assert _VFR_HUD.unpacker.format == "<ffffhH" and VFR_HUD_WIRE.itemsize == 20
+assert _DISTANCE_SENSOR.unpacker.format == "<IHHHBBBBff4fB" and DISTANCE_SENSOR_WIRE.itemsize == 39
 _TUNNEL_HEAD = struct.Struct("<HBBB")  # payload_type, target system and component, payload_length
 assert _TUNNEL.unpacker.format == "<HBBB128B"
 
@@ -368,61 +360,19 @@ class _Writer:
             out += snapshot_chunks(ident, head + packer.compress(part) + packer.flush())
         return out
 
-    def _poses(self, poses: np.ndarray) -> list[np.ndarray]:
-        """GLOBAL_POSITION_INT, LOCAL_POSITION_NED and ATTITUDE payloads (rows of bytes): the values of
-        ``Telemetry``'s builders, with the same operations on arrays (numpy casts truncate as ``int`` does)."""
-        _, now, x, y, z, yaw, pitch, roll, vx, vy, vz, yaw_rate = poses.T
-        ms = (now * 1000).astype(np.int64) & 0xFFFFFFFF
-        lat, lon = self.datum.to_global(x, y)
-        home = self.home
-        height = z - home[2]
-        position = np.empty(len(poses), _GLOBAL_WIRE)
-        position["time"] = ms
-        position["lat"] = np.rint(lat * 1e7)  # round(), half to even
-        position["lon"] = np.rint(lon * 1e7)
-        position["alt"] = ((self.datum.alt + home[2]) + height) * 1000
-        position["relative_alt"] = height * 1000
-        position["vx"] = vy * 100
-        position["vy"] = vx * 100
-        position["vz"] = -vz * 100
-        position["hdg"] = np.mod(np.trunc(np.degrees(yaw) * 100).astype(np.int64), 36000)
-        local = np.empty(len(poses), _SEVEN_WIRE)
-        attitude = np.empty(len(poses), _SEVEN_WIRE)
-        local["time"] = attitude["time"] = ms
-        wrapped = np.where(yaw <= math.pi, yaw, yaw - 2 * math.pi)
-        for name, ned, turn in zip(local.dtype.names[1:], (y - home[1], x - home[0], -height, vy, vx, -vz),
-                                   (roll, pitch, wrapped, 0.0, 0.0, yaw_rate), strict=True):
-            local[name], attitude[name] = ned, turn
-        return [block.view(np.uint8).reshape(len(poses), -1) for block in (position, local, attitude)]
+    def _poses(self, rows: np.ndarray) -> list[np.ndarray]:
+        """GLOBAL_POSITION_INT, LOCAL_POSITION_NED and ATTITUDE payloads (rows of bytes), by Telemetry's encoder."""
+        return [_bytes(block) for block in poses(self.datum, self.home, rows[:, 1:])]
 
-    def _huds(self, huds: np.ndarray) -> list[np.ndarray]:
-        """VFR_HUD payloads, as ``Telemetry.vfr_hud`` makes them."""
-        _, _, speed, yaw, z, vz, flying = huds.T
-        hud = np.empty(len(huds), _HUD_WIRE)
-        hud["airspeed"] = hud["groundspeed"] = speed
-        hud["alt"] = (self.datum.alt + self.home[2]) + (z - self.home[2])
-        hud["climb"] = vz
-        hud["heading"] = np.mod(np.trunc(np.degrees(yaw)).astype(np.int64), 360)
-        hud["throttle"] = np.where(flying > 0, 50, 0)
-        return [hud.view(np.uint8).reshape(len(huds), -1)]
+    def _huds(self, rows: np.ndarray) -> list[np.ndarray]:
+        """VFR_HUD payloads, by Telemetry's encoder."""
+        return [_bytes(huds(self.datum, self.home, rows[:, 2:]))]
 
-    def _ranges(self, ranges: np.ndarray) -> list[np.ndarray]:
-        """DISTANCE_SENSOR payloads, as ``rangefinder.distance_sensor`` makes them."""
-        _, now, sensor, distance, yaw_offset, pitch, max_range, min_range, beam_angle = ranges.T
-        out = np.zeros(len(ranges), _RANGE_WIRE)
-        top = np.minimum(np.trunc(max_range * 100), 65534)
-        bottom = np.trunc(min_range * 100)
-        value = np.where(np.isnan(distance), top + 1, np.maximum(bottom, np.trunc(np.nan_to_num(distance) * 100)))
-        out["time"] = (now * 1000).astype(np.int64) & 0xFFFFFFFF
-        out["min_distance"], out["max_distance"], out["current"] = bottom, top, np.minimum(value, 65535)
-        out["type"] = mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND
-        out["id"] = sensor.astype(np.int64) & 0xFF
-        mounts, which = np.unique(np.column_stack([yaw_offset, pitch]), axis=0, return_inverse=True)
-        orientations = [orientation_of(float(yaw), float(up)) for yaw, up in mounts]
-        out["orientation"] = np.array([o for o, _ in orientations], dtype=np.int64)[which.reshape(-1)]
-        out["quaternion"] = np.array([q for _, q in orientations], dtype=np.float64).reshape(-1, 4)[which.reshape(-1)]
-        out["horizontal_fov"] = out["vertical_fov"] = np.radians(2 * beam_angle)
-        return [out.view(np.uint8).reshape(len(ranges), -1)]
+    def _ranges(self, rows: np.ndarray) -> list[np.ndarray]:
+        """DISTANCE_SENSOR payloads, by the rangefinder's encoder (time in ms, as the live vehicle's)."""
+        readings = rows[:, 1:].copy()
+        readings[:, 0] = np.trunc(readings[:, 0] * 1000)
+        return [_bytes(distance_sensors(readings))]
 
     def close(self) -> int:
         try:
@@ -517,6 +467,11 @@ def _serve(setup: tuple, connection) -> None:
     while writer.error is None and (batch := connection.recv()) is not None:
         writer.write(batch)
     connection.send((writer.close(), writer.error))
+
+
+def _bytes(payloads: np.ndarray) -> np.ndarray:
+    """Payloads of a wire layout as rows of bytes."""
+    return payloads.view(np.uint8).reshape(len(payloads), -1)
 
 
 def _payload(message) -> bytes:

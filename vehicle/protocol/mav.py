@@ -53,6 +53,12 @@ def __getattr__(name: str):
 
 
 
+def from_wire(message_class, row):
+    """A pymavlink message of ``message_class`` from one row of a numpy array of its payloads (fields named as
+    pymavlink names them), so that one vectorised encoder serves a single message and a batch of thousands."""
+    return message_class(**{name: row[name].tolist() for name in row.dtype.names})
+
+
 def pack(message, packer) -> bytes:
     """The message's bytes from ``packer`` (a MAVLink instance), advancing its sequence number.
 
@@ -65,4 +71,4 @@ def pack(message, packer) -> bytes:
 
 
 __all__ = ["ACCEPTED", "AUTOPILOT", "COMMAND_NAMES", "COMPANION", "DENIED", "FAILED", "RESULT_WORDS",
-           "TEMPORARILY_REJECTED", "UNSUPPORTED", "mavlink", "pack"]  # and mavutil, on first use
+           "TEMPORARILY_REJECTED", "UNSUPPORTED", "from_wire", "mavlink", "pack"]  # and mavutil, on first use

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vehicle.protocol.frames import Pose, beam_axis
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import from_wire, mavlink
 
 CUSTOM = mavlink.MAV_SENSOR_ROTATION_CUSTOM
 UNKNOWN_DISTANCE = 65535  # OBSTACLE_DISTANCE: no sensor in this sector
@@ -79,16 +79,42 @@ def orientation_of(yaw_offset: float, pitch: float) -> tuple[int, list[float]]:
     return CUSTOM, [cy * cp, -sy * sp, cy * sp, sy * cp]
 
 
+# DISTANCE_SENSOR's payload in wire order (pymavlink's names; the struct format is checked where it is framed)
+DISTANCE_SENSOR_WIRE = np.dtype([("time_boot_ms", "<u4"), ("min_distance", "<u2"), ("max_distance", "<u2"),
+                                 ("current_distance", "<u2"), ("type", "u1"), ("id", "u1"), ("orientation", "u1"),
+                                 ("covariance", "u1"), ("horizontal_fov", "<f4"), ("vertical_fov", "<f4"),
+                                 ("quaternion", "<f4", 4), ("signal_quality", "u1")])
+
+
 def distance_sensor(reading: Reading, time_boot_ms: int):
-    """The DISTANCE_SENSOR message of a reading."""
-    top = min(int(reading.max_range * 100), 65534)
-    bottom = int(reading.min_range * 100)
-    value = top + 1 if reading.distance is None else max(bottom, int(reading.distance * 100))
-    orientation, quaternion = orientation_of(reading.yaw_offset, reading.pitch)
-    fov = math.radians(2 * reading.beam_angle)
-    return mavlink.MAVLink_distance_sensor_message(
-        time_boot_ms & 0xFFFFFFFF, bottom, top, min(value, 65535), mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND,
-        reading.sensor & 0xFF, orientation, 0, fov, fov, quaternion, 0)
+    """The DISTANCE_SENSOR message of a reading (the one encoder's, as a log makes thousands at once)."""
+    row = distance_sensors(np.array([[time_boot_ms, reading.sensor,
+                                      math.nan if reading.distance is None else reading.distance,
+                                      reading.yaw_offset, reading.pitch, reading.max_range, reading.min_range,
+                                      reading.beam_angle]], dtype=np.float64))[0]
+    return from_wire(mavlink.MAVLink_distance_sensor_message, row)
+
+
+def distance_sensors(readings: np.ndarray) -> np.ndarray:
+    """DISTANCE_SENSOR payloads (``DISTANCE_SENSOR_WIRE``) of readings, one a row: time_boot_ms, sensor, distance
+    (NaN: no echo, sent as ``max_distance + 1``), mount yaw and pitch (degrees), max and min range (m) and
+    beam half-angle (degrees). Centimetres are truncated, as ``int`` does."""
+    ms, sensor, distance, yaw_offset, pitch, max_range, min_range, beam_angle = readings.T
+    out = np.zeros(len(readings), DISTANCE_SENSOR_WIRE)
+    top = np.minimum(np.trunc(max_range * 100), 65534)
+    bottom = np.trunc(min_range * 100)
+    value = np.where(np.isnan(distance), top + 1, np.maximum(bottom, np.trunc(np.nan_to_num(distance) * 100)))
+    out["time_boot_ms"] = ms.astype(np.int64) & 0xFFFFFFFF
+    out["min_distance"], out["max_distance"], out["current_distance"] = bottom, top, np.minimum(value, 65535)
+    out["type"] = mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND
+    out["id"] = sensor.astype(np.int64) & 0xFF
+    mounts, which = np.unique(np.column_stack([yaw_offset, pitch]), axis=0, return_inverse=True)
+    orientations = [orientation_of(float(yaw), float(up)) for yaw, up in mounts]
+    which = which.reshape(-1)
+    out["orientation"] = np.array([o for o, _ in orientations], dtype=np.int64)[which]
+    out["quaternion"] = np.array([q for _, q in orientations], dtype=np.float64).reshape(-1, 4)[which]
+    out["horizontal_fov"] = out["vertical_fov"] = np.radians(2 * beam_angle)
+    return out
 
 
 # ---- receiving ---------------------------------------------------------------------------------------

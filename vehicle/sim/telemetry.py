@@ -8,14 +8,22 @@ same, and their ``time_boot_ms`` is always the simulated time since boot.
 Conventions: LOCAL_POSITION_NED is metres from home (north, east, down);
 DISTANCE_SENSOR carries one reading (``vehicle.protocol.rangefinder``). An
 onboard agent's own messages (its map, its state) are its own: component 191.
+
+Positions, attitude, VFR_HUD and DISTANCE_SENSOR are encoded by functions on
+arrays (``poses``, ``huds``, ``rangefinder.distance_sensors``): a live vehicle
+asks them for one row, an experiment's log (``vehicle.lab.log``) for thousands
+at once, so both send the very same bytes.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from vehicle import __version__
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mav import from_wire, mavlink
 from vehicle.protocol.modes import mode_number
 from vehicle.protocol.rangefinder import Reading, distance_sensor
 from vehicle.protocol.statustext import statustexts
@@ -42,6 +50,57 @@ DEFAULT_INTERVALS = {  # seconds
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
 }
 VERSION = tuple(int(p) for p in __version__.split(".")[:3])
+# payloads in wire order (pymavlink's names; the struct formats are checked where the log frames them)
+GLOBAL_POSITION_WIRE = np.dtype([("time_boot_ms", "<u4"), ("lat", "<i4"), ("lon", "<i4"), ("alt", "<i4"),
+                                 ("relative_alt", "<i4"), ("vx", "<i2"), ("vy", "<i2"), ("vz", "<i2"),
+                                 ("hdg", "<u2")])
+LOCAL_POSITION_WIRE = np.dtype([("time_boot_ms", "<u4")] + [(name, "<f4") for name in
+                                                            ("x", "y", "z", "vx", "vy", "vz")])
+ATTITUDE_WIRE = np.dtype([("time_boot_ms", "<u4")] + [(name, "<f4") for name in
+                                                      ("roll", "pitch", "yaw", "rollspeed", "pitchspeed", "yawspeed")])
+VFR_HUD_WIRE = np.dtype([("airspeed", "<f4"), ("groundspeed", "<f4"), ("alt", "<f4"), ("climb", "<f4"),
+                         ("heading", "<i2"), ("throttle", "<u2")])
+
+
+def poses(datum: Datum, home, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """GLOBAL_POSITION_INT, LOCAL_POSITION_NED and ATTITUDE payloads of poses, one a row: time (s since boot),
+    x, y, z (scene m), yaw (compass), pitch, roll (rad), vx, vy, vz (m/s east, north, up), yaw rate. Heights
+    are above the start's ground (``home``'s z); integers are truncated as ``int`` does, degrees E7 rounded."""
+    now, x, y, z, yaw, pitch, roll, vx, vy, vz, yaw_rate = rows.T
+    ms = (now * 1000).astype(np.int64) & 0xFFFFFFFF
+    lat, lon = datum.to_global(x, y)
+    height = z - home[2]
+    position = np.empty(len(rows), GLOBAL_POSITION_WIRE)
+    position["time_boot_ms"] = ms
+    position["lat"] = np.rint(lat * 1e7)  # round(), half to even
+    position["lon"] = np.rint(lon * 1e7)
+    position["alt"] = ((datum.alt + home[2]) + height) * 1000
+    position["relative_alt"] = height * 1000
+    position["vx"], position["vy"], position["vz"] = vy * 100, vx * 100, -vz * 100  # north, east, down
+    position["hdg"] = np.mod(np.trunc(np.degrees(yaw) * 100).astype(np.int64), 36000)
+    local = np.empty(len(rows), LOCAL_POSITION_WIRE)
+    attitude = np.empty(len(rows), ATTITUDE_WIRE)
+    local["time_boot_ms"] = attitude["time_boot_ms"] = ms
+    for name, value in zip(LOCAL_POSITION_WIRE.names[1:], (y - home[1], x - home[0], -height, vy, vx, -vz),
+                           strict=True):
+        local[name] = value
+    wrapped = np.where(yaw <= math.pi, yaw, yaw - 2 * math.pi)
+    for name, value in zip(ATTITUDE_WIRE.names[1:], (roll, pitch, wrapped, 0.0, 0.0, yaw_rate), strict=True):
+        attitude[name] = value
+    return position, local, attitude
+
+
+def huds(datum: Datum, home, rows: np.ndarray) -> np.ndarray:
+    """VFR_HUD payloads, one a row: ground speed (m/s), yaw (compass, rad), z (scene m), vz (m/s up), flying
+    (1 or 0: the throttle shows 50 % while it flies)."""
+    speed, yaw, z, vz, flying = rows.T
+    hud = np.empty(len(rows), VFR_HUD_WIRE)
+    hud["airspeed"] = hud["groundspeed"] = speed
+    hud["alt"] = (datum.alt + home[2]) + (z - home[2])
+    hud["climb"] = vz
+    hud["heading"] = np.mod(np.trunc(np.degrees(yaw)).astype(np.int64), 360)
+    hud["throttle"] = np.where(flying > 0, 50, 0)
+    return hud
 
 
 class Telemetry:
@@ -124,41 +183,26 @@ class Telemetry:
             0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, 32767, [cell] * 4 + [65535] * 6,
             int(battery.current * 100), int(battery.consumed_mah), -1, int(battery.remaining * 100))
 
-    def _position(self):
-        pose = self.world.pose
-        home = self.world.home
-        lat, lon = self.world.datum.to_global(pose.x, pose.y)
-        height = pose.z - home[2]  # above the start's ground
-        return pose, lat, lon, height
+    def _poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        body, pose = self.world.body, self.world.pose
+        row = (self.world.time, pose.x, pose.y, pose.z, pose.yaw, pose.pitch, pose.roll, body.vx, body.vy, body.vz,
+               body.yaw_rate)
+        return poses(self.world.datum, self.world.home, np.array([row], dtype=np.float64))
 
     def global_position(self, now: float):
-        pose, lat, lon, height = self._position()
-        body = self.world.body
-        msl = self.world.datum.alt + self.world.home[2] + height
-        heading = int(math.degrees(pose.yaw) * 100) % 36000
-        return mavlink.MAVLink_global_position_int_message(
-            self._ms(now), int(round(lat * 1e7)), int(round(lon * 1e7)), int(msl * 1000), int(height * 1000),
-            int(body.vy * 100), int(body.vx * 100), int(-body.vz * 100), heading)
+        return from_wire(mavlink.MAVLink_global_position_int_message, self._poses()[0][0])
 
     def local_position(self, now: float):
-        pose, _, _, height = self._position()
-        body = self.world.body
-        home = self.world.home
-        return mavlink.MAVLink_local_position_ned_message(
-            self._ms(now), pose.y - home[1], pose.x - home[0], -height, body.vy, body.vx, -body.vz)
+        return from_wire(mavlink.MAVLink_local_position_ned_message, self._poses()[1][0])
 
     def attitude(self, now: float):
-        pose = self.world.pose
-        yaw = pose.yaw if pose.yaw <= math.pi else pose.yaw - 2 * math.pi
-        return mavlink.MAVLink_attitude_message(self._ms(now), pose.roll, pose.pitch, yaw, 0.0, 0.0,
-                                                self.world.body.yaw_rate)
+        return from_wire(mavlink.MAVLink_attitude_message, self._poses()[2][0])
 
     def vfr_hud(self, now: float):
-        pose, _, _, height = self._position()
         body = self.world.body
-        throttle = 50 if self.world.autopilot.flying else 0
-        return mavlink.MAVLink_vfr_hud_message(body.speed, body.speed, int(math.degrees(pose.yaw)) % 360,
-                                               throttle, self.world.datum.alt + self.world.home[2] + height, body.vz)
+        row = (body.speed, self.world.pose.yaw, self.world.pose.z, body.vz, self.world.autopilot.flying)
+        return from_wire(mavlink.MAVLink_vfr_hud_message,
+                         huds(self.world.datum, self.world.home, np.array([row], dtype=np.float64))[0])
 
     def mission_current(self, now: float):
         pilot = self.world.autopilot
