@@ -80,3 +80,36 @@ def test_a_walker_is_tracked_without_any_calibration(network):
     assert np.median(errors) < 0.5
     assert np.median(track_errors[5:]) < 0.6
     assert result.info["links"]["calibrated"] == 0
+
+
+def test_moving_radios_are_calibrated_per_spot_pair_and_weighed_once_per_path():
+    """Two layouts of the same 16 radios (vehicles that drive between two sets of spots) take turns; the
+    calibration visits both. Every spot pair is its own link, and the person shows in the image of both."""
+    first, second = Network(square(16), channels=2, seed=7), Network(square(16, 6.0) + 0.2, channels=2, seed=8)
+
+    def both(method, *args, **kwargs):
+        a, b = getattr(first, method)(*args, **kwargs), getattr(second, method)(*args, **kwargs)
+        keep = np.ones(len(a), bool)
+        out = a.select(keep)
+        out.t = np.concatenate([a.t, b.t + 0.25])
+        order = np.argsort(out.t, kind="stable")
+        out.t, out.rssi = out.t[order], np.concatenate([a.rssi, b.rssi])[order]
+        out.tx, out.rx = np.vstack([a.tx, b.tx])[order], np.vstack([a.rx, b.rx])[order]
+        out.channel = np.concatenate([a.channel, b.channel])[order]
+        return out
+
+    calibration = both("sweeps", np.arange(6) * 0.5)
+    records = both("sweeps", 50 + np.arange(6) * 0.5, lambda t: [(2.0, 4.0)])
+    result = reconstruct(records, calibration, bounds=BOUNDS, cell=0.2)
+    assert result.info["links"]["paths"] == 2 * 120 and result.info["links"]["calibrated"] == 2 * 240 * 2
+    assert np.linalg.norm(strongest(result) - (2.0, 4.0)) < 0.3
+
+
+def test_total_variation_through_the_whole_method(network):
+    net, calibration = network
+    records = net.sweeps(100 + np.arange(8) * 0.5, lambda t: [(4.1, 1.7)])
+    result = reconstruct(records, calibration, bounds=BOUNDS, cell=0.32, solver="tv")
+    assert result.info["solver"] == "tv"
+    assert np.linalg.norm(strongest(result) - (4.1, 1.7)) < 0.3
+    image = result.frames[0]["image"]
+    assert image.min() >= 0 and (image < 0.05 * image.max()).mean() > 0.5  # TV: mostly flat zero, one blob

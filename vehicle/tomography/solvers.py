@@ -117,17 +117,18 @@ def tv_solve(W, y: np.ndarray, shape: tuple[int, int], mu: float, x0: np.ndarray
 
 def tv_discrepancy(W, y: np.ndarray, shape: tuple[int, int], target: float, x0: np.ndarray | None = None,
                    steps: int = 10) -> tuple[np.ndarray, float, bool]:
-    """TV with mu chosen by the discrepancy principle: |W x - y|^2 = ``target`` (the noise GCV estimated),
-    by bisection on log mu. Returns the image, mu and whether its solve converged."""
+    """TV with mu chosen by the discrepancy principle: the largest mu whose misfit |W x - y|^2 stays within
+    ``target`` (the noise GCV estimated), by bisection on log mu; when even the smallest mu tried misfits more
+    (the bound at zero keeps TV from fitting negative noise), that smallest one. Returns the image, mu and
+    whether its solve converged."""
     lo, hi = -4.0, 3.0  # log10 mu, relative to |W^T y|_inf, which makes x = 0 optimal at hi = 0
     scale = float(np.abs(W.T @ y).max()) or 1.0
-    best = (np.zeros(shape[0] * shape[1]), scale, True)
+    within = closest = None
     for _ in range(steps):
         mid = (lo + hi) / 2
         x, ok = tv_solve(W, y, shape, scale * 10 ** mid, x0=x0)
-        misfit = float(np.sum((W @ x - y) ** 2))
-        if misfit > target:
-            hi = mid
+        if float(np.sum((W @ x - y) ** 2)) > target:
+            hi, closest = mid, (x, scale * 10 ** mid, ok)
         else:
-            lo, best, x0 = mid, (x, scale * 10 ** mid, ok), x
-    return best
+            lo, within, x0 = mid, (x, scale * 10 ** mid, ok), x
+    return within or closest
