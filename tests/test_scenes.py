@@ -20,6 +20,13 @@ EXPECTED = {
         start=(0.0, 0.0),
         clear=3.0,
     ),
+    "apartment": dict(
+        objects=53,
+        triangles=(200, 5_000),
+        bounds=((-9, -6, 0), (9, 6, 2.6)),
+        start=(-4.8, -3.0),
+        clear=2.0,
+    ),
     "house": dict(
         objects=32,
         triangles=(200, 5_000),
@@ -84,6 +91,26 @@ def _horizontal_distance(triangles: np.ndarray, point: np.ndarray) -> np.ndarray
     return np.where(inside, 0.0, edges)
 
 
+def _reachable_labels(s: Scene, height: float, radius: float, res: float = 0.02):
+    """Where a body of ``radius`` fits at ``height``: the scene's cross-section there drawn on a grid of ``res``
+    metres, the free cells at least ``radius`` from every drawn one labelled by the connected part they are in
+    (0: no room for the body). Returns label_at(x, y)."""
+    sections = trimesh.intersections.mesh_plane(s.mesh, (0, 0, 1), (0, 0, height))
+    lo = s.bounds[0, :2] - 0.5
+    occupied = np.zeros(tuple(np.ceil((s.bounds[1, :2] + 0.5 - lo) / res).astype(int)), dtype=bool)
+    for a, b in sections[:, :, :2]:
+        n = int(np.linalg.norm(b - a) / (res / 2)) + 2
+        ij = ((a + np.linspace(0, 1, n)[:, None] * (b - a) - lo) / res).astype(int)
+        occupied[ij[:, 0], ij[:, 1]] = True
+    fits = ndimage.distance_transform_edt(~occupied) * res > radius
+    labels, _ = ndimage.label(fits)
+
+    def label_at(x: float, y: float) -> int:
+        return labels[int((x - lo[0]) / res), int((y - lo[1]) / res)]
+
+    return label_at
+
+
 # --- every scene -------------------------------------------------------------------------------------
 
 
@@ -126,7 +153,7 @@ def test_start_ground_is_flat(scene):
     z = _ground_z(s.mesh, np.vstack(([x, y], ring)))
     assert np.isfinite(z).all()
     assert np.ptp(z) < 0.05
-    if name in ("default", "house"):
+    if name in ("default", "house", "apartment"):
         assert abs(z[0]) < 0.01
 
 
@@ -170,21 +197,7 @@ def test_default_objects_around_the_start():
 def test_house_every_room_reachable_at_flight_height():
     """At 1.2 m a 0.3 m copter gets from the start through the doorways into all five rooms."""
     s = _load("house")
-    sections = trimesh.intersections.mesh_plane(s.mesh, (0, 0, 1), (0, 0, 1.2))
-    res = 0.05
-    lo = np.array([-8.5, -6.5])
-    shape = (int(17 / res), int(13 / res))
-    occupied = np.zeros(shape, dtype=bool)
-    for a, b in sections[:, :, :2]:
-        n = int(np.linalg.norm(b - a) / (res / 2)) + 2
-        pts = a + np.linspace(0, 1, n)[:, None] * (b - a)
-        ij = ((pts - lo) / res).astype(int)
-        occupied[ij[:, 0], ij[:, 1]] = True
-    occupied = ndimage.binary_dilation(occupied, iterations=int(0.3 / res))
-    labels, _ = ndimage.label(~occupied)
-
-    def label_at(x, y):
-        return labels[int((x - lo[0]) / res), int((y - lo[1]) / res)]
+    label_at = _reachable_labels(s, 1.2, 0.3, res=0.05)
 
     start = label_at(*s.start[:2])
     assert start != 0
@@ -192,6 +205,72 @@ def test_house_every_room_reachable_at_flight_height():
     rooms = {"kitchen": (5, -2), "bedroom 1": (-5.5, 3), "bedroom 2": (0, 3), "bathroom": (6, 3)}
     for room, (x, y) in rooms.items():
         assert label_at(x, y) == start, f"{room} not reachable from the start"
+
+
+# --- apartment -------------------------------------------------------------------------------------
+
+APARTMENT_ALTITUDE = 1.6  # the scene's WorldInfo suggests it
+APARTMENT_ROOMS = {  # the spots in clear space its header names, one per room
+    "living room": (-4.8, -3.0), "kitchen": (1.8, -2.6), "bedroom 1": (-5.8, 2.9), "bedroom 2": (-1.0, 2.9),
+    "study": (3.2, 3.3), "corridor": (0.0, 0.25),
+}
+BATHROOM, STOREROOM = (7.0, -2.5), (7.5, 4.0)
+
+
+def _corridor_hit(s: Scene, origin: tuple[float, float], direction: tuple[float, float]) -> float:
+    """How far a horizontal ray at flight height from ``origin`` goes before it meets the scene."""
+    o = np.array([[*origin, APARTMENT_ALTITUDE]])
+    hits, _, _ = s.mesh.ray.intersects_location(o, np.array([[*direction, 0.0]]))
+    return float(np.linalg.norm(hits[:, :2] - o[0, :2], axis=1).min())
+
+
+def test_apartment_corridor_runs_the_whole_width_between_its_walls():
+    """Along its middle the corridor is clear from the west wall to the east wall; across it, 1.38 m between
+    the walls, except at a doorway, where the ray goes on into the room."""
+    s = _load("apartment")
+    assert _corridor_hit(s, (-8.7, 0.25), (1, 0)) == pytest.approx(17.5, abs=0.01)  # inner faces at x = +-8.8
+    for x in (-8.0, -3.0, 0.5, 4.5, 8.0):  # on wall between the doorways
+        assert _corridor_hit(s, (x, 0.25), (0, 1)) + _corridor_hit(s, (x, 0.25), (0, -1)) == pytest.approx(1.38)
+    doorways = {(-6.0, 1): 4.8, (-1.5, 1): 4.8, (3.25, 1): 0.5, (-4.0, -1): 5.0, (2.5, -1): 5.0, (7.0, -1): 3.0}
+    for (x, north_or_south), beyond in doorways.items():  # a ray through the doorway reaches well into the room
+        assert _corridor_hit(s, (x, 0.25), (0, north_or_south)) > beyond, f"doorway at x = {x} closed"
+
+
+def test_apartment_rooms_are_reached_through_doorways_of_0_9_to_1_2_m():
+    """A body 0.84 m across (radius 0.42) gets from the start into every room but two: the bathroom, whose
+    doorway is 0.8 m, and the storeroom, which has none. The default copter's body with its doorway clearance
+    (radius 0.35) fits the bathroom's doorway too."""
+    s = _load("apartment")
+    wide = _reachable_labels(s, APARTMENT_ALTITUDE, 0.42)
+    start = wide(*s.start[:2])
+    assert start != 0
+    for room, spot in APARTMENT_ROOMS.items():
+        assert wide(*spot) == start, f"{room} not reachable through a 0.9 m doorway"
+    assert wide(*BATHROOM) not in (0, start), "the bathroom's doorway is wider than 0.84 m"
+    narrow = _reachable_labels(s, APARTMENT_ALTITUDE, 0.35)
+    assert narrow(*BATHROOM) == narrow(*s.start[:2]) != 0, "the bathroom's doorway is narrower than 0.7 m"
+
+
+def test_apartment_storeroom_is_closed_and_the_flat_too():
+    """Not even a point gets into the storeroom from the start, nor out of the flat: no gap at flight height."""
+    s = _load("apartment")
+    point = _reachable_labels(s, APARTMENT_ALTITUDE, 0.0)
+    start = point(*s.start[:2])
+    assert point(*STOREROOM) not in (0, start), "the storeroom has a way in"
+    assert point(-9.4, -6.4) != start, "the flat is open to the outside"
+
+
+def test_apartment_waypoints_are_in_reachable_rooms():
+    """The WorldInfo's Pathfind route (kitchen, bathroom, study, bedroom 2, bedroom 1, living room) is all on
+    floor the default copter reaches, each point 1 m or more from anything at flight height."""
+    s = _load("apartment")
+    route = [tuple(float(v) for v in p.split(",")) for p in s.hints["waypoints"].split(";")]
+    assert len(route) == 6 and route[1] == BATHROOM
+    clear = _reachable_labels(s, APARTMENT_ALTITUDE, 1.0)
+    narrow = _reachable_labels(s, APARTMENT_ALTITUDE, 0.35)
+    for x, y in route:
+        assert clear(x, y) != 0 and narrow(x, y) == narrow(*s.start[:2])
+    assert s.hints["altitude"] == str(APARTMENT_ALTITUDE)
 
 
 # --- trees -----------------------------------------------------------------------------------------
