@@ -3,7 +3,9 @@
 Groups of runs (every mission: square, browse, search, pathfind):
 
 - copter in castle.wrl (start -40, 0, altitude 4; when ../shared is there) and in the
-  project's scenes (default, trees, house: their own start and suggested settings);
+  project's scenes (default, trees, house, apartment: their own start and suggested settings);
+- copter in the apartment from a spot in each of five rooms (living room, kitchen, both
+  bedrooms, study; its scene's header names them);
 - copter in ``--fields`` random obstacle fields (default 100);
 - rover in the first ``--rover-fields`` of those fields (default 20), and in the project's scenes.
 
@@ -39,7 +41,9 @@ from vehicle.lab.experiment import OUTCOMES, Experiment, run_experiment
 from vehicle.world.scene import Scene, load_scene, parse_scene
 
 MISSIONS = ["square", "browse", "search", "pathfind"]
-PROJECT_SCENES = [ROOT / "scenes" / name for name in ("default.wrl", "trees.wrl", "house.wrl")]
+PROJECT_SCENES = [ROOT / "scenes" / name for name in ("default.wrl", "trees.wrl", "house.wrl", "apartment.wrl")]
+APARTMENT = ROOT / "scenes" / "apartment.wrl"
+APARTMENT_ROOMS = [(-4.8, -3.0), (1.8, -2.6), (-5.8, 2.9), (-1.0, 2.9), (3.2, 3.3)]  # clear spots, one per room
 OUT = Path("/tmp/bench-out")
 CLEARANCE = 2.5  # no obstacle nearer than this to the start (the origin)
 RADIUS = 35.0  # obstacle centres within this distance of the origin
@@ -172,7 +176,7 @@ def _picture(job: Job, scene: Scene, agent, route: list[tuple[float, float]], re
     from vehicle.world.topview import render_top_view
 
     OUT.mkdir(parents=True, exist_ok=True)
-    stem = f"{result['outcome']}-{Path(job.scene).stem}-{job.mission}-{job.vehicle}"
+    stem = f"{result['outcome']}-{Path(job.scene).stem}-{job.mission}-{job.vehicle}{_at(job.start)}"
     if job.field is not None:
         (OUT / f"{job.scene}.wrl").write_text(field_vrml(job.field), encoding="utf-8")
     final = result.get("final_position")
@@ -183,6 +187,10 @@ def _picture(job: Job, scene: Scene, agent, route: list[tuple[float, float]], re
                     start=tuple(result.get("start") or (0.0, 0.0)),
                     title=f"{result['outcome']}: {job.vehicle} {job.mission} in {Path(job.scene).stem}")
     return str(path)
+
+
+def _at(start: tuple[float, float] | None) -> str:
+    return f"@{start[0]:g},{start[1]:g}" if start else ""
 
 
 def _xy(position) -> str:
@@ -197,6 +205,8 @@ def jobs(fields: int, rover_fields: int) -> list[Job]:
     known += [(str(path), None) for path in PROJECT_SCENES]
     for path, start in known:
         out += [Job("copter, castle and project scenes", path, m, "copter", start) for m in MISSIONS]
+    for start in APARTMENT_ROOMS:
+        out += [Job("copter, apartment from five rooms", str(APARTMENT), m, "copter", start) for m in MISSIONS]
     for k in range(fields):
         out += [Job(f"copter, {fields} random fields", f"field-{k}", m) for m in MISSIONS]
     for k in range(rover_fields):
@@ -245,11 +255,11 @@ def main() -> int:
                          sum(d == 0 for d in detections), f"{sim / max(1, len(runs)):.0f}"])
         print(f"\n### {group}\n")
         print(table(["mission", "runs", *OUTCOMES, "median detections", "zero detections", "mean sim s"], rows))
-        if group.startswith(("copter, castle", "rover, project")):
+        if group.startswith(("copter, castle", "copter, apartment", "rover, project")):
             print()
             print(table(["scene", "mission", "outcome", "reason", "detections", "sim s"],
-                        [[Path(r["job"].scene).name, r["job"].mission, r["outcome"], r["reason"], r["detections"],
-                          r.get("sim_time_s", "-")] for r in mine]))
+                        [[Path(r["job"].scene).name + _at(r["job"].start), r["job"].mission, r["outcome"], r["reason"],
+                          r["detections"], r.get("sim_time_s", "-")] for r in mine]))
 
     bad = [r for r in results if r["outcome"] in ("collision", "error")]
     print(f"\n### Collisions and errors: {sum(r['outcome'] == 'collision' for r in bad)} collisions, "

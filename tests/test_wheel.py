@@ -48,7 +48,7 @@ def test_the_wheel_holds_every_module_the_page_and_the_scenes(wheel):
     assert sources - names == set()
     for page in (ROOT / "static").iterdir():  # every file the page may ask for (not an editor's hidden ones)
         assert page.name.startswith(".") or f"groundstation/static/{page.name}" in names
-    for scene in ("default.wrl", "house.wrl", "trees.wrl"):
+    for scene in ("default.wrl", "house.wrl", "trees.wrl", "apartment.wrl"):
         assert f"vehicle/scenes/{scene}" in names
 
 

@@ -26,13 +26,21 @@ def _thesis_scenes() -> list[str]:
     return [castle, str(scenes_dir() / "trees.wrl"), str(scenes_dir() / "house.wrl")]
 
 
+THESIS_GRID = {"padding": [0.1, 2, 4], "resolution": [1, 10], "space_size": [10, 100],
+               "closeness": [0.1, 2], "monitor_period": [0.25, 0.5]}
+
 PRESETS = {
     "thesis": {
         "help": "the thesis's sweep: 48 settings x 4 missions x 3 scenes = 576 runs",
         "missions": ["square", "browse", "search", "pathfind"],
         "scenes": _thesis_scenes,
-        "grid": {"padding": [0.1, 2, 4], "resolution": [1, 10], "space_size": [10, 100],
-                 "closeness": [0.1, 2], "monitor_period": [0.25, 0.5]},
+        "grid": THESIS_GRID,
+    },
+    "indoor": {
+        "help": "the thesis's 48 settings x 4 missions in the project's indoor scenes (house, apartment) = 384 runs",
+        "missions": ["square", "browse", "search", "pathfind"],
+        "scenes": lambda: [str(scenes_dir() / "house.wrl"), str(scenes_dir() / "apartment.wrl")],
+        "grid": THESIS_GRID,
     },
     "quick": {
         "help": "a small smoke sweep: 2 missions x the default scene x 2 paddings",
