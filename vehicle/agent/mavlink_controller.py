@@ -39,10 +39,10 @@ from collections.abc import Callable
 from vehicle.protocol import mission as mission_protocol
 from vehicle.protocol.frames import Navigation, Pose
 from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
-from vehicle.protocol.mav import ACCEPTED, AUTOPILOT, COMMAND_NAMES, RESULT_WORDS, UNSUPPORTED, mavlink, mavutil
+from vehicle.protocol.mav import ACCEPTED, AUTOPILOT, COMMAND_NAMES, RESULT_WORDS, UNSUPPORTED, mavlink
 from vehicle.protocol.mav import COMPANION as COMPONENT
 from vehicle.protocol.mission import MissionItem, MissionProgress
-from vehicle.protocol.modes import DISARMED, Kind
+from vehicle.protocol.modes import DISARMED, Kind, name_of, number_of
 from vehicle.protocol.rangefinder import Reading, Servo, reading_from, readings_from_obstacles
 
 NO_ANSWER = -1  # what a command returns when the autopilot never acknowledged it
@@ -298,7 +298,7 @@ class MavlinkController:
     def _on_heartbeat(self, m) -> None:
         self._heard, self._place = time.monotonic(), m._place  # the autopilot is heard there (``_from_elsewhere``)
         was_armed, self._armed = self._armed, bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-        mode = (mavutil.mode_mapping_bynumber(m.type) or {}).get(m.custom_mode, f"MODE{m.custom_mode}")
+        mode = name_of(m.type, m.custom_mode) or f"MODE{m.custom_mode}"
         if was_armed and not self._armed and mode == "GUIDED":  # the agent never disarms: a kill
             self._events.append(DISARMED)
         if mode == self._mode:
@@ -556,8 +556,7 @@ class MavlinkController:
         return result
 
     def set_mode(self, name: str) -> int:
-        number = next((n for n, mode in (mavutil.mode_mapping_bynumber(self._mav_type()) or {}).items()
-                       if mode == name.upper()), None)
+        number = number_of(self._mav_type(), name)
         if number is None:
             self._problem(f"flight controller has no mode {name}")
             return UNSUPPORTED

@@ -48,6 +48,7 @@ def __getattr__(name: str):
 
         mavutil.set_dialect("ardupilotmega")  # the module ``mavlink`` above, as every part of the project uses
         assert mavutil.mavlink is mavlink
+        globals()["mavutil"] = mavutil  # found directly from now on (this runs on first use only)
         return mavutil
     raise AttributeError(name)
 
