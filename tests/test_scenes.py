@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from scipy import ndimage
 
+from vehicle.world.floor import reachable_floor
 from vehicle.world.scene import Scene, load_scene
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
@@ -92,23 +92,8 @@ def _horizontal_distance(triangles: np.ndarray, point: np.ndarray) -> np.ndarray
 
 
 def _reachable_labels(s: Scene, height: float, radius: float, res: float = 0.02):
-    """Where a body of ``radius`` fits at ``height``: the scene's cross-section there drawn on a grid of ``res``
-    metres, the free cells at least ``radius`` from every drawn one labelled by the connected part they are in
-    (0: no room for the body). Returns label_at(x, y)."""
-    sections = trimesh.intersections.mesh_plane(s.mesh, (0, 0, 1), (0, 0, height))
-    lo = s.bounds[0, :2] - 0.5
-    occupied = np.zeros(tuple(np.ceil((s.bounds[1, :2] + 0.5 - lo) / res).astype(int)), dtype=bool)
-    for a, b in sections[:, :, :2]:
-        n = int(np.linalg.norm(b - a) / (res / 2)) + 2
-        ij = ((a + np.linspace(0, 1, n)[:, None] * (b - a) - lo) / res).astype(int)
-        occupied[ij[:, 0], ij[:, 1]] = True
-    fits = ndimage.distance_transform_edt(~occupied) * res > radius
-    labels, _ = ndimage.label(fits)
-
-    def label_at(x: float, y: float) -> int:
-        return labels[int((x - lo[0]) / res), int((y - lo[1]) / res)]
-
-    return label_at
+    """label_at(x, y): the connected part of the floor where a body of ``radius`` fits at ``height``."""
+    return reachable_floor(s, height, radius, res).label_at
 
 
 # --- every scene -------------------------------------------------------------------------------------
@@ -271,6 +256,33 @@ def test_apartment_waypoints_are_in_reachable_rooms():
     for x, y in route:
         assert clear(x, y) != 0 and narrow(x, y) == narrow(*s.start[:2])
     assert s.hints["altitude"] == str(APARTMENT_ALTITUDE)
+
+
+def test_apartment_known_share_of_the_reachable_floor():
+    """The coverage measure: nothing known is 0, everything known is 1, the living room alone about a quarter
+    (its floor where the body fits, less its tall furniture, of the whole flat's but the storeroom), and
+    knowing the storeroom or the outside adds nothing."""
+    from vehicle.mapping.memory_map import MemoryMap
+
+    s = _load("apartment")
+    floor = reachable_floor(s, APARTMENT_ALTITUDE, 0.35)
+    start = tuple(s.start[:2])
+    memory = MemoryMap(start, space_size=15, resolution=10)
+    assert floor.known_share(memory, start) == 0.0
+
+    def mark(x0, x1, y0, y1):
+        (r0, c0), (r1, c1) = memory.cell_of(x0, y0), memory.cell_of(x1, y1)
+        memory.grid[r0:r1 + 1, c0:c1 + 1] = -3
+
+    mark(5.5, 9.0, 1.0, 6.0)  # the storeroom
+    mark(-19.0, -9.0, -15.0, 10.0)  # outside, west of the flat
+    assert floor.known_share(memory, start) == 0.0
+    mark(-9.0, -1.0, -6.0, -0.5)  # the living room
+    assert 0.2 < floor.known_share(memory, start) < 0.3
+    memory.grid[:] = 5
+    assert floor.known_share(memory, start) == 1.0
+    assert floor.known_share(memory, STOREROOM) == 1.0  # from inside the storeroom, its own floor
+    assert floor.known_share(memory, (-8.7, -5.7)) == 0.0  # where the body does not fit
 
 
 # --- trees -----------------------------------------------------------------------------------------
