@@ -14,6 +14,10 @@ obstacles within about 35 m of the origin (boxes of random size and yaw, thin wa
 poles), none nearer than 2.5 m to the start at the origin. ``--dump-field K`` prints
 field K, so a run can be reproduced with ``vehicle experiment --scene field.wrl``.
 
+Copter runs in the closed indoor scenes (house, apartment) also report the share of the floor
+reachable from their start (where the body and its doorway clearance fit at flight height) that
+their memory map knows ("floor known", ``vehicle.world.floor``); the issue's target for Search is 80 %.
+
 Prints a Markdown table of outcomes per mission for each group and every collision and
 error with what reproduces it; saves a top view of each collision and timeout (scene, memory map,
 path) and the field's VRML into /tmp/bench-out (bench/out/ is not git-ignored). Exits
@@ -38,12 +42,16 @@ from common import CASTLE, ROOT, code_state, table
 
 from vehicle.agent.settings import load_settings
 from vehicle.lab.experiment import OUTCOMES, Experiment, run_experiment
+from vehicle.mapping.planner import DOORWAY_CLEARANCE
+from vehicle.world.floor import Floor, reachable_floor
 from vehicle.world.scene import Scene, load_scene, parse_scene
 
 MISSIONS = ["square", "browse", "search", "pathfind"]
 PROJECT_SCENES = [ROOT / "scenes" / name for name in ("default.wrl", "trees.wrl", "house.wrl", "apartment.wrl")]
 APARTMENT = ROOT / "scenes" / "apartment.wrl"
 APARTMENT_ROOMS = [(-4.8, -3.0), (1.8, -2.6), (-5.8, 2.9), (-1.0, 2.9), (3.2, 3.3)]  # clear spots, one per room
+INDOOR = ("house.wrl", "apartment.wrl")  # closed scenes: their reachable floor is the measure of coverage
+BODY = 0.3 + DOORWAY_CLEARANCE  # the default copter's radius and the clearance planning keeps in a doorway
 OUT = Path("/tmp/bench-out")
 CLEARANCE = 2.5  # no obstacle nearer than this to the start (the origin)
 RADIUS = 35.0  # obstacle centres within this distance of the origin
@@ -116,6 +124,11 @@ def file_scene(path: str) -> Scene:
     return load_scene(path)
 
 
+@functools.lru_cache(maxsize=8)
+def indoor_floor(path: str, altitude: float) -> Floor:
+    return reachable_floor(file_scene(path), altitude, BODY)
+
+
 # ---- runs ---------------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -165,6 +178,9 @@ def run_job(job: Job) -> dict:
                                 scene=scene, on_step=on_step)
         if result["outcome"] in ("collision", "timeout"):
             result["picture"] = _picture(job, scene, seen.get("agent"), route, result)
+        if job.vehicle == "copter" and Path(job.scene).name in INDOOR and "agent" in seen:
+            floor = indoor_floor(job.scene, settings.altitude)
+            result["floor_known"] = floor.known_share(seen["agent"].map, tuple(result["start"][:2]))
     except Exception as error:  # noqa: BLE001 - a failure is a finding, reported with the others
         result = {"outcome": "error", "reason": f"{type(error).__name__}: {error}", "detections": 0}
     result["job"] = job
@@ -187,6 +203,10 @@ def _picture(job: Job, scene: Scene, agent, route: list[tuple[float, float]], re
                     start=tuple(result.get("start") or (0.0, 0.0)),
                     title=f"{result['outcome']}: {job.vehicle} {job.mission} in {Path(job.scene).stem}")
     return str(path)
+
+
+def _percent(share: float | None) -> str:
+    return "-" if share is None else f"{100 * share:.0f} %"
 
 
 def _at(start: tuple[float, float] | None) -> str:
@@ -257,9 +277,9 @@ def main() -> int:
         print(table(["mission", "runs", *OUTCOMES, "median detections", "zero detections", "mean sim s"], rows))
         if group.startswith(("copter, castle", "copter, apartment", "rover, project")):
             print()
-            print(table(["scene", "mission", "outcome", "reason", "detections", "sim s"],
+            print(table(["scene", "mission", "outcome", "reason", "detections", "floor known", "sim s"],
                         [[Path(r["job"].scene).name + _at(r["job"].start), r["job"].mission, r["outcome"], r["reason"],
-                          r["detections"], r.get("sim_time_s", "-")] for r in mine]))
+                          r["detections"], _percent(r.get("floor_known")), r.get("sim_time_s", "-")] for r in mine]))
 
     bad = [r for r in results if r["outcome"] in ("collision", "error")]
     print(f"\n### Collisions and errors: {sum(r['outcome'] == 'collision' for r in bad)} collisions, "

@@ -31,7 +31,8 @@ class Floor:
         return int(self.labels[i, j]) if inside else 0
 
     def known_share(self, memory: MemoryMap, start: tuple[float, float]) -> float:
-        """The share of the floor reachable from ``start`` whose map cell is known (free or occupied)."""
+        """The share of the floor reachable from ``start`` and inside the map whose map cell is known (free or
+        occupied)."""
         part = self.label_at(*start)
         if part == 0:
             return 0.0
