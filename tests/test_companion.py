@@ -205,69 +205,98 @@ def test_ctrl_c_stops_an_agent_with_a_line_not_a_traceback(tmp_path):
     assert "Traceback" not in err and err.strip().endswith("vehicle agent: interrupted")
 
 
-# ---- taking over ----------------------------------------------------------------------------------------------
-def test_an_operators_rtl_pauses_the_agent_and_resume_hands_control_back(tmp_path):
-    """The station hears the autopilot and, routed through it, the agent (component 191): one vehicle."""
+# ---- a vehicle flying its mission, and taking over -------------------------------------------------------------
+class Lines:
+    """A process's standard error, line by line as it comes (read on a thread of its own)."""
+
+    def __init__(self, stream):
+        self.lines: list[str] = []
+        self._thread = threading.Thread(target=lambda: self.lines.extend(iter(stream.readline, "")), daemon=True)
+        self._thread.start()
+
+    def said(self, text: str) -> bool:
+        return any(text in line for line in list(self.lines))
+
+    def text(self) -> str:
+        return "".join(self.lines)
+
+
+@contextmanager
+def agent_flying(tmp_path: Path, mission: str = "pathfind", direct: bool = True):
+    """A station, our simulated autopilot (``vehicle sim --role autopilot``, which can be stopped as a starved
+    process is) and the agent flying its mission, as far as the mission's start; yields (station's API, autopilot
+    process, agent process, its standard error, a raw ground station the autopilot also sends to)."""
     scene_file = tmp_path / "yard.wrl"
     scene_file.write_text(SCENE_TEXT)
     agent_port = free_udp_port()
     with (
         RunningStation(small_scene(), tmp_path / "recordings") as station,
         station.api() as api,
-        autopilot(scene_file, [f"udpout:127.0.0.1:{agent_port}", station.vehicle_url()], speedup=10),
+        Peer(None, 254, 190) as gcs,
+        autopilot(scene_file, [f"udpout:127.0.0.1:{agent_port}", station.vehicle_url(), gcs.url], speedup=10) as pilot,
     ):
-        agent = subprocess.Popen(
-            agent_command(agent_port, "pathfind", scene_file, "copter", "--set", "space_size=20"),
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
+        # ``direct``: the agent speaks to the station straight too (--gcs): what it sent through a starved autopilot
+        # waits there behind a backlog of a few seconds, and some of it is lost, as UDP loses it
+        straight = ("--gcs", station.vehicle_url()) if direct else ()
+        agent = subprocess.Popen(agent_command(agent_port, mission, scene_file, "copter", "--set", "space_size=20",
+                                               *straight), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        errors = Lines(agent.stderr)
         try:
-
-            def away(v):
-                agent_state = v["agent"] or {}
-                return (
-                    agent_state.get("phase") == "mission"
-                    and v["position"]
-                    and math.hypot(v["position"]["x"], v["position"]["y"]) > 3.0
-                )
-
-            flying = api.wait_vehicle(
-                1,
-                lambda v: away(v) and v["path"] and v["map"]["occupied"],
-                sim_timeout=120,
-                what="the agent flies its mission, its map and path shown",
-            )
-            assert flying["agent"]["state"] == "running" and flying["agent"]["companion"]
-            assert flying["map"]["source"] == "vehicle"  # the agent's own map, not one the station built
-            assert flying["mode"] == "GUIDED"
-
-            command_ok(api, 1, action="rtl")
-            paused = api.wait_vehicle(
-                1, lambda v: v["agent"]["state"] == "paused", sim_timeout=30, what="the agent pauses"
-            )
-            assert paused["agent"]["reason"] == "operator switched to RTL"
-            home = api.wait_vehicle(
-                1,
-                lambda v: math.hypot(v["position"]["x"], v["position"]["y"]) < 1.0,
-                sim_timeout=60,
-                what="the vehicle flies home",
-            )
-            assert home["mode"] == "RTL" and home["agent"]["state"] == "paused"
-
-            command_ok(api, 1, action="resume")  # MISSION_START to component 191, through the autopilot
-            resumed = api.wait_vehicle(
-                1,
-                lambda v: v["agent"]["state"] == "running" and v["mode"] == "GUIDED",
-                sim_timeout=30,
-                what="the agent resumes",
-            )
-            assert resumed["agent"]["phase"] in ("preflight", "takeoff", "mission")
-            out, err = agent.communicate(timeout=180)
+            api.wait_vehicle(1, lambda v: (v["agent"] or {}).get("phase") == "mission"
+                             and v["agent"]["state"] == "running", sim_timeout=120, what="the mission flies")
+            yield api, pilot, agent, errors, gcs
         finally:
+            pilot.send_signal(signal.SIGCONT)
             agent.kill()
-    result = json.loads(out.strip().splitlines()[-1])
-    assert result["outcome"] == "finished", (result, err[-2000:])
+            agent.wait(timeout=10)
+            print(f"the agent's standard error:\n{errors.text()}")  # shown with a failure
+
+
+def test_an_operators_rtl_pauses_the_agent_and_resume_hands_control_back(tmp_path):
+    """The station hears the autopilot and, routed through it, the agent (component 191): one vehicle."""
+    with agent_flying(tmp_path, direct=False) as (api, _, agent, errors, _):
+        def away(v):
+            agent_state = v["agent"] or {}
+            return (
+                agent_state.get("phase") == "mission"
+                and v["position"]
+                and math.hypot(v["position"]["x"], v["position"]["y"]) > 3.0
+            )
+
+        flying = api.wait_vehicle(
+            1,
+            lambda v: away(v) and v["path"] and v["map"]["occupied"],
+            sim_timeout=120,
+            what="the agent flies its mission, its map and path shown",
+        )
+        assert flying["agent"]["state"] == "running" and flying["agent"]["companion"]
+        assert flying["map"]["source"] == "vehicle"  # the agent's own map, not one the station built
+        assert flying["mode"] == "GUIDED"
+
+        command_ok(api, 1, action="rtl")
+        paused = api.wait_vehicle(
+            1, lambda v: v["agent"]["state"] == "paused", sim_timeout=30, what="the agent pauses"
+        )
+        assert paused["agent"]["reason"] == "operator switched to RTL"
+        home = api.wait_vehicle(
+            1,
+            lambda v: math.hypot(v["position"]["x"], v["position"]["y"]) < 1.0,
+            sim_timeout=60,
+            what="the vehicle flies home",
+        )
+        assert home["mode"] == "RTL" and home["agent"]["state"] == "paused"
+
+        command_ok(api, 1, action="resume")  # MISSION_START to component 191, through the autopilot
+        resumed = api.wait_vehicle(
+            1,
+            lambda v: v["agent"]["state"] == "running" and v["mode"] == "GUIDED",
+            sim_timeout=30,
+            what="the agent resumes",
+        )
+        assert resumed["agent"]["phase"] in ("preflight", "takeoff", "mission")
+        agent.wait(timeout=180)
+        result = json.loads(agent.stdout.read().strip().splitlines()[-1])
+    assert result["outcome"] == "finished", (result, errors.text()[-2000:])
     assert "Agent: paused, operator switched to RTL" in result["messages"]
     assert "Agent: resuming mission" in result["messages"]
 
@@ -323,6 +352,8 @@ class ScriptedAutopilot:
         self.answer: dict[int, int | None | list[int | None]] = {}
         self.received: list = []
         self.late_acks: list[tuple[int, int]] = []
+        self.together: set[int] = set()  # commands whose answers it holds until a second try, then sends both
+        self._held: list[tuple[int, int]] = []
         self.attitude = (0.0, 0.0, 0.5)
         self.mode = 4  # copter GUIDED, as its heartbeat says
         self.base_mode = 217  # armed (MAV_MODE_FLAG_SAFETY_ARMED), custom mode, guided, stabilized
@@ -365,7 +396,14 @@ class ScriptedAutopilot:
                     result = self.answer.get(message.command, mavlink.MAV_RESULT_ACCEPTED)
                     if isinstance(result, list):  # one answer per try, the last one for every later try
                         result = result.pop(0) if len(result) > 1 else result[0]
-                    if result is not None:
+                    if result is not None and message.command in self.together:
+                        self._held.append((message.command, result))
+                        if len(self._held) < 2:
+                            continue
+                        for held in self._held:
+                            mav.command_ack_send(*held, 0, 0, message.get_srcSystem(), message.get_srcComponent())
+                        self._held.clear()
+                    elif result is not None:
                         mav.command_ack_send(
                             message.command, result, 0, 0, message.get_srcSystem(), message.get_srcComponent()
                         )
@@ -521,6 +559,18 @@ def test_a_late_refusal_of_a_command_never_answered_is_not_taken_as_the_answer_t
         assert fc.takeoff(4.0) == mavlink.MAV_RESULT_ACCEPTED
         assert len(fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)) == 4
         assert fc.took_over() is None and fc.problems == 1
+
+
+def test_an_acceptance_that_comes_with_the_refusal_of_a_later_try_is_the_answer():
+    """A slow autopilot (or a starved agent) answered the first take-off late, together with its refusal of the
+    second try (already climbing: ArduPilot FAILS it); the refusal, read last, paused the agent for good."""
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fake.together.add(mavlink.MAV_CMD_NAV_TAKEOFF)
+        fake.answer[mavlink.MAV_CMD_NAV_TAKEOFF] = [mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_FAILED]
+        assert fc.takeoff(4.0) == mavlink.MAV_RESULT_ACCEPTED
+        assert len(fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)) == 2
+        assert fc.took_over() is None and fc.problems == 0 and fc.taking_off
 
 
 def test_a_controller_allowed_no_tries_sends_nothing_and_reports_the_command_never_answered():
@@ -783,51 +833,6 @@ LOST = "paused, lost the flight controller's heartbeat for 2 s; not commanding u
 BACK = "the flight controller's heartbeat is back after"
 
 
-class Lines:
-    """A process's standard error, line by line as it comes (read on a thread of its own)."""
-
-    def __init__(self, stream):
-        self.lines: list[str] = []
-        self._thread = threading.Thread(target=lambda: self.lines.extend(iter(stream.readline, "")), daemon=True)
-        self._thread.start()
-
-    def said(self, text: str) -> bool:
-        return any(text in line for line in list(self.lines))
-
-    def text(self) -> str:
-        return "".join(self.lines)
-
-
-@contextmanager
-def agent_flying(tmp_path: Path, mission: str = "pathfind"):
-    """A station, our simulated autopilot (``vehicle sim --role autopilot``, which can be stopped as a starved
-    process is) and the agent flying its mission, as far as the mission's start; yields (station's API, autopilot
-    process, agent process, its standard error, a raw ground station the autopilot also sends to)."""
-    scene_file = tmp_path / "yard.wrl"
-    scene_file.write_text(SCENE_TEXT)
-    agent_port = free_udp_port()
-    with (
-        RunningStation(small_scene(), tmp_path / "recordings") as station,
-        station.api() as api,
-        Peer(None, 254, 190) as gcs,
-        autopilot(scene_file, [f"udpout:127.0.0.1:{agent_port}", station.vehicle_url(), gcs.url], speedup=10) as pilot,
-    ):
-        # the agent speaks to the station straight too (--gcs): what it sent through the starved autopilot waits
-        # there behind the backlog of a few seconds, and some of it is lost, as UDP loses it
-        agent = subprocess.Popen(agent_command(agent_port, mission, scene_file, "copter", "--set", "space_size=20",
-                                               "--gcs", station.vehicle_url()),
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        errors = Lines(agent.stderr)
-        try:
-            api.wait_vehicle(1, lambda v: (v["agent"] or {}).get("phase") == "mission"
-                             and v["agent"]["state"] == "running", sim_timeout=120, what="the mission flies")
-            yield api, pilot, agent, errors, gcs
-        finally:
-            pilot.send_signal(signal.SIGCONT)
-            agent.kill()
-            agent.wait(timeout=10)
-
-
 def starve(pilot: subprocess.Popen, errors: Lines, meanwhile=None) -> None:
     """Stop the autopilot's process (a machine too busy to run it) until the agent says it paused for the gap in
     its heartbeat, do ``meanwhile`` then, and let it run again."""
@@ -878,8 +883,10 @@ def test_an_operators_mode_change_during_or_after_a_gap_pauses_the_agent_for_goo
             starve(pilot, errors)
             wait_wall(lambda: errors.said(f"agent: {BACK}"), 60, "the agent carries on")
             command_ok(api, 1, action="rtl")
-        paused = api.wait_vehicle(1, lambda v: v["agent"]["reason"] == "operator switched to RTL", sim_timeout=30,
-                                  what="the agent pauses for the operator")
+        wait_wall(lambda: errors.said("agent: paused, operator switched to RTL"), 60, "the agent pauses, for good")
+        # the station shows it once what the autopilot held back in the stall has drained (a loaded machine: seconds)
+        paused = api.wait_vehicle(1, lambda v: v["agent"]["reason"] == "operator switched to RTL", sim_timeout=120,
+                                  what="the station shows the agent paused for the operator")
         assert paused["agent"]["state"] == "paused"
         later = api.wait_sim_time(1, 20)
         assert later["agent"]["state"] == "paused" and later["agent"]["reason"] == "operator switched to RTL"

@@ -112,6 +112,7 @@ class MavlinkController:
         self._prearm_ok = False
         self._progress = MissionProgress(0, 0, False, False)
         self._heard = -math.inf  # wall time of the autopilot's last heartbeat
+        self._back = -math.inf  # wall time its heartbeat came (back) after none for HEARTBEAT_LOST
         self._place: tuple | None = None  # (link, sender) the autopilot's heartbeat comes from
         self._requests: deque[tuple] = deque()  # (request, link) to answer at the next pump
         self.dropped: Counter[str] = Counter()  # why (FROM_ELSEWHERE, TOO_MANY, FAILED) -> messages dropped
@@ -151,6 +152,7 @@ class MavlinkController:
             raise FlightControllerError(f"the flight controller is a {found}, not a {self.kind.value} (--vehicle)")
         self.sysid = beat.get_srcSystem()
         self._place, self._heard = beat._place, time.monotonic()  # heard there from now on (``_from_elsewhere``)
+        self._back = self._heard
         self.conn.mav.srcSystem, self.conn.mav.srcComponent = self.sysid, COMPONENT
         for link in self.extra_links:
             link.mav.srcSystem, link.mav.srcComponent = self.sysid, COMPONENT
@@ -296,6 +298,8 @@ class MavlinkController:
         self._time = boot
 
     def _on_heartbeat(self, m) -> None:
+        if self.lost:
+            self._back = time.monotonic()
         self._heard, self._place = time.monotonic(), m._place  # the autopilot is heard there (``_from_elsewhere``)
         was_armed, self._armed = self._armed, bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         mode = name_of(m.type, m.custom_mode) or f"MODE{m.custom_mode}"
@@ -359,8 +363,11 @@ class MavlinkController:
 
     def _on_command_ack(self, m) -> None:
         """Ours: addressed to this agent, or to no one (MAVLink 1 carries no address); an answer to another
-        ground station's command is not (taking one for ours paused the agent on a refusal it never got)."""
-        if (getattr(m, "target_system", 0), getattr(m, "target_component", 0)) in ((0, 0), (self.sysid, COMPONENT)):
+        ground station's command is not (taking one for ours paused the agent on a refusal it never got). An
+        acceptance waiting to be read stays: a slow autopilot's answers to two tries may come together, and its
+        refusal of the second (ArduPilot: a take-off already climbing FAILS) is no refusal of the command."""
+        ours = (getattr(m, "target_system", 0), getattr(m, "target_component", 0)) in ((0, 0), (self.sysid, COMPONENT))
+        if ours and self._acks.get(m.command) != ACCEPTED:
             self._acks[m.command] = m.result
 
     def _on_distance_sensor(self, m) -> None:
@@ -409,6 +416,11 @@ class MavlinkController:
     def last_heard(self) -> float:
         """When (``time.monotonic()``) the autopilot's last heartbeat came."""
         return self._heard
+
+    @property
+    def back_since(self) -> float:
+        """When (``time.monotonic()``) the autopilot's heartbeat came back after the last gap (or first came)."""
+        return self._back
 
     @property
     def flying(self) -> bool:

@@ -53,6 +53,8 @@ from vehicle.world.scene import Scene
 SONAR_RATE = 10.0  # Hz of the autopilot's clock
 START_TIMEOUT = 180.0  # wall s from the agent's start to the mission's (ArduPilot's EKF alone takes ~45 s)
 IDLE = 0.002  # wall s to wait when nothing came in
+STEADY = 1.5  # wall s the autopilot's heartbeat is back before the agent carries on: the first after a stall may
+# predate what the autopilot then took from its input (an operator's mode change sent meanwhile)
 RADIUS = 0.3  # m, the vehicle body the agent plans around
 CLEARANCE = 0.05  # m between the ground and the body when the vehicle stands
 
@@ -190,8 +192,9 @@ class OnboardAgent:
         since = fc.last_heard
 
         def back() -> str | None:
-            return None if fc.lost else \
-                f"the flight controller's heartbeat is back after {time.monotonic() - since:.1f} s"
+            if fc.lost or time.monotonic() - fc.back_since < STEADY:
+                return None
+            return f"the flight controller's heartbeat is back after {fc.back_since - since:.1f} s"
 
         agent.pause(f"lost the flight controller's heartbeat for {HEARTBEAT_LOST:g} s; not commanding until it is back",
                     until=back)
