@@ -119,3 +119,39 @@ def test_the_closest_approach_to_the_scene_leaves_the_ground_out(make_scene, box
 def test_a_team_that_cannot_be_is_refused_before_it_starts(flat_scene, starts, ids, words):
     with pytest.raises(PlacementError, match=words):
         Team([Simulation(flat_scene, "copter", start) for start in starts], ids)
+
+
+def test_the_cone_precheck_skips_only_bodies_no_ray_can_meet(flat_scene):
+    """Bodies all around, near and far, at every angle off the beams: a read that tests only the bodies the
+    scalar pre-check lets through echoes exactly as one that tests every body, and most reads test none."""
+    import numpy as np
+
+    from vehicle.protocol.frames import Pose
+    from vehicle.world.sonar import Bodies, SonarArray
+
+    sim = Simulation(flat_scene, "copter", (0.0, 0.0), sensors=sensor_suite("triple"))
+    sonars: SonarArray = sim.sonars
+    everyone = sonars._in_cones
+    rng = np.random.default_rng(4)
+    skipped = hits = 0
+    for trial in range(400):
+        pose = Pose(0.0, 0.0, 4.0, yaw=float(rng.uniform(0, 2 * np.pi)))
+        count = int(rng.integers(1, 6))
+        centres = np.column_stack([rng.uniform(-12, 12, count), rng.uniform(-12, 12, count),
+                                   rng.uniform(2.5, 5.5, count)])
+        bodies = Bodies(np.arange(10, 10 + count), centres, rng.uniform(0.2, 1.0, count))
+        picked = sonars.read(pose, trial, bodies)
+        sonars._in_cones = lambda xyz, axes, b: list(range(len(b.ids)))
+        brute = sonars.read(pose, trial, bodies)
+        sonars._in_cones = everyone
+        assert [r.vehicle for r in picked] == [r.vehicle for r in brute]
+        assert [r.distance for r in picked] == pytest.approx([r.distance for r in brute], abs=1e-9)
+        skipped += not everyone((0.0, 0.0, 4.0), (sonars._body_rays()[1] @ _to_world(pose)).tolist(), bodies)
+        hits += any(r.vehicle is not None for r in brute)
+    assert hits > 40 and skipped > 100  # both kinds of read were tried
+
+
+def _to_world(pose):
+    from vehicle.protocol.frames import body_to_world
+
+    return body_to_world(pose).T

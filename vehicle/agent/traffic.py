@@ -155,13 +155,17 @@ class GiveWay:
         """Whether the two would come within the margin over the horizon, each keeping its velocity (this
         vehicle's until its target, ``reach`` away)."""
         pose = self.ctx.fc.pose
-        reach = self.ctx.fc.navigation.reach
         speed = math.hypot(*wanted)
+        margin = self._margin(other)
+        if math.dist((pose.x, pose.y, pose.z), (other.x, other.y, other.z)) > (
+                margin + (speed + math.hypot(other.vx, other.vy)) * HORIZON):
+            return False  # too far apart to meet within the horizon: no array work
+        reach = self.ctx.fc.navigation.reach
         mine = np.minimum(_TIMES, reach / speed) if speed > 0 and math.isfinite(reach) else _TIMES
         dx = (pose.x + wanted[0] * mine) - (other.x + other.vx * _TIMES)
         dy = (pose.y + wanted[1] * mine) - (other.y + other.vy * _TIMES)
         dz = pose.z - other.z
-        return bool((dx * dx + dy * dy + dz * dz).min() < self._margin(other) ** 2)
+        return bool((dx * dx + dy * dy + dz * dz).min() < margin * margin)
 
     def _too_close_ahead(self, wanted: tuple[float, float], others: list[Traffic]) -> Traffic | None:
         """A team-mate already within the margin that this vehicle would move closer to."""

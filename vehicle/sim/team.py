@@ -7,8 +7,10 @@ step is two halves over every vehicle: all bodies move (``Simulation.move``,
 checked against the scene), then every pair is checked over that same step,
 then all sonars read (``Simulation.sense``) with the other bodies as spheres
 to echo off. So one vehicle costs what it costs alone, plus a pair check per
-step and, per read, a pick of the bodies within sonar reach; the same
-vehicles given the same seeds fly the same way, whatever the machine.
+step in plain floats and, per read, a scalar pick of the bodies within sonar
+range and inside a cone: a read with none costs what a lone one does, and
+only the bodies picked meet the rays as arrays. The same vehicles given the
+same seeds fly the same way, whatever the machine.
 
 Two bodies collide when their centres, each moving in a straight line over the
 step, come closer than the sum of their radii (the closest approach of two
@@ -53,8 +55,8 @@ class Team:
         self.closest_gap = math.inf  # m between the surfaces of the two bodies that came closest
         self.closest_pair: tuple[int, int] | None = None
         self.scene_gaps = [_SceneGap(s) for s in simulations]
-        self._pairs = np.triu_indices(len(simulations), 1)
-        self._reach = self.radii[self._pairs[0]] + self.radii[self._pairs[1]]
+        self._pair_list = [(i, j, float(self.radii[i] + self.radii[j]))
+                           for i in range(len(simulations)) for j in range(i + 1, len(simulations))]
         self._ids = np.array(ids)
 
     def __len__(self) -> int:
@@ -70,54 +72,59 @@ class Team:
     def step(self) -> list[list]:
         """One step of every vehicle: move all, collide pairs, then read every sonar. Returns each vehicle's
         readings, in the team's order."""
-        moves = [s.move() for s in self.simulations]
-        if len(self.simulations) > 1:
+        sims = self.simulations
+        moves = [s.move() for s in sims]
+        if len(sims) > 1:
             self._collide(moves)
-        centres = self._centres()
-        for gap, centre, simulation in zip(self.scene_gaps, centres, self.simulations, strict=True):
-            if simulation.reading_due:  # ten times a second is enough for a figure
-                gap.note(centre)
-        return [s.sense(self.others(i, centres)) if s.reading_due else [] for i, s in enumerate(self.simulations)]
+        readings = []
+        for index, (gap, simulation) in enumerate(zip(self.scene_gaps, sims, strict=True)):
+            if not simulation.reading_due:  # ten times a second is enough for the scene-gap figure too
+                readings.append([])
+                continue
+            gap.note(simulation.body.pose.xyz())
+            readings.append(simulation.sense(self.others(index, within=simulation.sonars.reach)))
+        return readings
 
-    def others(self, index: int, centres: np.ndarray | None = None) -> Bodies | None:
-        """Every body but vehicle ``index``'s (wrecks too: they still stand in the way)."""
-        if len(self.simulations) == 1:
+    def others(self, index: int, within: float = math.inf) -> Bodies | None:
+        """Every body but vehicle ``index``'s (wrecks too: they still stand in the way) whose surface is
+        within ``within`` metres of its centre; None when there is none (then a read costs what it does alone)."""
+        here = self.simulations[index].body.pose.xyz()
+        near = [k for k, sim in enumerate(self.simulations)
+                if k != index and math.dist(here, sim.body.pose.xyz()) - self.radii[k] <= within]
+        if not near:
             return None
-        keep = np.arange(len(self.simulations)) != index
-        centres = self._centres() if centres is None else centres
-        return Bodies(self._ids[keep], centres[keep], self.radii[keep])
+        centres = np.array([self.simulations[k].body.pose.xyz() for k in near], dtype=np.float64)
+        return Bodies(self._ids[near], centres, self.radii[near])
 
     def _collide(self, moves: list) -> None:
-        """Check every pair over the step just taken (a wreck stands where it lies); note the closest."""
+        """Check every pair over the step just taken (a wreck stands where it lies); note the closest.
+        In plain floats: a few pairs cost less so than numpy's calls on arrays of a few rows."""
         sims = self.simulations
-        starts, ends = [], []
+        paths = []
         for sim, move in zip(sims, moves, strict=True):
             if move is None:
                 here = sim.body.pose.xyz()
                 move = (here, here)
-            starts.append(move[0])
-            ends.append(move[1])
-        starts, ends = np.array(starts, dtype=np.float64), np.array(ends, dtype=np.float64)
-        first, second = self._pairs
-        gap0 = starts[second] - starts[first]  # (pairs, 3): the second's centre seen from the first's
-        change = (ends[second] - ends[first]) - gap0
-        speed2 = np.einsum("ij,ij->i", change, change)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            when = np.where(speed2 > 1e-18, np.clip(-np.einsum("ij,ij->i", gap0, change) / speed2, 0.0, 1.0), 0.0)
-        nearest = np.linalg.norm(gap0 + when[:, None] * change, axis=1)
-        reach = self._reach
-        gaps = nearest - reach
-        pair = int(np.argmin(gaps))
-        if gaps[pair] < self.closest_gap:
-            self.closest_gap = float(gaps[pair])
-            self.closest_pair = (self.ids[first[pair]], self.ids[second[pair]])
-        for k in np.flatnonzero(gaps < 0):
-            i, j = int(first[k]), int(second[k])
-            if moves[i] is None and moves[j] is None:
-                continue  # two wrecks
-            fraction = _first_touch(gap0[k], change[k], reach[k])
+            paths.append(move)
+        contacts = []
+        for i, j, reach in self._pair_list:
+            (ai, bi), (aj, bj) = paths[i], paths[j]
+            gx, gy, gz = aj[0] - ai[0], aj[1] - ai[1], aj[2] - ai[2]  # j's centre seen from i's, at the start
+            cx = (bj[0] - bi[0]) - gx  # and how that changes over the step
+            cy = (bj[1] - bi[1]) - gy
+            cz = (bj[2] - bi[2]) - gz
+            speed2 = cx * cx + cy * cy + cz * cz
+            when = min(1.0, max(0.0, -(gx * cx + gy * cy + gz * cz) / speed2)) if speed2 > 1e-18 else 0.0
+            gap = math.sqrt((gx + when * cx) ** 2 + (gy + when * cy) ** 2 + (gz + when * cz) ** 2) - reach
+            if gap < self.closest_gap:
+                self.closest_gap = gap
+                self.closest_pair = (self.ids[i], self.ids[j])
+            if gap < 0 and not (moves[i] is None and moves[j] is None):  # two wrecks lie still
+                contacts.append((i, j, _first_touch((gx, gy, gz), (cx, cy, cz), reach)))
+        for i, j, fraction in contacts:
             for index in (i, j):
-                point = starts[index] + fraction * (ends[index] - starts[index])
+                start, end = paths[index]
+                point = np.array(start) + fraction * (np.array(end) - np.array(start))
                 contact = Contact(point=point, fraction=fraction, face=-1, vehicles=(self.ids[i], self.ids[j]))
                 if sims[index].collision is None:
                     sims[index].crash(contact)
@@ -134,14 +141,14 @@ class _SceneGap:
         self.collider = Collider(grid, simulation.limits.radius, search=2 * SCENE_GAP_REACH)
         self.radius = simulation.limits.radius
         self.closest = math.inf  # m from the body's centre
-        self._anchor: np.ndarray | None = None
+        self._anchor: tuple[float, float, float] | None = None
         self._clear = 0.0
 
-    def note(self, centre: np.ndarray) -> None:
+    def note(self, centre: tuple[float, float, float]) -> None:
         worth = min(self.closest, SCENE_GAP_REACH)
-        if self._anchor is not None and self._clear - float(np.linalg.norm(centre - self._anchor)) >= worth:
+        if self._anchor is not None and self._clear - math.dist(centre, self._anchor) >= worth:
             return
-        self._anchor, self._clear = centre.copy(), self.collider.clearance(centre)
+        self._anchor, self._clear = centre, self.collider.clearance(np.array(centre))
         if self._clear < SCENE_GAP_REACH:
             self.closest = min(self.closest, self._clear)
 
@@ -160,11 +167,11 @@ class _Walls:
         self.face_normals = np.asarray(scene.face_normals)[steep]
 
 
-def _first_touch(gap0: np.ndarray, change: np.ndarray, reach: float) -> float:
+def _first_touch(gap0: tuple[float, float, float], change: tuple[float, float, float], reach: float) -> float:
     """The first fraction of the step at which |gap0 + t change| = reach (0 if already touching)."""
-    a = float(change @ change)
-    b = 2.0 * float(gap0 @ change)
-    c = float(gap0 @ gap0) - reach * reach
+    a = sum(v * v for v in change)
+    b = 2.0 * sum(g * v for g, v in zip(gap0, change, strict=True))
+    c = sum(g * g for g in gap0) - reach * reach
     if c <= 0 or a <= 1e-18:
         return 0.0
     root = b * b - 4 * a * c

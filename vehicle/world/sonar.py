@@ -10,8 +10,9 @@ the body, optionally on a servo driven by PWM.
 
 In a team (``vehicle.sim.team``) the other vehicles are bodies too: spheres the
 cone echoes off as off a wall, met analytically (ray-sphere), the nearest echo
-of mesh and bodies winning. Only the bodies within the sensors' reach are
-tested, picked once per read, so a ray costs no more in a larger team.
+of mesh and bodies winning. A scalar pre-check per read keeps only the bodies
+within a sensor's range and inside its cone (widened by the angle the sphere
+spans); a read with none left costs what a lone vehicle's does.
 """
 
 from __future__ import annotations
@@ -93,6 +94,13 @@ class SonarArray:
         self._servos = any(s.servo is not None for s in sensors)
         self._yaw_offsets = [s.yaw_offset for s in sensors]  # fixed unless a servo turns one
         self._max_range = max((s.max_range for s in sensors), default=0.0)
+        self._cone_sin = [math.sin(math.radians(s.beam_angle)) for s in sensors]
+        self._cone_cos = [math.cos(math.radians(s.beam_angle)) for s in sensors]
+
+    @property
+    def reach(self) -> float:
+        """The furthest any of the sensors can hear an echo, metres."""
+        return self._max_range
 
     def _body_rays(self) -> tuple[np.ndarray, np.ndarray]:
         """All sensors' rays and beam axes in the body frame; recomputed only when a servo moved."""
@@ -119,9 +127,11 @@ class SonarArray:
         nearest = _nearest_echoes(distance, faces, directions, self.caster.face_normals, self._first_ray,
                                   self._cos_critical, self._min_range).tolist()
         hit_by = [None] * len(self.sensors)
-        if bodies is not None and len(bodies.ids):
-            self._echo_off_bodies(origin, directions, bodies, nearest, hit_by)
         world_axes = axes @ to_world
+        if bodies is not None and len(bodies.ids):
+            near = self._in_cones(xyz, world_axes.tolist(), bodies)
+            if near:
+                self._echo_off_bodies(origin, directions, bodies, near, nearest, hit_by)
         readings = []
         for index, sensor in enumerate(self.sensors):
             value = nearest[index]
@@ -136,16 +146,34 @@ class SonarArray:
                                     None if value is None else hit_by[index]))
         return readings
 
-    def _echo_off_bodies(self, origin: np.ndarray, directions: np.ndarray, bodies: Bodies, nearest: list[float],
-                         hit_by: list[int | None]) -> None:
+    def _in_cones(self, xyz: tuple[float, float, float], axes: list[list[float]], bodies: Bodies) -> list[int]:
+        """The bodies some sensor's cone may meet: within its range and inside its angle, widened by the angle
+        the sphere itself spans. Plain floats: most reads have none, and must then cost what a lone read does."""
+        near = []
+        for k, ((cx, cy, cz), radius) in enumerate(zip(bodies.centres.tolist(), bodies.radii.tolist(), strict=True)):
+            dx, dy, dz = cx - xyz[0], cy - xyz[1], cz - xyz[2]
+            distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if distance <= radius:
+                near.append(k)  # inside it: every ray starts in the sphere
+                continue
+            sin_body = radius / distance  # the half-angle the sphere spans, as seen from here
+            cos_body = math.sqrt(1.0 - sin_body * sin_body)
+            for (ax, ay, az), sensor, sin_cone, cos_cone in zip(axes, self.sensors, self._cone_sin, self._cone_cos,
+                                                                strict=True):
+                if distance - radius > sensor.max_range:
+                    continue
+                # inside the cone when the angle to the centre is under the cone's half-angle plus the sphere's
+                cos_widened = cos_cone * cos_body - sin_cone * sin_body
+                if (dx * ax + dy * ay + dz * az) / distance >= cos_widened:
+                    near.append(k)
+                    break
+        return near
+
+    def _echo_off_bodies(self, origin: np.ndarray, directions: np.ndarray, bodies: Bodies, near: list[int],
+                         nearest: list[float], hit_by: list[int | None]) -> None:
         """Where a body echoes nearer than the scene, its distance replaces the scene's in ``nearest`` and its
-        id goes in ``hit_by``. Only the bodies within reach of the sensors are tested (picked once)."""
-        offsets = bodies.centres - origin
-        reach = self._max_range + bodies.radii
-        near = np.flatnonzero(np.einsum("ij,ij->i", offsets, offsets) <= reach * reach)
-        if not len(near):
-            return
-        offsets, radii = offsets[near], bodies.radii[near]
+        id goes in ``hit_by``. Only the bodies ``near`` (in some sensor's cone) are tested."""
+        offsets, radii = bodies.centres[near] - origin, bodies.radii[near]
         along = directions @ offsets.T  # (rays, bodies): how far along each ray each centre lies
         miss = along * along - (np.einsum("ij,ij->i", offsets, offsets) - radii * radii)
         with np.errstate(invalid="ignore"):
