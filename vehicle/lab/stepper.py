@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from vehicle.agent.agent import Agent
 from vehicle.agent.settings import Settings
-from vehicle.mapping.sharing import take_in
+from vehicle.mapping.sharing import Changes, apply
 from vehicle.protocol.rangefinder import Reading
 from vehicle.sim.onboard import SimController
 from vehicle.sim.simulation import PlacementError, Simulation
@@ -72,12 +72,16 @@ def simulate(scene: Scene, mission: str | None = None, kind: str = "copter", set
     return Stepper(simulation, mission, settings, waypoints, autostart)
 
 
+SHARE_PERIOD = 1.0  # s between two shares of a team's map changes
+
+
 class TeamStepper:
     """A team's simulations (``Team``) and their agents, stepped together on the one clock.
 
     Each step moves the whole world one step and hands every vehicle's readings to its own controller;
-    every ``monitor_period`` each agent still flying steps, and (``share_maps``) each map takes in the cells
-    the others' maps changed since, as the map stream would carry them. A wreck's agent steps no more; the
+    every ``monitor_period`` each agent still flying steps, and (``share_maps``) once a second each map takes
+    in the cells the others' maps changed since, as the map stream would carry them (batched: each share costs
+    a few array calls per pair of vehicles, whatever it carries). A wreck's agent steps no more; the
     others fly on.
     """
 
@@ -91,6 +95,7 @@ class TeamStepper:
         self.agents = [Agent(controller, mission, self.settings, points, autostart)
                        for controller, points in zip(self.controllers, waypoints, strict=True)]
         self.period = max(1, round(self.settings.monitor_period / team.simulations[0].dt))
+        self.share_every = self.period * max(1, round(SHARE_PERIOD / self.settings.monitor_period))
         self.share_maps = self.settings.share_maps >= 0.5
         self.cells_shared = 0
 
@@ -107,17 +112,17 @@ class TeamStepper:
                 controller.collect(taken)
                 if due:
                     agent.step()
-        if due and self.share_maps and len(self.agents) > 1:
+        if self.share_maps and len(self.agents) > 1 and self.team.simulations[0].steps % self.share_every == 0:
             self._share()
         return readings
 
     def _share(self) -> None:
         maps = [agent.map for agent in self.agents]
-        changes = [m.take_changes() for m in maps]
+        changes = [Changes.of(m, m.take_changes(in_order=False)) for m in maps]  # each source read once
         for target in maps:
-            for source, cells in zip(maps, changes, strict=True):
-                if source is not target:
-                    self.cells_shared += take_in(target, source, cells)
+            for source in changes:
+                if source.source is not target:
+                    self.cells_shared += apply(target, source)
 
 
 def simulate_team(scene: Scene, mission: str, count: int, kind: str = "copter", settings: Settings | None = None,
