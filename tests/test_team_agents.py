@@ -91,3 +91,23 @@ def test_team_settings_out_of_range_are_refused(name, value):
 
     with pytest.raises(SettingsError, match=name):
         Settings().updated({name: value})
+
+
+def test_two_vehicles_going_round_each_other_on_the_way_home_never_touch(make_scene):
+    """The bench's run that crashed (6 copters, Pathfind, default scene, 60 s): vehicles 3 and 4, both homing,
+    each went round the other as one standing in its way, and flew into each other. The guard holds or steps
+    aside a vehicle that would come within the margin, before any detour."""
+    from pathlib import Path
+
+    from vehicle.agent.settings import load_settings
+    from vehicle.lab.experiment import Experiment, run_team
+    from vehicle.world.scene import load_scene
+
+    scene = load_scene(Path(__file__).resolve().parent.parent / "scenes" / "default.wrl")
+    settings = load_settings(scene_hints=scene.hints).updated({"time_limit": 60})
+    starts = [(1.548, -7.046), (4.548, -3.046), (6.548, 5.954), (-2.452, 3.954), (0.548, -0.046), (-3.452, -4.046)]
+    stepper = simulate_team(scene, "pathfind", 6, settings=settings, starts=starts, seed=13)
+    result = run_team(Experiment("default.wrl", "pathfind", settings=settings, seed=13), stepper)
+    assert [v["outcome"] for v in result["vehicles"] if v["outcome"] == "collision"] == []
+    assert stepper.team.closest_gap > 0.5
+

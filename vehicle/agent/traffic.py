@@ -32,6 +32,7 @@ ASIDE = 1.0  # m beyond the margin that stepping aside leaves
 MOVING = 0.3  # m/s: a team-mate slower than this stands: it has no track to keep out of, it is gone round
 DETOUR_REACHED = 0.7  # m from the point beside a team-mate at which going round it is done
 DETOUR_FOR = 20.0  # s at most spent going round one
+GUARD_EXTRA = 0.5  # s looked ahead by the guard beyond the time to stop
 _TIMES = np.linspace(0.0, HORIZON, SAMPLES)
 
 
@@ -61,6 +62,16 @@ class GiveWay:
         conflicts = [o for o in others if self._conflict(wanted, o)]
         standing = [o for o in conflicts if math.hypot(o.vx, o.vy) <= MOVING]
         moving_lower = [o for o in conflicts if o.vehicle < me and o not in standing]
+        close = self._closing_in(wanted, others)
+        if close is not None:  # the guard, before any rule or detour: never fly into a team-mate's margin
+            self._detour = None
+            if close.vehicle < me:
+                self._begin(close, wanted, "giving way to vehicle {} (lower system id), which is close")
+                self._keep_out_of(close)
+            else:
+                self._begin(close, wanted, "waiting: vehicle {} is too close ahead")
+                self._hold()
+            return True
         if moving_lower:  # the rule: the higher system id gives way to the lower
             other = min(moving_lower, key=lambda o: o.vehicle)
             self._begin(other, wanted, "giving way to vehicle {} (lower system id)")
@@ -166,6 +177,29 @@ class GiveWay:
         dy = (pose.y + wanted[1] * mine) - (other.y + other.vy * _TIMES)
         dz = pose.z - other.z
         return bool((dx * dx + dy * dy + dz * dz).min() < margin * margin)
+
+    def _closing_in(self, wanted: tuple[float, float], others: list[Traffic]) -> Traffic | None:
+        """The nearest team-mate this vehicle would come within the margin of before it could stop, flying
+        ``wanted`` (the other keeping its velocity): a monitor period of flight plus the braking distance."""
+        pose = self.ctx.fc.pose
+        speed = max(math.hypot(*wanted), self.ctx.fc.speed)
+        soon = self.ctx.settings.monitor_period + speed / max(self.ctx.fc.brake, 0.1) + GUARD_EXTRA
+        closest, found = math.inf, None
+        for other in others:
+            margin = self._margin(other)
+            gx, gy, gz = other.x - pose.x, other.y - pose.y, other.z - pose.z
+            if math.sqrt(gx * gx + gy * gy + gz * gz) > margin + (speed + math.hypot(other.vx, other.vy)) * soon:
+                continue
+            cx, cy = wanted[0] - other.vx, wanted[1] - other.vy  # closing velocity
+            closing2 = cx * cx + cy * cy
+            when = min(soon, max(0.0, (gx * cx + gy * cy) / closing2)) if closing2 > 1e-9 else 0.0
+            if when <= 0.0:
+                continue  # not closing in: moving away is always allowed
+            ax, ay = gx - cx * when, gy - cy * when
+            nearest = math.sqrt(ax * ax + ay * ay + gz * gz)
+            if nearest < margin and nearest < closest:
+                closest, found = nearest, other
+        return found
 
     def _too_close_ahead(self, wanted: tuple[float, float], others: list[Traffic]) -> Traffic | None:
         """A team-mate already within the margin that this vehicle would move closer to."""

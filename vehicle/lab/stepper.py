@@ -141,7 +141,28 @@ def simulate_team(scene: Scene, mission: str, count: int, kind: str = "copter", 
         raise PlacementError(f"{len(starts)} starts for {count} vehicles")
     simulations = [Simulation(scene, kind, start, cruise_speed=settings.speed, wp_radius=settings.closeness,
                               seed=seed + k, sensors=sensor_suite(suite), **options) for k, start in enumerate(starts)]
+    for k, simulation in enumerate(simulations):
+        _check_climb(simulation, settings, k + 1 if ids is None else ids[k])
     return TeamStepper(Team(simulations, ids), mission, settings, waypoints)
+
+
+def _check_climb(simulation: Simulation, settings: Settings, vehicle: int) -> None:
+    """A copter takes off straight up, its sonars looking sideways, and sets off at once: a start under a
+    branch or a roof, or one whose flight altitude lies within ``padding`` of a tree's crown, would fly it
+    into it before it could see it. Such a start is refused before anything flies."""
+    if simulation.kind.value != "copter":
+        return
+    x, y, z = simulation.pose.xyz()
+    top = max(z, simulation.home[2] + settings.altitude)
+    where = f"vehicle {vehicle} at x={x:.2f} y={y:.2f}"
+    contact = simulation.collider.sweep((x, y, z), (x, y, top))
+    if contact is not None:
+        raise PlacementError(f"{where} cannot climb to {settings.altitude:g} m: something is overhead at "
+                             f"z={contact.point[2]:.2f}")
+    clear = simulation.collider.clearance((x, y, top)) - simulation.limits.radius
+    if clear < settings.padding:
+        raise PlacementError(f"{where} would fly within {clear:.2f} m of the scene at its altitude of "
+                             f"{settings.altitude:g} m (padding {settings.padding:g} m): start it further out")
 
 
 # where a team starts, around the scene's start: the spots of ``groundstation demo --vehicles N``, metres apart
