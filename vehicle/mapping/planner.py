@@ -21,6 +21,7 @@ from vehicle.mapping.memory_map import MemoryMap
 PLAN_MARGINS = (15.0, 40.0)  # m around start and goal that planning searches, the small window first
 UNSEEN_EXTENT = 1.0  # m: unknown cells this close to an obstacle are presumed to be more of it
 DOORWAY_CLEARANCE = 0.05  # m between the body and an obstacle's cell when nothing wider gets through
+SQUEEZE_REACH = 1.0  # m around a doorway within which a path keeps only that clearance
 
 Point = tuple[float, float]
 
@@ -58,6 +59,8 @@ class MapPlanner:
         if level == 0 and self.path_clear(start, [goal], horizon=math.inf, padding=padding):
             return [goal], level  # in the open: no search needed
         attempts = [(self.margin_cells(padding), True), (self.margin_cells(0.0), True), (self.margin_cells(0.0), False)]
+        if 1.0 / self.map.resolution > self.radius:  # cells wider than the body resolve no doorway, and on a map
+            attempts = attempts[:1]  # this coarse a gap between the walls seen is a wall missed as often as not
         for index, (margin, presume) in enumerate(attempts[level:], start=level):
             for wider, window in enumerate(self._windows(start_cell, goal_cell)):
                 try:  # a wider window is tried when a smaller one had no path: there may be none
@@ -66,12 +69,46 @@ class MapPlanner:
                     if failure.reason == planning.UNREACHABLE:
                         continue  # a wider window may find a way round
                     break  # start or goal inside the margin: try with less
+                if index > 0:  # squeezed through somewhere: keep the wide clearance everywhere else
+                    cells = self._widen(cells, start_cell, goal_cell, window, presume, attempts[0][0], margin)
                 points = [self.map.center_of(r, c) for r, c in cells[1:]]
                 if points:
                     points[-1] = goal
                 return points or [goal], index
         self.reason = self._why_not(start_cell, goal_cell, attempts[-1][0])
         return None, level
+
+    def _widen(self, cells: np.ndarray, start, goal, window, presume: bool, wide: float, tight: float) -> np.ndarray:
+        """The path planned again with the tight clearance allowed only within ``SQUEEZE_REACH`` of where the
+        tight path had to pass closer than the wide clearance (a doorway), and the wide one everywhere else:
+        a path squeezed through one doorway must not hug every wall on its way. The tight path if none.
+
+        Had to: no cell with the wide clearance lies within the difference of the two clearances of it (beside
+        a wall, one step aside gives the wide clearance; in a doorway none does); and at its start and end.
+        The wide clearance presumes the unseen surroundings of seen walls to be more wall, as the first
+        attempt does: a sonar sees no wall it meets at a glancing angle, so a path must not graze one."""
+        obstacles, offset = self.blocked_in(*window, presume), np.array((window[0].start, window[1].start))
+        wide_zone = planning.inflate(self.blocked_in(*window, True), wide)  # unseen walls presumed, as at first
+        tight_zone = planning.inflate(obstacles, tight)
+        local = cells - offset
+        legs = [np.rint(np.linspace(a, b, int(np.abs(b - a).max()) + 1)).astype(int)
+                for a, b in zip(local[:-1], local[1:], strict=True)]
+        walk = np.concatenate(legs) if legs else local
+        bottleneck = wide_zone & ~planning.inflate(~wide_zone, wide - tight + 1.0)
+        squeezed = np.zeros_like(obstacles)
+        on_walk = bottleneck[walk[:, 0], walk[:, 1]]
+        squeezed[walk[on_walk, 0], walk[on_walk, 1]] = True
+        squeezed[tuple(local[0])] = squeezed[tuple(local[-1])] = True  # leaving a wall, reaching a goal by one
+        allowed = planning.inflate(squeezed, SQUEEZE_REACH * self.map.resolution) | squeezed
+        grid = (wide_zone & ~allowed) | tight_zone
+        local_start, local_goal = tuple(int(v) for v in start - offset), tuple(int(v) for v in goal - offset)
+        if grid[local_start] or grid[local_goal]:
+            return cells
+        try:
+            path = planning.smooth(planning.astar(grid, local_start, local_goal), grid)
+        except planning.NoPath:
+            return cells
+        return path + offset
 
     def _windows(self, a: tuple[int, int], b: tuple[int, int]):
         """The windows planning searches, smallest first, the whole map last (each once)."""
