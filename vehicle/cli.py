@@ -215,8 +215,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if autopilot == bool(args.mission):  # checked first: loading the scene and the loops takes a while
         raise ValueError("--mission NAME (a vehicle with its onboard agent) or --role autopilot (for an onboard "
                          "agent in another process), one of them")
+    if args.vehicles is None and (args.sysids or args.team_link or args.port_step is not None):
+        raise ValueError("--sysids, --team-link and --port-step are for a team: give --vehicles N")
     scene = load_scene(args.scene)
     settings = settings_from(args, scene)
+    if args.vehicles is not None:
+        return _sim_team(args, scene, settings)
     warmed = warm_up()  # before any link opens: compiling the loops on a fresh install takes a few seconds
     if warmed > 1.0:
         print(f"vehicle {args.sysid}: compiled the simulation's loops in {warmed:.1f} s (once after an install)",
@@ -249,6 +253,83 @@ def cmd_sim(args: argparse.Namespace) -> int:
     finally:
         stats = ", ".join(f"{k} {v}" for k, v in sorted(sim.endpoint.stats.items()))
         print(f"vehicle {args.sysid}: stopped at {world.time:.1f} s simulated; {stats}", flush=True)
+    return 0
+
+
+PORT_STEP = 10  # a team's vehicle k has its links' ports k * this up, as ArduPilot SITL's instance -I k
+
+
+def _team_urls(urls: list[str], index: int, step: int) -> list[str]:
+    """Vehicle ``index``'s links: each URL with its port ``index * step`` up."""
+    out = []
+    for url in urls:
+        head, _, port = url.rpartition(":")
+        if not port.isdigit() or not head:
+            raise ValueError(f"--mavlink {url} names no port to give each vehicle of the team its own (a serial "
+                             "link cannot be shared); give it as --team-link for a link every vehicle opens as is")
+        if int(port) + index * step > 65535:
+            raise ValueError(f"--mavlink {url}: vehicle {index + 1}'s port {int(port) + index * step} is past 65535")
+        out.append(f"{head}:{int(port) + index * step}")
+    return out
+
+
+def _sim_team(args: argparse.Namespace, scene, settings) -> int:
+    """``vehicle sim --vehicles N``: N autopilots (with their agents, given --mission) in one world, vehicle k
+    (from 0) on the --mavlink links with their ports k * --port-step up, plus every --team-link as is, with the
+    system id --sysid + k (or the k-th of --sysids). Refused (exit 2) before any link opens."""
+    from vehicle.lab.experiment import warm_up
+    from vehicle.lab.live import Autopilots, SimOptions, SimTeam
+    from vehicle.lab.stepper import TeamStepper, team_starts
+    from vehicle.protocol.geodesy import Datum
+    from vehicle.sim.simulation import Simulation
+    from vehicle.sim.team import Team
+    from vehicle.world.suites import sensor_suite
+
+    count = args.vehicles
+    ids = args.sysids or list(range(args.sysid, args.sysid + count))
+    if len(ids) != count or ids[-1] > 255:
+        raise ValueError(f"a team of {count} needs {count} system ids of 1 to 255 (--sysids, or --sysid "
+                         f"{args.sysid} and up)")
+    if args.start and len(args.start) != count:
+        raise ValueError(f"--start given {len(args.start)} times for a team of {count}: once per vehicle, or not")
+    if args.waypoints:
+        raise ValueError("--waypoints is for one vehicle; a team flies its mission's own")
+    step = PORT_STEP if args.port_step is None else args.port_step
+    urls = args.mavlink or ([] if args.team_link else [DEFAULT_SIM_LINK])
+    links = [_team_urls(urls, k, step) + list(args.team_link or []) for k in range(count)]
+    listening = [url for own in links for url in own if url.partition(":")[0] in ("udpin", "udp", "tcpin")]
+    if len(set(listening)) < len(listening):
+        raise ValueError("two vehicles of the team would listen on one port: give --port-step above 0, or "
+                         "--team-link only for links that send (udpout, tcp)")
+    datum = Datum.of_scene(scene.hints, args.datum)
+    simulations = [Simulation(scene, args.vehicle, start, args.heading, seed=args.seed + k,
+                              sensors=sensor_suite(args.sensors), datum=datum, cruise_speed=settings.speed,
+                              wp_radius=settings.closeness)
+                   for k, start in enumerate(args.start or team_starts(scene, count))]
+    team = Team(simulations, ids)
+    stepper = TeamStepper(team, args.mission, settings, None, args.autostart) if args.mission else Autopilots(team)
+    warmed = warm_up()
+    if warmed > 1.0:
+        print(f"vehicle team: compiled the simulation's loops in {warmed:.1f} s (once after an install)", flush=True)
+    autopilot = args.role == "autopilot"
+    per_vehicle = [SimOptions(own, sysid, args.speedup, args.failsafe_timeout, args.log if k == 0 else None,
+                              sim_clock=autopilot, signing_key=args.signing_key)
+                   for k, (own, sysid) in enumerate(zip(links, ids, strict=True))]
+    sim = SimTeam(stepper, per_vehicle, say=lambda text: print(f"vehicle team: {text}", file=sys.stderr, flush=True))
+    what = "plain autopilots: an onboard agent flies each over MAVLink" if autopilot else f"mission {args.mission}"
+    print(f"vehicle team: {count} {args.vehicle}s in {Path(args.scene).name}, one world, x{args.speedup:g}; {what}",
+          flush=True)
+    for world, sysid, own in zip(stepper.team.simulations, ids, links, strict=True):
+        print(f"vehicle {sysid}: at {world.home[0]:.1f}, {world.home[1]:.1f} on {', '.join(own)}", flush=True)
+    try:
+        sim.run(args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        print(f"vehicle team: stopped at {sim.world.time:.1f} s simulated", flush=True)
+        for wire, sysid in zip(sim.wires, ids, strict=True):
+            stats = ", ".join(f"{k} {v}" for k, v in sorted(wire.endpoint.stats.items()))
+            print(f"vehicle {sysid}: {stats}", flush=True)
     return 0
 
 
@@ -349,6 +430,17 @@ def main(argv: list[str] | None = None) -> int:
     sim.add_argument("--log", metavar="FILE.tlog", help="record the vehicle's own MAVLink traffic")
     sim.add_argument("--duration", type=options.positive, help="stop after this many wall seconds")
     sim.add_argument("--signing-key", type=_signing_key, metavar="FILE|PASSPHRASE", help=SIGNING_HELP)
+    sim.add_argument("--vehicles", type=options.whole(1, 8), metavar="N",
+                     help="N vehicles (1 to 8) in one world on one clock, on the team's spots around the start (or "
+                          "one --start each); vehicle k (from 0) has the --mavlink links with their ports "
+                          f"k * --port-step up (default {PORT_STEP}, as ArduPilot SITL's -I k) and the system id "
+                          "--sysid + k; each autopilot reports the others as ADSB_VEHICLE at 4 Hz")
+    sim.add_argument("--sysids", type=_system_ids, metavar="ID,ID,...", help="a team's system ids, one per vehicle")
+    sim.add_argument("--port-step", type=options.whole(0), metavar="S",
+                     help=f"a team's ports per vehicle (default {PORT_STEP}; 0: all on the same port, for udpout)")
+    sim.add_argument("--team-link", action="append", metavar="URL", type=options.link_url,
+                     help="a link every vehicle of a team opens as given, repeatable: say udpout to one ground "
+                          "station's port (each vehicle sends from its own socket)")
     sim.set_defaults(run=cmd_sim)
 
     agent = commands.add_parser("agent", help="the onboard agent on a companion computer, flying an autopilot "

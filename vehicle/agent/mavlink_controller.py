@@ -27,6 +27,13 @@ What ArduPilot needs that our simulator does not: Rover refuses CONDITION_YAW
 a mode change resets DO_CHANGE_SPEED (it is sent again); a copter holds best
 on a zero-velocity target. Positions on the wire are latitude and longitude,
 turned into scene metres with the datum; heights are above home.
+
+Team-mates (``traffic``) are the ADSB_VEHICLE reports the autopilot forwards
+(our simulator reports each vehicle of its world so; an ArduPilot with an
+ADS-B receiver forwards what it hears): ICAO address = the team-mate's system
+id, altitude geometric above sea level. A report older than TRAFFIC_STALE s of
+the autopilot's clock is forgotten. ADS-B carries no size: a team-mate's
+radius is assumed to be this vehicle's own.
 """
 
 from __future__ import annotations
@@ -38,12 +45,13 @@ from collections.abc import Callable
 
 from vehicle.protocol import mission as mission_protocol
 from vehicle.protocol.frames import Navigation, Pose
-from vehicle.protocol.geodesy import Datum, heading_of, wrap_pi
+from vehicle.protocol.geodesy import Datum, heading_of, on_earth, wrap_pi
 from vehicle.protocol.mav import ACCEPTED, AUTOPILOT, COMMAND_NAMES, RESULT_WORDS, UNSUPPORTED, mavlink
 from vehicle.protocol.mav import COMPANION as COMPONENT
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import DISARMED, Kind, name_of, number_of
 from vehicle.protocol.rangefinder import Reading, Servo, reading_from, readings_from_obstacles
+from vehicle.protocol.traffic import Traffic
 
 NO_ANSWER = -1  # what a command returns when the autopilot never acknowledged it
 HEARTBEAT_LOST = 2.0  # wall s without the autopilot's heartbeat before the agent stops commanding until it is back
@@ -54,6 +62,8 @@ NEWS_EVERY = 5.0  # wall s at least between two lines about what was dropped (a 
 FROM_ELSEWHERE = "messages in the autopilot's name from elsewhere"  # why a message was dropped (``dropped``)
 TOO_MANY = f"requests beyond the {REQUESTS_HELD} it holds at once"
 FAILED = "messages it failed to handle"
+TRAFFIC_STALE = 3.0  # s of the autopilot's clock after which a team-mate's ADSB_VEHICLE is forgotten
+TRAFFIC_HELD = 64  # team-mates remembered at once (more reports are dropped)
 STREAMS = {  # message -> rate (Hz of the autopilot's clock) the agent asks for
     "HEARTBEAT": 4, "GLOBAL_POSITION_INT": 20, "ATTITUDE": 20, "SYS_STATUS": 1, "HOME_POSITION": 0.5,
     "MISSION_CURRENT": 2, "EXTENDED_SYS_STATE": 4, "DISTANCE_SENSOR": 10,
@@ -136,6 +146,7 @@ class MavlinkController:
         self._speed_applied = False
         self._speed_news = False  # the operator set a speed that the next pump sends
         self._reposition_ok = True
+        self._traffic: dict[int, Traffic] = {}  # ICAO address (a team-mate's system id) -> its last report
 
     # ---- connecting ---------------------------------------------------------------------------------
     def connect(self, timeout: float = 30.0) -> None:
@@ -370,6 +381,20 @@ class MavlinkController:
         if ours and self._acks.get(m.command) != ACCEPTED:
             self._acks[m.command] = m.result
 
+    def _on_adsb_vehicle(self, m) -> None:
+        """A team-mate as the autopilot's ADS-B receiver heard it (see the module's docstring)."""
+        flags = mavlink.ADSB_FLAGS_VALID_COORDS | mavlink.ADSB_FLAGS_VALID_ALTITUDE
+        if m.flags & flags != flags or m.ICAO_address in (0, self.sysid) or not on_earth(m.lat * 1e-7, m.lon * 1e-7):
+            return
+        if m.ICAO_address not in self._traffic and len(self._traffic) >= TRAFFIC_HELD:
+            return
+        x, y = self.datum.to_local(m.lat * 1e-7, m.lon * 1e-7)
+        speed = m.hor_velocity / 100.0 if m.flags & mavlink.ADSB_FLAGS_VALID_VELOCITY else 0.0
+        track = math.radians(m.heading / 100.0) if m.flags & mavlink.ADSB_FLAGS_VALID_HEADING else 0.0
+        self._traffic[m.ICAO_address] = Traffic(m.ICAO_address, x, y, m.altitude / 1000.0 - self.datum.alt,
+                                                speed * math.sin(track), speed * math.cos(track), self.radius,
+                                                self._time - m.tslc)
+
     def _on_distance_sensor(self, m) -> None:
         self._clock(m)
         if self.use_fc_sensors and self._have_position:
@@ -461,6 +486,17 @@ class MavlinkController:
     def readings(self) -> list[Reading]:
         readings, self._readings = self._readings, []
         return readings
+
+    @property
+    def system_id(self) -> int:
+        return self.sysid
+
+    def traffic(self) -> list[Traffic]:
+        """The team-mates heard within the last TRAFFIC_STALE s of the autopilot's clock."""
+        fresh = {k: t for k, t in self._traffic.items() if self._time - t.time <= TRAFFIC_STALE}
+        if len(fresh) < len(self._traffic):
+            self._traffic = fresh
+        return list(fresh.values())
 
     def took_over(self) -> str | None:
         """(A gap in the heartbeat is not one: see ``lost``.)"""

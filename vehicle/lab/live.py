@@ -17,6 +17,7 @@ in simulated time.
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 import time
@@ -25,12 +26,13 @@ from dataclasses import dataclass
 
 from vehicle.agent.companion import COMPONENT, Companion
 from vehicle.lab.experiment import warm_up
-from vehicle.lab.stepper import Stepper
+from vehicle.lab.stepper import Stepper, TeamStepper
 from vehicle.protocol.links import LinkWatch
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.sim.endpoint import Endpoint
-from vehicle.sim.telemetry import Telemetry
+from vehicle.sim.team import Team
+from vehicle.sim.telemetry import Telemetry, adsb_vehicle
 
 TICK = 0.01  # s of wall time between loop iterations
 MAX_LAG = 0.5  # s of wall time the simulation may fall behind before it gives up catching up
@@ -58,18 +60,13 @@ class SimVehicle:
         self.world = stepper.simulation
         self.agent = stepper.agent
         self.options = options
-        now = time.time()
-        self.telemetry = Telemetry(self.world, start=self.world.time if options.sim_clock else now,
-                                   sysid=options.sysid)
-        self.companion = Companion(self.agent, options.sysid, start=now) if self.agent is not None else None
-        self.log = TlogWriter(options.log) if options.log else None
-        self.endpoint = Endpoint(options.urls, self.world, self.telemetry, options.sysid, options.failsafe_timeout,
-                                 self.log, onboard=self.companion, signing_key=options.signing_key)
-        self.links = LinkWatch(self.endpoint.links)
         self.say = say
+        self.log = TlogWriter(options.log) if options.log else None
+        self.wires = [_Wire(self.world, self.agent, options, self.log)]
+        self.telemetry, self.companion = self.wires[0].telemetry, self.wires[0].companion
+        self.endpoint, self.links = self.wires[0].endpoint, self.wires[0].links
         self.stop_event = threading.Event()
         self.lagging = 0.0  # simulated seconds dropped because the machine could not keep up
-        self._crash_reported = False
 
     def run(self, duration: float | None = None) -> None:
         """Run until ``stop()`` (or for ``duration`` wall seconds)."""
@@ -83,40 +80,125 @@ class SimVehicle:
                 if duration is not None and wall - started >= duration:
                     break
                 now = time.time()
-                self.endpoint.poll(now)
-                for line in self.links.changes():
-                    self.say(line)
+                for wire in self.wires:
+                    wire.endpoint.poll(now)
+                    for line in wire.links.changes():
+                        self.say(line)
                 target = sim_start + (wall - started) * self.options.speedup - self.lagging
                 outgoing = self._advance(target, now, deadline=wall + MAX_LAG)
                 if self.world.time < target - MAX_LAG * self.options.speedup:
                     self.lagging += target - self.world.time  # too slow: let simulated time slip
                 if not self.options.sim_clock:
-                    outgoing += self.telemetry.tick(now)
-                self.endpoint.send(outgoing, now)
-                if self.companion is not None:
-                    self.endpoint.send(self.companion.tick(now), now, COMPONENT)
+                    for wire, messages in zip(self.wires, outgoing, strict=True):
+                        messages += wire.telemetry.tick(now)
+                    self._add_traffic(outgoing, now)
+                for wire, messages in zip(self.wires, outgoing, strict=True):
+                    wire.endpoint.send(messages, now)
+                    if wire.companion is not None:
+                        wire.endpoint.send(wire.companion.tick(now), now, COMPONENT)
                 if self.log is not None and wall - last_flush >= 1.0:
                     self.log.flush()
                     last_flush = wall
                 time.sleep(max(0.0, TICK - (time.monotonic() - wall)))
         finally:
-            self.endpoint.close()
+            for wire in self.wires:
+                wire.endpoint.close()
             if self.log is not None:
                 self.log.close()
 
-    def _advance(self, target: float, now: float, deadline: float) -> list:
-        """Step the world up to simulated time ``target``; returns the DISTANCE_SENSOR messages of its readings."""
-        world, stepper = self.world, self.stepper
-        messages = []
+    def _advance(self, target: float, now: float, deadline: float) -> list[list]:
+        """Step the world up to simulated time ``target``; returns each vehicle's DISTANCE_SENSOR messages of
+        its readings (and, on simulated time, its telemetry)."""
+        world = self.world
+        messages: list[list] = [[] for _ in self.wires]
         while world.time + world.dt / 2 <= target and time.monotonic() < deadline:
-            readings = stepper.step()
-            messages += [self.telemetry.distance_sensor(r, world.time) for r in readings]
+            for wire, readings, out in zip(self.wires, self._step(), messages, strict=True):
+                out += [wire.telemetry.distance_sensor(r, world.time) for r in readings]
+                if self.options.sim_clock:
+                    out += wire.telemetry.tick(world.time)
+                wire.say_crash()
             if self.options.sim_clock:
-                messages += self.telemetry.tick(world.time)
-            if world.collision is not None and not self._crash_reported:
-                self._crash_reported = True
-                world.autopilot.say(f"Crash: {world.collision.describe()}", mavlink.MAV_SEVERITY_CRITICAL)
+                self._add_traffic(messages, world.time)
         return messages
+
+    def _step(self) -> list[list]:
+        """One step of the world: each vehicle's readings."""
+        return [self.stepper.step()]
+
+    def _add_traffic(self, messages: list[list], now: float) -> None:
+        """A lone vehicle has no team-mates to report."""
 
     def stop(self) -> None:
         self.stop_event.set()
+
+
+class _Wire:
+    """One vehicle on the wire: its telemetry, its onboard agent's companion (if it carries one), its MAVLink
+    endpoint and the watch on its links."""
+
+    def __init__(self, world, agent, options: SimOptions, log: TlogWriter | None):
+        now = time.time()
+        self.world = world
+        self.telemetry = Telemetry(world, start=world.time if options.sim_clock else now, sysid=options.sysid)
+        self.companion = Companion(agent, options.sysid, start=now) if agent is not None else None
+        self.endpoint = Endpoint(options.urls, world, self.telemetry, options.sysid, options.failsafe_timeout,
+                                 log, onboard=self.companion, signing_key=options.signing_key)
+        self.links = LinkWatch(self.endpoint.links)
+        self._crash_reported = False
+
+    def say_crash(self) -> None:
+        """The autopilot says once that the vehicle crashed, and into what."""
+        world = self.world
+        if world.collision is not None and not self._crash_reported:
+            self._crash_reported = True
+            world.autopilot.say(f"Crash: {world.collision.describe()}", mavlink.MAV_SEVERITY_CRITICAL)
+
+
+ADSB_PERIOD = 0.25  # s between two ADSB_VEHICLE reports of each team-mate (4 Hz, on the telemetry's clock)
+
+
+class Autopilots:
+    """A team's plain autopilots in one world, no agent on board: each is flown from its own process."""
+
+    def __init__(self, team: Team):
+        self.team = team
+        self.agents = [None] * len(team)
+
+    def step(self) -> list[list]:
+        return self.team.step()
+
+
+class SimTeam(SimVehicle):
+    """A team in one world (``vehicle.sim.team.Team``) on the one simulated clock, each vehicle on its own links
+    with its own system id and its own telemetry, as N SITL instances are. Every vehicle's autopilot reports each
+    team-mate as ADSB_VEHICLE every ADSB_PERIOD, as an ArduPilot with an ADS-B receiver forwards what it hears:
+    that is how an agent in another process learns where the others are (``MavlinkController.traffic``)."""
+
+    def __init__(self, stepper: Autopilots | TeamStepper, options: list[SimOptions],
+                 say: Callable[[str], None] = _to_stderr):
+        """``options``: one per vehicle, in the team's order (the first's speed-up, clock and log serve all)."""
+        self.stepper = stepper
+        self.team = stepper.team
+        self.world = self.team.simulations[0]
+        self.agent = None
+        self.options = options[0]
+        self.say = say
+        self.log = TlogWriter(self.options.log) if self.options.log else None
+        self.wires = [_Wire(world, agent, own, self.log)
+                      for world, agent, own in zip(self.team.simulations, stepper.agents, options, strict=True)]
+        self.endpoint = self.wires[0].endpoint
+        self.stop_event = threading.Event()
+        self.lagging = 0.0
+        self._traffic_due = -math.inf
+
+    def _step(self) -> list[list]:
+        return self.stepper.step()
+
+    def _add_traffic(self, messages: list[list], now: float) -> None:
+        if len(self.wires) < 2 or now < self._traffic_due:
+            return
+        self._traffic_due = max(self._traffic_due + ADSB_PERIOD, now)
+        reports = [adsb_vehicle(world, sysid) for world, sysid in zip(self.team.simulations, self.team.ids,
+                                                                        strict=True)]
+        for index, out in enumerate(messages):
+            out += reports[:index] + reports[index + 1:]

@@ -264,3 +264,23 @@ class Telemetry:
 
     def distance_sensor(self, reading: Reading, now: float):
         return distance_sensor(reading, self._ms(now))
+
+
+ADSB_FLAGS = (mavlink.ADSB_FLAGS_VALID_COORDS | mavlink.ADSB_FLAGS_VALID_ALTITUDE | mavlink.ADSB_FLAGS_VALID_HEADING
+              | mavlink.ADSB_FLAGS_VALID_VELOCITY | mavlink.ADSB_FLAGS_VALID_CALLSIGN
+              | mavlink.ADSB_FLAGS_VERTICAL_VELOCITY_VALID | mavlink.ADSB_FLAGS_SIMULATED)
+
+
+def adsb_vehicle(other: Simulation, sysid: int):
+    """ADSB_VEHICLE for a team-mate, as an ADS-B receiver on an ArduPilot vehicle forwards what it hears: the ICAO
+    address is the team-mate's system id, its callsign VEH<id>, its altitude geometric (above sea level: the
+    datum's altitude plus scene z), its heading and ground speed its track over the ground."""
+    body, pose = other.body, other.pose
+    lat, lon = other.datum.to_global(pose.x, pose.y)
+    track = math.degrees(math.atan2(body.vx, body.vy)) % 360 if math.hypot(body.vx, body.vy) > 0.05 else \
+        math.degrees(pose.yaw) % 360
+    return mavlink.MAVLink_adsb_vehicle_message(
+        sysid, int(round(float(lat) * 1e7)), int(round(float(lon) * 1e7)), mavlink.ADSB_ALTITUDE_TYPE_GEOMETRIC,
+        int(round((other.datum.alt + pose.z) * 1000)), int(track * 100) % 36000,
+        min(65535, int(round(math.hypot(body.vx, body.vy) * 100))), max(-32768, min(32767, int(round(body.vz * 100)))),
+        f"VEH{sysid}".encode(), mavlink.ADSB_EMITTER_TYPE_UAV, 0, ADSB_FLAGS, 0)

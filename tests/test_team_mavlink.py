@@ -1,0 +1,115 @@
+"""A team on the wire: ``vehicle sim --role autopilot --vehicles N`` serves N autopilots in one world, and each
+agent learns where the others are from the ADSB_VEHICLE its autopilot forwards.
+
+Real processes and real sockets: the team runs as the command a user types, the agents' flight controllers
+(``MavlinkController``) listen on the ports the command's port rule gives (vehicle k: the --mavlink port + 10 k).
+"""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+
+import pytest
+from harness import SCENE_TEXT, free_udp_port, wait_sim
+
+from vehicle.agent.mavlink_controller import MavlinkController
+from vehicle.protocol import links
+from vehicle.protocol.geodesy import Datum
+from vehicle.protocol.mav import mavlink
+
+SPEEDUP = 4.0
+RADIUS = 0.3  # m: the simulated copter's body, and what the agent assumes a team-mate's is
+
+
+def free_pair() -> int:
+    """A UDP port P with P + 10 free too (vehicle 2's, by the team's port rule)."""
+    for _ in range(50):
+        port = free_udp_port()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(("127.0.0.1", port + 10))
+            except OSError:
+                continue
+        return port
+    raise OSError("no free pair of UDP ports ten apart")
+
+
+@pytest.fixture
+def scene_file(tmp_path):
+    path = tmp_path / "walls.wrl"
+    path.write_text(SCENE_TEXT)
+    return path
+
+
+def start_team(scene_file, port: int, *extra: str) -> subprocess.Popen:
+    command = [sys.executable, "-m", "vehicle.cli", "sim", "--role", "autopilot", "--vehicles", "2", "--scene",
+               str(scene_file), "--mavlink", f"udpout:127.0.0.1:{port}", "--speedup", str(SPEEDUP), *extra]
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def agents(port: int) -> list[MavlinkController]:
+    return [MavlinkController(links.connect(f"udpin:127.0.0.1:{p}", 1, 191), "copter", Datum(), radius=RADIUS)
+            for p in (port, port + 10)]
+
+
+def heard(fc: MavlinkController):
+    """What the controller knows of its team-mates now, and its autopilot's clock (for ``wait_sim``)."""
+    fc.pump()
+    return fc.traffic(), fc.time
+
+
+def test_two_autopilots_in_one_world_each_agent_hears_the_other_as_adsb_and_sees_its_body(scene_file):
+    port = free_pair()
+    controllers = agents(port)
+    # vehicle 2 stands 3 m north of vehicle 1, both facing north: 1's forward sonar looks at 2's body
+    team = start_team(scene_file, port, "--start=0,0", "--start=0,3", "--heading", "0")
+    try:
+        for fc in controllers:
+            fc.connect(60)
+        one, two = controllers
+        assert (one.system_id, two.system_id) == (1, 2)
+        others = wait_sim(lambda: heard(one), lambda t: len(t) == 1, 10, SPEEDUP, "vehicle 1 hears vehicle 2")
+        assert others[0].vehicle == 2
+        assert abs(others[0].x) < 0.05 and abs(others[0].y - 3.0) < 0.05 and others[0].radius == RADIUS
+        mates = wait_sim(lambda: heard(two), lambda t: len(t) == 1, 10, SPEEDUP, "vehicle 2 hears vehicle 1")
+        assert mates[0].vehicle == 1 and abs(mates[0].x) < 0.05 and abs(mates[0].y) < 0.05
+
+        def forward_echo():
+            echoes = [m.current_distance / 100.0 for m in one.pump()
+                      if m.get_type() == "DISTANCE_SENSOR" and m.orientation == mavlink.MAV_SENSOR_ROTATION_NONE]
+            return (echoes[-1] if echoes else None), one.time
+
+        # the wall behind vehicle 2 is 8 m away: an echo at 3 m less its radius is vehicle 2's body
+        echo = wait_sim(forward_echo, lambda d: d is not None, 10, SPEEDUP, "vehicle 1's forward sonar")
+        assert abs(echo - (3.0 - RADIUS)) < 0.15, echo
+
+        # vehicle 2 climbs: vehicle 1 hears it rise, moving, not only where it stood
+        assert two.set_mode("GUIDED") == 0 and two.arm() == 0 and two.takeoff(3.0) == 0
+        risen = wait_sim(lambda: heard(one), lambda t: t and t[0].z > 2.0, 30, SPEEDUP, "vehicle 2 seen climbing")
+        assert risen[0].vehicle == 2
+        assert heard(two)[0][0].z < 0.5, "vehicle 1 stayed on the ground"
+    finally:
+        team.terminate()
+        output = team.communicate(timeout=10)[0]
+        for fc in controllers:
+            fc.conn.close()
+    assert "vehicle 1: at 0.0, 0.0 on udpout:127.0.0.1:%d" % port in output, output
+    assert "vehicle 2: at 0.0, 3.0 on udpout:127.0.0.1:%d" % (port + 10) in output, output
+
+
+@pytest.mark.parametrize("arguments, says", [
+    (["--vehicles", "0"], "0"),
+    (["--vehicles", "9"], "9"),
+    (["--vehicles", "2", "--sysids", "3,3"], "two vehicles have the system id 3"),
+    (["--vehicles", "2", "--start=0,0", "--start=0.2,0"], "start inside each other"),
+    (["--vehicles", "2", "--mavlink", "udpin:127.0.0.1:14999", "--port-step", "0"], "listen on one port"),
+    (["--vehicles", "2", "--mavlink", "/dev/ttyUSB0,57600"], "names no port"),
+    (["--sysids", "1,2"], "give --vehicles N"),
+])
+def test_a_bad_team_is_a_usage_error_before_anything_starts(scene_file, arguments, says):
+    run = subprocess.run([sys.executable, "-m", "vehicle.cli", "sim", "--role", "autopilot", "--scene",
+                          str(scene_file), *arguments], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2, run.stdout + run.stderr
+    assert says in run.stderr and "Traceback" not in run.stderr, run.stderr
