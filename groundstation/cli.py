@@ -19,6 +19,7 @@ from vehicle.world.bundled import default_scene
 
 DEFAULT_SCENE = default_scene()
 DEFAULT_LINK = "udpin:127.0.0.1:14550"
+TEAM_PORT_STEP = 10  # vehicle sim --vehicles N's default --port-step
 DEMO_SPOTS = [(0.0, 0.0), (-4.0, -4.0), (4.0, -3.0), (-3.0, 4.0), (6.0, 6.0), (-7.0, 1.0), (1.0, -7.0), (8.0, -1.0)]
 
 
@@ -105,6 +106,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """The station and, per vehicle, the two processes a user deploys: a flight controller (our simulator as a
     plain autopilot, in the scene) and the onboard agent beside it, speaking MAVLink as a companion computer."""
 
+    from vehicle.cli import team_kind
+
     port = args.mavlink_port or _demo_port()
     station = _station(args, [f"udpin:127.0.0.1:{port}"], args.scene)
     vehicle = [sys.executable, "-m", "vehicle.cli"]
@@ -112,17 +115,28 @@ def cmd_demo(args: argparse.Namespace) -> int:
     common = [*datum, *_key_for_children(args.signing_key)]  # what both vehicle processes are told
     output = subprocess.DEVNULL if args.quiet else None
     processes, roles = [], []
-    for index, (x, y) in enumerate(demo_starts(args.vehicles)):
+    if args.vehicles == 1 and args.vehicle != "mixed":  # a lone vehicle: its own flight controller process
+        x, y = demo_starts(1)[0]
         agent_port = _free_udp_port()
-        sysid = str(index + 1)
         processes.append(_child([*vehicle, "sim", "--role", "autopilot", "--scene", args.scene, "--vehicle",
-                                 args.vehicle, f"--start={x},{y}", "--sysid", sysid, "--speedup", str(args.speedup),
+                                 args.vehicle, f"--start={x},{y}", "--sysid", "1", "--speedup", str(args.speedup),
                                  "--mavlink", f"udpout:127.0.0.1:{port}", "--mavlink",
                                  f"udpout:127.0.0.1:{agent_port}", *common], output))
+        agent_ports, roles = [agent_port], ["vehicle 1's flight controller"]
+    else:  # a team: one world serving every flight controller, vehicle k's agent on the base port + 10 k
+        agent_base = _free_udp_ports_apart(args.vehicles)
+        starts = [f"--start={x},{y}" for x, y in demo_starts(args.vehicles)]
+        processes.append(_child([*vehicle, "sim", "--role", "autopilot", "--scene", args.scene, "--vehicle",
+                                 args.vehicle, "--vehicles", str(args.vehicles), *starts, "--speedup",
+                                 str(args.speedup), "--team-link", f"udpout:127.0.0.1:{port}", "--mavlink",
+                                 f"udpout:127.0.0.1:{agent_base}", *common], output))
+        agent_ports = [agent_base + TEAM_PORT_STEP * k for k in range(args.vehicles)]
+        roles = ["the team's world (every vehicle's flight controller)"]
+    for index, agent_port in enumerate(agent_ports):
         processes.append(_child([*vehicle, "agent", "--connect", f"udpin:127.0.0.1:{agent_port}", "--mission",
-                                 args.mission, "--vehicle", args.vehicle, "--scene", args.scene, "--stay", *common],
-                                output))
-        roles += [f"vehicle {sysid}'s flight controller", f"vehicle {sysid}'s onboard agent"]
+                                 args.mission, "--vehicle", team_kind(args.vehicle, index), "--scene", args.scene,
+                                 "--stay", *common], output))
+        roles.append(f"vehicle {index + 1}'s onboard agent")
     stopping = threading.Event()
     died: list[str] = []
 
@@ -151,8 +165,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     atexit.register(stop_vehicles)
     for number in (signal.SIGTERM, signal.SIGHUP):  # as Ctrl-C does: the vehicles go down with the station
         signal.signal(number, _exit_quietly)
+    world = "" if args.vehicles == 1 else ", all in one world"
     print(f"demo: {args.vehicles} simulated {args.vehicle}(s) in {Path(args.scene).name}, each a flight controller "
-          f"and an onboard agent flying '{args.mission}'", flush=True)
+          f"and an onboard agent flying '{args.mission}'{world}", flush=True)
     try:
         _serve(station, args)
     except SystemExit:
@@ -186,6 +201,27 @@ def _demo_port() -> int:
         port = _free_udp_port()
         print(f"demo: UDP port 14550 is taken (another ground station?); the vehicles send to {port}", flush=True)
         return port
+
+
+def _free_udp_ports_apart(count: int) -> int:
+    """A UDP port P with P + 10 k free for every k below ``count`` (the team's agents' ports)."""
+    for _ in range(100):
+        base = _free_udp_port()
+        if base + TEAM_PORT_STEP * count > 65535:
+            continue
+        probes = []
+        try:
+            for k in range(1, count):
+                probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                probes.append(probe)
+                probe.bind(("127.0.0.1", base + TEAM_PORT_STEP * k))
+            return base
+        except OSError:
+            continue
+        finally:
+            for probe in probes:
+                probe.close()
+    raise OSError(f"no {count} free UDP ports {TEAM_PORT_STEP} apart for the team's agents")
 
 
 def _free_udp_port() -> int:
@@ -317,7 +353,9 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--mission", default="search", help="mission the vehicles fly (default %(default)s)")
     demo.add_argument("--vehicles", type=options.whole(1, len(DEMO_SPOTS)), default=1,
                       help=f"how many, 1 to {len(DEMO_SPOTS)} (default %(default)s)")
-    demo.add_argument("--vehicle", default="copter", choices=["copter", "rover"])
+    demo.add_argument("--vehicle", default="copter", choices=["copter", "rover", "mixed"],
+                      help="what flies (default %(default)s); mixed: copters and rovers in turn, the first a copter; "
+                           "two or more fly in one world, where each sees and keeps clear of the others")
     demo.add_argument("--speedup", type=options.positive, default=1.0, help="simulation speed-up (default %(default)s)")
     demo.add_argument("--mavlink-port", type=options.port,
                       help="UDP port the vehicles send to (default 14550, or a free one if that is taken)")

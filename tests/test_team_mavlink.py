@@ -7,12 +7,16 @@ Real processes and real sockets: the team runs as the command a user types, the 
 
 from __future__ import annotations
 
+import os
+import signal
 import socket
 import subprocess
 import sys
+import time
 
 import pytest
-from harness import SCENE_TEXT, free_udp_port, wait_sim
+from harness import SCENE_TEXT, free_port, free_udp_port, wait_sim
+from test_demo import WAIT, processes_mentioning, vehicles
 
 from vehicle.agent.mavlink_controller import MavlinkController
 from vehicle.protocol import links
@@ -95,8 +99,8 @@ def test_two_autopilots_in_one_world_each_agent_hears_the_other_as_adsb_and_sees
         output = team.communicate(timeout=10)[0]
         for fc in controllers:
             fc.conn.close()
-    assert "vehicle 1: at 0.0, 0.0 on udpout:127.0.0.1:%d" % port in output, output
-    assert "vehicle 2: at 0.0, 3.0 on udpout:127.0.0.1:%d" % (port + 10) in output, output
+    assert f"vehicle 1: copter at 0.0, 0.0 on udpout:127.0.0.1:{port}" in output, output
+    assert f"vehicle 2: copter at 0.0, 3.0 on udpout:127.0.0.1:{port + 10}" in output, output
 
 
 @pytest.mark.parametrize("arguments, says", [
@@ -113,3 +117,33 @@ def test_a_bad_team_is_a_usage_error_before_anything_starts(scene_file, argument
                           str(scene_file), *arguments], capture_output=True, text=True, timeout=60)
     assert run.returncode == 2, run.stdout + run.stderr
     assert says in run.stderr and "Traceback" not in run.stderr, run.stderr
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to find the vehicle processes")
+def test_the_demo_flies_a_mixed_team_in_one_world_with_an_agent_each(tmp_path):
+    port, mavlink_port = free_port(socket.SOCK_STREAM), free_port(socket.SOCK_DGRAM)
+    process = subprocess.Popen([sys.executable, "-m", "groundstation.cli", "demo", "--port", str(port),
+                                "--mavlink-port", str(mavlink_port), "--record-dir", "", "--speedup", "4",
+                                "--vehicles", "2", "--vehicle", "mixed", "--quiet"],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline, seen = time.monotonic() + WAIT, []
+        while time.monotonic() < deadline and process.poll() is None:
+            try:
+                seen = vehicles(port)
+            except OSError:
+                seen = []
+            if len(seen) == 2 and all(v["agent"] and v["position"] for v in seen):
+                break
+            time.sleep(0.5)
+        assert process.poll() is None, process.stdout.read()
+        assert sorted((v["sysid"], v["type"]) for v in seen) == [(1, "copter"), (2, "rover")], seen
+        assert all(v["agent"]["companion"] for v in seen), "each vehicle has its onboard agent"
+        worlds = processes_mentioning(f"--team-link udpout:127.0.0.1:{mavlink_port}")
+        assert len(worlds) == 1, "one world process serves both flight controllers"
+        assert len(processes_mentioning(" agent --connect udpin:127.0.0.1:")) >= 2
+    finally:
+        process.send_signal(signal.SIGTERM)
+        process.wait(timeout=30)
+        for pid in processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"):
+            os.kill(pid, signal.SIGKILL)

@@ -40,14 +40,15 @@ SIGNING_HELP = ("MAVLink 2 signing key: a file (32 bytes, or one line of 64 hex 
                 "is signed and whatever is not signed with it (but RADIO_STATUS) is refused")
 
 
-def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = True) -> None:
+def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = True,
+                    kinds: tuple[str, ...] = ("rover", "copter")) -> None:
     """Options shared by ``experiment`` and ``sim``: what to fly, where, and with which settings."""
     from vehicle.agent.settings import Settings
 
     parser.add_argument("--scene", default=str(DEFAULT_SCENE), help="VRML scene (default: %(default)s)")
     parser.add_argument("--mission", required=mission_required, type=str.lower, choices=list(MISSIONS),
                         help="; ".join(f"{name}: {text}" for name, text in MISSIONS.items()))
-    parser.add_argument("--vehicle", default="copter", choices=["rover", "copter"])
+    parser.add_argument("--vehicle", default="copter", choices=list(kinds))
     parser.add_argument("--start", type=_point, metavar="X,Y[,Z]", action="append",
                         help="start in scene metres (default: the scene's Start); with Z, on the highest surface "
                              "below Z (a floor under a roof); a team (experiment --vehicles N) takes one per vehicle")
@@ -215,8 +216,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if autopilot == bool(args.mission):  # checked first: loading the scene and the loops takes a while
         raise ValueError("--mission NAME (a vehicle with its onboard agent) or --role autopilot (for an onboard "
                          "agent in another process), one of them")
-    if args.vehicles is None and (args.sysids or args.team_link or args.port_step is not None):
-        raise ValueError("--sysids, --team-link and --port-step are for a team: give --vehicles N")
+    if args.vehicles is None and (args.sysids or args.team_link or args.port_step is not None
+                                  or args.vehicle == "mixed"):
+        raise ValueError("--sysids, --team-link, --port-step and --vehicle mixed are for a team: give --vehicles N")
     scene = load_scene(args.scene)
     settings = settings_from(args, scene)
     if args.vehicles is not None:
@@ -254,6 +256,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
         stats = ", ".join(f"{k} {v}" for k, v in sorted(sim.endpoint.stats.items()))
         print(f"vehicle {args.sysid}: stopped at {world.time:.1f} s simulated; {stats}", flush=True)
     return 0
+
+
+def team_kind(vehicle: str, index: int) -> str:
+    """A team's vehicle ``index``: ``mixed`` alternates copter and rover (the first a copter)."""
+    return ("copter", "rover")[index % 2] if vehicle == "mixed" else vehicle
 
 
 PORT_STEP = 10  # a team's vehicle k has its links' ports k * this up, as ArduPilot SITL's instance -I k
@@ -302,7 +309,7 @@ def _sim_team(args: argparse.Namespace, scene, settings) -> int:
         raise ValueError("two vehicles of the team would listen on one port: give --port-step above 0, or "
                          "--team-link only for links that send (udpout, tcp)")
     datum = Datum.of_scene(scene.hints, args.datum)
-    simulations = [Simulation(scene, args.vehicle, start, args.heading, seed=args.seed + k,
+    simulations = [Simulation(scene, team_kind(args.vehicle, k), start, args.heading, seed=args.seed + k,
                               sensors=sensor_suite(args.sensors), datum=datum, cruise_speed=settings.speed,
                               wp_radius=settings.closeness)
                    for k, start in enumerate(args.start or team_starts(scene, count))]
@@ -320,7 +327,8 @@ def _sim_team(args: argparse.Namespace, scene, settings) -> int:
     print(f"vehicle team: {count} {args.vehicle}s in {Path(args.scene).name}, one world, x{args.speedup:g}; {what}",
           flush=True)
     for world, sysid, own in zip(stepper.team.simulations, ids, links, strict=True):
-        print(f"vehicle {sysid}: at {world.home[0]:.1f}, {world.home[1]:.1f} on {', '.join(own)}", flush=True)
+        print(f"vehicle {sysid}: {world.kind.value} at {world.home[0]:.1f}, {world.home[1]:.1f} on {', '.join(own)}",
+              flush=True)
     try:
         sim.run(args.duration)
     except KeyboardInterrupt:
@@ -415,7 +423,7 @@ def main(argv: list[str] | None = None) -> int:
     experiment.set_defaults(run=cmd_experiment)
 
     sim = commands.add_parser("sim", help="a simulated vehicle with its onboard agent, live on MAVLink")
-    add_run_options(sim, mission_required=False)
+    add_run_options(sim, mission_required=False, kinds=("rover", "copter", "mixed"))
     sim.add_argument("--role", choices=["vehicle", "autopilot"], default="vehicle",
                      help="vehicle: the autopilot and its onboard agent in one (default); autopilot: a plain "
                           "ArduPilot-like flight controller, for `vehicle agent` to fly")
