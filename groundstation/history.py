@@ -2,7 +2,7 @@
 
 The page plots any numeric field against time and marks events on the same
 axis (mode changes, arming, the operator's commands and the vehicle's ACKs,
-messages, the onboard agent's phases). The Fleet feeds this as it applies
+messages, the onboard agent's phases, near misses between two vehicles). The Fleet feeds this as it applies
 messages, live and in replay alike, so a field means the same in both: a
 sample is the vehicle's state as the Fleet knew it at that moment. Series are
 numpy ring buffers (an hour at two samples a second is half a megabyte per
@@ -34,7 +34,7 @@ UNITS = dict(FIELDS)
 @dataclass
 class Event:
     time: float
-    kind: str  # mode, armed, command, ack, message, agent
+    kind: str  # mode, armed, command, ack, message, agent, near miss
     text: str
     severity: int | None = None  # MAVLink severity of a message (0 emergency .. 7 debug)
 
@@ -111,6 +111,7 @@ class History:
         self.every = every
         self.capacity = capacity
         self.vehicles: dict[int, VehicleHistory] = {}
+        self.near_misses = NearMisses()
 
     def of(self, sysid: int) -> VehicleHistory:
         found = self.vehicles.get(sysid)
@@ -130,3 +131,51 @@ class History:
 
     def clear(self) -> None:
         self.vehicles.clear()
+        self.near_misses.clear()
+
+
+NEAR_MISS_MARGIN = 2.0  # m between two bodies: the agents' default separation
+ASSUMED_RADIUS = 0.3  # m: a vehicle's body (MAVLink tells the station no size; the simulator's and agent's default)
+PARTED = 1.0  # m beyond the margin two vehicles must part before coming close again is a new near miss
+
+
+class NearMisses:
+    """Two vehicles closer than the separation margin (``margin`` plus both bodies' radii), from the poses the
+    station hears: one event on each one's timeline naming both as they come within it, counted once; the
+    same pair again only after they parted by PARTED more."""
+
+    def __init__(self, margin: float = NEAR_MISS_MARGIN, radius: float = ASSUMED_RADIUS):
+        self.reach = margin + 2 * radius
+        self.margin = margin
+        self.close: dict[tuple[int, int], float] = {}  # pair -> the closest their centres came, while close
+        self.counts: dict[int, int] = {}  # system id -> near misses it was in
+        self.total = 0
+
+    def check(self, sysid: int, positions: dict[int, tuple[float, float, float]], now: float,
+              history: History) -> None:
+        """Vehicle ``sysid`` moved: compare it with every other whose position is known."""
+        here = positions.get(sysid)
+        if here is None:
+            return
+        for other, there in positions.items():
+            if other == sysid:
+                continue
+            pair = (min(sysid, other), max(sysid, other))
+            apart = math.dist(here, there)
+            if pair in self.close:
+                if apart > self.reach + PARTED:
+                    del self.close[pair]
+                continue
+            if apart < self.reach:
+                self.close[pair] = apart
+                self.total += 1
+                text = (f"near miss: vehicles {pair[0]} and {pair[1]} {apart:.1f} m apart (centres), within the "
+                        f"{self.margin:g} m separation margin")
+                for each in pair:
+                    self.counts[each] = self.counts.get(each, 0) + 1
+                    history.event(each, now, "near miss", text, 4)  # MAV_SEVERITY_WARNING
+
+    def clear(self) -> None:
+        self.close.clear()
+        self.counts.clear()
+        self.total = 0

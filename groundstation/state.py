@@ -296,6 +296,9 @@ class Fleet:
                 if kind in POSES:
                     self.moved.add(sysid)
                     self.pose_news.set()
+                if kind == "GLOBAL_POSITION_INT" and len(self.vehicles) > 1:
+                    self.history.near_misses.check(sysid, {s: (o.x, o.y, self.height(o)) for s, o in
+                                                           self.vehicles.items() if o.x is not None}, now, self.history)
             if self.history.due(sysid, now) and vehicle.last_heartbeat is not None:
                 self.history.sample(sysid, now, self._sample(vehicle))
 
@@ -550,6 +553,7 @@ class Fleet:
             "time_boot_s": _round(v.time_boot_s, 3),
             "messages": list(v.messages)[-20:],
             "map": {"occupied": self.occupied(v), "source": v.map_source},
+            "near_misses": self.history.near_misses.counts.get(v.sysid, 0),
             "path": [[_round(x), _round(y)] for x, y in v.planned_path()],
             "waypoints": [[_round(x), _round(y)] for x, y in v.waypoints[:MAX_WAYPOINTS_SHOWN]],
             "sonar": [{"id": ident, "distance": _round(s.distance), "max_range": _round(s.max_range),

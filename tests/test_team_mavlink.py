@@ -15,7 +15,7 @@ import sys
 import time
 
 import pytest
-from harness import SCENE_TEXT, free_port, free_udp_port, wait_sim
+from harness import SCENE_TEXT, free_port, free_udp_port, wait_sim, wait_wall
 from test_demo import WAIT, processes_mentioning, vehicles
 
 from vehicle.agent.mavlink_controller import MavlinkController
@@ -147,3 +147,43 @@ def test_the_demo_flies_a_mixed_team_in_one_world_with_an_agent_each(tmp_path):
         process.wait(timeout=30)
         for pid in processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"):
             os.kill(pid, signal.SIGKILL)
+
+
+def test_a_near_miss_is_one_event_on_each_vehicles_timeline_naming_both_and_counted():
+    """Two vehicles' own MAVLink bytes to a real station: they close in to 1.5 m (inside 2 m + both radii), stay
+    there for many poses, part, and close in again."""
+    from harness import RunningStation
+    from mavlink_peer import Peer, position, vehicle_heartbeat
+
+    metre = 1 / 111_320  # degrees of latitude
+    with RunningStation(None, None) as station, Peer(("127.0.0.1", station.mavlink_port), 1) as one, \
+            Peer(("127.0.0.1", station.mavlink_port), 2) as two:
+        api = station.api()
+
+        def fly(north_of_one: list[float]) -> None:
+            for step, north in enumerate(north_of_one):
+                one.send(vehicle_heartbeat(), position(time_ms=1000 + step))
+                two.send(vehicle_heartbeat(), position(lat=-35.363261 + north * metre, time_ms=1000 + step))
+                time.sleep(0.02)
+
+        def near_misses(sysid: int) -> list[str]:
+            events = api.get(f"/api/vehicles/{sysid}/history").json()["events"]
+            return [e["text"] for e in events if e["kind"] == "near miss"]
+
+        def settled(sysid: int, north: float) -> bool:  # the station took in the last pose sent
+            found = api.vehicle(sysid)
+            return found is not None and found["position"] is not None and \
+                abs(found["position"]["y"] - (north if sysid == 2 else 0.0)) < 0.05
+
+        fly([10.0] * 5)
+        wait_wall(lambda: settled(1, 0) and settled(2, 10.0), 10, "both vehicles placed")
+        assert near_misses(1) == []
+        fly([6.0, 4.0, 2.0, 1.5, 1.5, 1.5, 1.6, 1.4])
+        wait_wall(lambda: settled(2, 1.4), 10, "vehicle 2 close")
+        for sysid in (1, 2):
+            texts = near_misses(sysid)
+            assert len(texts) == 1 and "vehicles 1 and 2" in texts[0], texts
+            assert api.vehicle(sysid)["near_misses"] == 1
+        fly([3.0, 10.0, 1.5, 1.3])  # 3 m is still close (within the margin and a metre more): no new event
+        wait_wall(lambda: settled(2, 1.3), 10, "vehicle 2 close again")
+        assert len(near_misses(1)) == 2 and api.vehicle(2)["near_misses"] == 2
