@@ -324,8 +324,8 @@ def _sim_team(args: argparse.Namespace, scene, settings) -> int:
                    for k, (own, sysid) in enumerate(zip(links, ids, strict=True))]
     sim = SimTeam(stepper, per_vehicle, say=lambda text: print(f"vehicle team: {text}", file=sys.stderr, flush=True))
     what = "plain autopilots: an onboard agent flies each over MAVLink" if autopilot else f"mission {args.mission}"
-    print(f"vehicle team: {count} {args.vehicle}s in {Path(args.scene).name}, one world, x{args.speedup:g}; {what}",
-          flush=True)
+    print(f"vehicle team: {count} vehicles ({args.vehicle}) in {Path(args.scene).name}, one world, "
+          f"x{args.speedup:g}; {what}", flush=True)
     for world, sysid, own in zip(stepper.team.simulations, ids, links, strict=True):
         print(f"vehicle {sysid}: {world.kind.value} at {world.home[0]:.1f}, {world.home[1]:.1f} on {', '.join(own)}",
               flush=True)

@@ -13,6 +13,13 @@ a ground station observes (message rates, heartbeats, the GCS failsafe, log
 timestamps) runs on the wall clock. ``time_boot_ms`` in the messages is the
 vehicle's simulated time since boot, as in ArduPilot's SITL, so tests can wait
 in simulated time.
+
+A team (``SimTeam``, ``vehicle sim --vehicles N``) is one world and one loop
+serving N vehicles, each with its own links, system id and telemetry, as N
+SITL instances are: one process, because the vehicles must share one world on
+one deterministic clock (sonars that echo off each other, a collision check
+between bodies), and one loop stepping them costs no more than one per vehicle.
+Each autopilot tells its links where the others are as ADSB_VEHICLE.
 """
 
 from __future__ import annotations
