@@ -26,6 +26,7 @@ from vehicle.agent.missions.base import Mission, Status
 from vehicle.agent.missions.routines import Scan, ServoScan, Travel, scan
 from vehicle.agent.monitor import sweep_profile
 from vehicle.agent.traffic import someone_elses
+from vehicle.mapping import frontier
 
 OPEN_ARC = (math.radians(10), math.radians(40))  # where "beside" an echo is, either side
 OPEN_WEIGHT = 0.5
@@ -34,6 +35,7 @@ UNKNOWN_RADIUS = 3.0  # m around a goal looked at for unknown cells
 VISITED_FRACTION = 0.2  # goals closer to an earlier goal or scan spot than this share of space_size are skipped
 VISITED_MAX = 6.0  # m, whatever the space size
 MIN_LEG = 1.0  # m: goals closer than this are not worth a trip
+LOOKED_RADIUS = 1.0  # m: frontier cells this near a spot scanned from (or a goal given up on) stay unknown to the sonar
 TIE = 1e-9  # m: arcs whose mean free distances differ by less are equally open (whatever the rounding)
 
 
@@ -46,6 +48,7 @@ class Search(Mission):
         self.visited: list[tuple[float, float]] = [self.ctx.position]
         self.visited_radius = min(VISITED_MAX, VISITED_FRACTION * self.ctx.settings.space_size)
         self.legs = 0
+        self.looked: list[tuple[float, float]] = []  # spots scanned from and frontier goals given up on
 
     def step(self) -> Status:
         if self.scan is not None:
@@ -55,15 +58,18 @@ class Search(Mission):
         status = self.travel.step()
         if status is Status.RUNNING:
             return status
+        if status is Status.STOPPED:
+            self.looked.append(self.travel.goal)  # no way there: not a frontier to try again
         self.scan = scan(self.ctx)  # arrived, or no way there: look around again
         self.visited.append(self.ctx.position)
         return Status.RUNNING
 
     def _after_scan(self, readings) -> Status:
         self.scan = None
-        goal = self.choose_goal(readings)
+        self.looked.append(self.ctx.position)
+        goal = self.choose_goal(readings) or self.nearest_frontier()
         if goal is None:
-            self.reason = "no open direction left to search"
+            self.reason = "no open direction left to search: no reachable frontier left"
             return Status.DONE
         self.legs += 1
         self.visited.append(goal)
@@ -111,6 +117,22 @@ class Search(Mission):
                 best, best_score, best_index = goal, score, i
         return best
 
+    def nearest_frontier(self) -> tuple[float, float] | None:
+        """The nearest point by path where known-free space meets unknown space (``vehicle.mapping.frontier``)
+        inside the allowed space and not in a team-mate's share, or None when no such frontier is left."""
+        ctx = self.ctx
+        m = ctx.map
+        half = ctx.settings.space_size - 1.0  # as ``ctx.inside``
+        box = (ctx.home[0] - half, ctx.home[1] - half, ctx.home[0] + half, ctx.home[1] + half)
+        done = max(ctx.settings.closeness, LOOKED_RADIUS) + 1.0 / m.resolution  # a goal counts as reached that far
+        min_cells = max(1, math.ceil(2 * ctx.radius * m.resolution))  # a frontier narrower than the body
+        for found in frontier.on_map(m, ctx.position, ctx.planner.margin_cells(0.0), min_cells, box,
+                                     self.looked, done):
+            goal = m.center_of(*found.goal)
+            if not someone_elses(ctx, goal):
+                return goal
+        return None
+
     def _unknown_around(self, point: tuple[float, float]) -> float:
         """Share of the cells within UNKNOWN_RADIUS of the point that are neither free nor occupied."""
         m = self.ctx.map
@@ -122,8 +144,10 @@ class Search(Mission):
         return float(np.count_nonzero((window > m.FREE_AT) & (window < m.OCCUPIED_AT))) / max(window.size, 1)
 
     def too_close(self) -> Status:
-        """Close to a new object: stop and scan again from here."""
+        """Close to a new object: stop and scan again from here (a frontier goal is not tried again)."""
         self.stop()
+        if self.travel is not None:
+            self.looked.append(self.travel.goal)
         self.travel = None
         self.scan = scan(self.ctx)
         self.visited.append(self.ctx.position)

@@ -1,0 +1,75 @@
+"""Frontier detection and the nearest reachable frontier (vehicle.mapping.frontier), on hand-made grids,
+and Search exploring until no reachable frontier is left, in the real simulator."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tests.test_missions import enclosure, fly, scene, wall
+from vehicle.mapping import frontier
+
+
+def grid(text: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Free, unknown and occupied masks of a picture: '.' (or 'S', the start) free, '?' unknown, '#' occupied
+    (first line row 0)."""
+    rows = np.array([list(line) for line in text.strip().splitlines()])
+    return (rows == ".") | (rows == "S"), rows == "?", rows == "#"
+
+
+def test_frontier_cells_are_free_cells_beside_unknown_ones_grouped_and_small_groups_dropped():
+    free, unknown, _ = grid("""
+......??
+......??
+####..??
+?.##....
+""")
+    cells = frontier.frontier_cells(free, unknown)
+    assert sorted(zip(*np.nonzero(cells), strict=True)) == [(0, 5), (1, 5), (2, 5), (3, 1), (3, 6), (3, 7)]
+    groups = frontier.frontiers(free, unknown)
+    assert sorted(len(g) for g in groups) == [1, 5]  # 8-connected: (2, 5) and (3, 6) touch
+    assert [len(g) for g in frontier.frontiers(free, unknown, min_cells=2)] == [5]
+
+
+def test_the_nearest_reachable_frontier_wins_over_a_nearer_one_behind_a_wall():
+    free, unknown, occupied = grid("""
+??????????????
+..#...........
+..#...........
+..#.....S.....
+..#...........
+..#...........
+..#..........?
+""")
+    start = (3, 8)
+    passable = free & ~occupied
+    found = frontier.reachable_frontiers(free, unknown, passable, start)
+    left_of_wall = [f for f in found if f.goal[1] < 2]
+    assert not left_of_wall  # the column left of the wall is 6 cells away, and unreachable
+    assert found[0].distance == min(f.distance for f in found)
+    lengths, _ = frontier.path_lengths(passable, start)
+    assert np.isinf(lengths[3, 0]) and np.isfinite(lengths[3, 13])
+
+
+def test_a_frontier_reached_only_through_a_gap_too_narrow_for_the_body_is_approached_but_not_entered():
+    free, unknown, occupied = grid("""
+????????????
+............
+####.#######
+............
+............
+............
+""")
+    start = (5, 5)
+    passable = free & (np.arange(6) >= 4)[:, None]  # the body fits only a row clear of the wall
+    assert not frontier.reachable_frontiers(free, unknown, passable, start)
+    found = frontier.reachable_frontiers(free, unknown, passable, start, narrow=free)
+    assert len(found) == 1 and found[0].narrow
+    assert found[0].goal[0] == 4 and abs(found[0].goal[1] - 4) <= 1  # short of the gap, where the body fits
+
+
+def test_search_in_a_closed_room_ends_only_when_no_reachable_frontier_is_left():
+    """A room 8 m across with a side room through a 1.9 m doorway: Search sees both and ends saying why."""
+    walls = [*enclosure(0, 0, 8), wall(2.5, -1, 0.2, 6.2)]  # a wall across, its doorway at the north end
+    result = fly(scene(*walls), "search", time_limit=400, space_size=10)
+    assert result["outcome"] == "finished", result["reason"]
+    assert "no reachable frontier left" in result["reason"], result["reason"]
