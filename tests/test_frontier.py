@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.test_missions import enclosure, fly, scene, wall
+from tests.test_missions import Track, enclosure, fly, scene, wall
 from vehicle.mapping import frontier
 
 
@@ -70,6 +70,12 @@ def test_a_frontier_reached_only_through_a_gap_too_narrow_for_the_body_is_approa
 def test_search_in_a_closed_room_ends_only_when_no_reachable_frontier_is_left():
     """A room 8 m across with a side room through a 1.9 m doorway: Search sees both and ends saying why."""
     walls = [*enclosure(0, 0, 8), wall(2.5, -1, 0.2, 6.2)]  # a wall across, its doorway at the north end
-    result = fly(scene(*walls), "search", time_limit=400, space_size=10)
+    track = Track()
+    result = fly(scene(*walls), "search", track=track, time_limit=400, space_size=10)
     assert result["outcome"] == "finished", result["reason"]
+    assert track.world.collision is None
+    m = track.agent.map
+    (r0, c0), (r1, c1) = m.cell_of(2.7, -3.9), m.cell_of(3.8, 3.9)  # the side room, behind the wall across
+    known = float(np.mean(m.grid[r0:r1, c0:c1] != 0))
+    assert known > 0.5, known
     assert "no reachable frontier left" in result["reason"], result["reason"]
