@@ -122,8 +122,9 @@ def test_gzip_is_read_transparently(walk_file, tmp_path, capsys):
 
 @pytest.mark.parametrize("case", ["basement_walk1", "basement_walk2"])
 def test_the_real_walks_with_the_defaults_and_their_cli_options(case, tmp_path, capsys):
-    """The README's figures: the data set author's own RTI scores 1.655 / 1.627 m on these walks. The issue's
-    goal, under 1.2 m, is not reached (see docs/rti.md); this holds the line at what the method does."""
+    """The README's figures: the data set author's own RTI scores 1.655 / 1.627 m on these walks, his VRTI
+    1.424 / 1.379 m. The issue's goal, under 1.2 m, is not reached (see docs/rti.md); the kernel distance
+    (the default) scores 1.335 / 1.419 m, and this holds the line there with a margin."""
     directory = SHARED / case
     if not directory.exists():
         pytest.skip("needs ../shared/rti (the basement walks; absent in a bare clone)")
@@ -141,4 +142,4 @@ def test_the_real_walks_with_the_defaults_and_their_cli_options(case, tmp_path, 
     assert code == 0, err
     score = score_walk(truth, json.loads(out.read_text()))
     assert score["frames_missing"] == 0 and score["frames_without_peak"] == 0
-    assert score["rmse_m"] < 1.6, score
+    assert score["rmse_m"] < 1.5, score

@@ -23,6 +23,7 @@ import scipy.sparse as sp
 from scipy.ndimage import maximum_filter
 
 from vehicle.tomography.calibration import Levels, channel_weights, empty_levels, file_levels, group_mean
+from vehicle.tomography.kernel import kernel_distances, kernel_width, reference_rows
 from vehicle.tomography.links import LinkTable, Records, link_table
 from vehicle.tomography.solvers import RegularisedLS, tv_discrepancy
 from vehicle.tomography.tracking import Tracker
@@ -34,6 +35,7 @@ DRIFT_ROUNDS = 4
 WORST_SHARE = 2 / 3  # a round takes out the paths within this share of the worst deviation
 DRIFT_MIN_DB = 5.0  # what a person near a link's line does to it in a room: 1 dB typically, 7 dB at the 90th percentile
 SOLVERS = ("ls", "tv")
+MEASURES = ("mean", "kernel")
 SMOOTH = 3  # windows: the centred moving average of each path's measurement (see smooth)
 
 
@@ -125,39 +127,60 @@ class Result:
                 "grid": [self.grid.nx, self.grid.ny], **self.info, "frames": frames}
 
 
-def window_measurements(records: Records, table: LinkTable, levels: Levels, weights: np.ndarray,
-                        start: float, window: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """Frame start times and the (frames x paths) measurements, NaN where a path was not heard."""
-    use = (records.t >= start) & (weights[table.row_lc] > 0)
-    t, lc = records.t[use], table.row_lc[use]
-    attenuation = levels.empty[lc] - records.rssi[use]
-    if window:
-        frame = np.floor((t - start) / window + 1e-9).astype(np.int64)
-        frames = int(frame.max()) + 1 if len(frame) else 0
-    else:
-        frame, frames = np.zeros(len(t), np.int64), 1
-    n_lc, n_path = len(table.lc_keys), len(table.paths)
-    mean_lc, _ = group_mean(frame * n_lc + lc, attenuation, frames * n_lc)
-    mean_lc = mean_lc.reshape(frames, n_lc)
-    heard = np.isfinite(mean_lc)
+def frame_index(t: np.ndarray, start: float, window: float | None) -> tuple[np.ndarray, int]:
+    """Each record's frame (window) index and how many frames there are."""
+    if not window:
+        return np.zeros(len(t), np.int64), 1
+    frame = np.floor((t - start) / window + 1e-9).astype(np.int64)
+    return frame, int(frame.max()) + 1 if len(frame) else 0
+
+
+def path_means(per_lc: np.ndarray, table: LinkTable, weights: np.ndarray) -> np.ndarray:
+    """(frames x paths): each path's weighted mean over its link-channels heard in the frame (NaN where none)."""
+    frames, n_path = len(per_lc), len(table.paths)
+    heard = np.isfinite(per_lc)
     w = np.where(heard, weights[None, :], 0.0)
     sums = np.zeros((frames, n_path))
     norms = np.zeros((frames, n_path))
-    np.add.at(sums.T, table.lc_path, (np.where(heard, mean_lc, 0.0) * w).T)
+    np.add.at(sums.T, table.lc_path, (np.where(heard, per_lc, 0.0) * w).T)
     np.add.at(norms.T, table.lc_path, w.T)
     with np.errstate(invalid="ignore", divide="ignore"):
-        y = np.where(norms > 0, sums / np.maximum(norms, 1e-12), np.nan)
+        return np.where(norms > 0, sums / np.maximum(norms, 1e-12), np.nan)
+
+
+def window_measurements(records: Records, table: LinkTable, levels: Levels, weights: np.ndarray,
+                        start: float, window: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Frame start times and the (frames x paths) mean attenuations, NaN where a path was not heard."""
+    use = (records.t >= start) & (weights[table.row_lc] > 0)
+    frame, frames = frame_index(records.t[use], start, window)
+    lc = table.row_lc[use]
+    n_lc = len(table.lc_keys)
+    mean_lc, _ = group_mean(frame * n_lc + lc, levels.empty[lc] - records.rssi[use], frames * n_lc)
     times = start + np.arange(frames) * (window or 0.0)
-    return times, y
+    return times, path_means(mean_lc.reshape(frames, n_lc), table, weights)
+
+
+def kernel_measurements(records: Records, table: LinkTable, calibration: Records | None, drifted: np.ndarray,
+                        weights: np.ndarray, start: float, window: float | None, span: int) -> tuple[np.ndarray, dict]:
+    """The (frames x paths) kernel distances (vehicle.tomography.kernel), the short-term histogram of a frame
+    pooling ``span`` windows; drifted paths are compared with the file's own long-term histogram."""
+    use = (records.t >= start) & (weights[table.row_lc] > 0)
+    frame, frames = frame_index(records.t[use], start, window)
+    reference = reference_rows(records, table, calibration, drifted[table.lc_path])
+    width = kernel_width(*reference)
+    per_lc = kernel_distances(records, table, reference, use, frame, frames, span, width)
+    return path_means(per_lc, table, weights), {"kernel_db": round(width, 3)}
 
 
 def reconstruct(records: Records, calibration: Records | None = None, calibration_seconds: float | None = None,
                 bounds: tuple[float, float, float, float] | None = None, cell: float | None = None,
                 window: float | None = None, peaks: int = 3, solver: str = "ls", model: str = "ellipse",
-                drift: bool = True, span: int = SMOOTH) -> Result:
+                drift: bool = True, span: int = SMOOTH, measure: str = "kernel") -> Result:
     """The whole method on one file (see the module's docstring and docs/rti.md)."""
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r} (one of {', '.join(SOLVERS)})")
+    if measure not in MEASURES:
+        raise ValueError(f"unknown measure {measure!r} (one of {', '.join(MEASURES)})")
     if window is not None and not (window > 0 and math.isfinite(window)):
         raise ValueError(f"window {window:g} must be a positive number of seconds")
     start = float(records.t.min())
@@ -188,7 +211,12 @@ def reconstruct(records: Records, calibration: Records | None = None, calibratio
             redo = drifted[table.lc_path]
             levels.empty[redo] = file_levels(records, table)[redo]
             times, Y = window_measurements(records, table, levels, weights, start, window)
-    Y = smooth(Y, span if window else 1)
+    span = span if window else 1
+    extra = {}
+    if measure == "kernel":
+        Y, extra = kernel_measurements(records, table, calibration, drifted, weights, start, window, span)
+    else:
+        Y = smooth(Y, span)
     alpha = choose_alpha(imager, table.paths, Y, sigma)  # on what is imaged: smoothing lowered the noise
     frames, tracker = [], Tracker()
     total = np.zeros(grid.shape)
@@ -209,7 +237,8 @@ def reconstruct(records: Records, calibration: Records | None = None, calibratio
             frame["track"] = tracker.step(window, (best["x"], best["y"]) if best else None)
         frames.append(frame)
     info = {
-        "solver": solver, "model": model, "smooth_windows": span if window else None, "alpha": alpha,
+        "measure": measure, **extra, "solver": solver, "model": model, "smooth_windows": span if window else None,
+        "alpha": alpha,
         "correlation_m": CORRELATION, "lambda_m": LAMBDA,
         "links": {"link_channels": len(table.lc_keys), "paths": len(table.paths),
                   "calibrated": int(levels.calibrated.sum()), "channels_used": int((weights > 0).sum()),
