@@ -16,6 +16,7 @@ let replay = null;          // the replay status from the stream
 let timeline = null;        // the replay's whole-log timeline (or null while it is scanned)
 let timelineName = null;
 let history = null;         // the shown vehicle's history: {t, series, units, events}
+let present = new Set();    // the system ids the latest status frame holds
 let origin = 0;             // time 0 of the axis (the log's start in a replay)
 let span = [0, 1];          // the axis's range, relative to origin
 const plots = { get field() { return $("#plot-field").value; }, get span() { return span; } };
@@ -45,7 +46,9 @@ async function refresh() {
     origin = timeline && isNum(timeline.start) ? timeline.start : 0;
     span = [0, timeline && isNum(timeline.duration) ? Math.max(timeline.duration, 0.1) : 1];
   } else {
-    history = await getJson(`/api/vehicles/${sysid}/history?limit=600`);
+    // asked for only while the station holds the vehicle (a replay's start clears them, and the browser logs
+    // every 404 as an error in the console)
+    history = present.has(sysid) ? await getJson(`/api/vehicles/${sysid}/history?limit=600`) : null;
     const t = history && Array.isArray(history.t) ? history.t : [];
     origin = t.length ? t[t.length - 1] : 0;  // live: seconds before the latest sample
     span = t.length > 1 ? [t[0] - origin, 0] : [-1, 0];
@@ -188,6 +191,7 @@ on(EVENTS.selected, () => {
 on(EVENTS.status, (msg) => {
   const next = msg.mode === "replay" ? "replay" : "live";
   replay = msg.replay || null;
+  present = new Set((Array.isArray(msg.vehicles) ? msg.vehicles : []).map((v) => v && v.sysid));
   if (next !== mode) {
     mode = next;
     timeline = null;

@@ -486,6 +486,8 @@ def _console_errors(page) -> list[str]:
     page.on("pageerror", lambda error: errors.append(f"uncaught: {error}"))
     page.on("console", lambda m: errors.append(f"console {m.type}: {m.text}")
             if m.type == "error" or "Content Security Policy" in m.text else None)
+    page.on("response", lambda r: errors.append(f"  (the answer {r.status} to {r.request.method} {r.url})")
+            if r.status >= 400 else None)  # which request a "Failed to load resource" was
     return errors
 
 

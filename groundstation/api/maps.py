@@ -64,7 +64,11 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
         else:
             found = await asyncio.to_thread(station.pictures.vehicle, fleet, int(which))
         if found is None:
-            raise HTTPException(404, "no such map yet")
+            if not fleet.vehicles if which == "merged" else fleet.get(int(which)) is None:
+                raise HTTPException(404, "no such map yet")
+            # a vehicle whose map holds nothing explored yet: an empty answer, not an error (the page asks as
+            # soon as the status says the vehicle has a map, and a browser logs every 404 as an error)
+            return {"image": None, "bounds": None, "legend": legend()}
         return {**found, "legend": legend()}
 
     @router.get("/api/map2d/trails", tags=["map"])
