@@ -1,8 +1,9 @@
 """From link records to images, one per time window: attenuations, drift, solving, peaks and the track.
 
-Per window, a link-channel's attenuation is its empty-area level minus the mean of its RSS in the window; a
-path's measurement (the unordered pair of positions: both directions see the same obstacles) is the mean over
-its anti-faded channels that were heard. A path not heard at all in a window is left out of that window's
+Per window, a link-channel's measurement is the kernel distance of its RSS histogram from the empty area's
+(vehicle.tomography.kernel; the default), or its attenuation, the empty-area level minus the mean of its RSS in
+the window; a path's measurement (the unordered pair of positions: both directions see the same obstacles) is
+the mean over its anti-faded channels that were heard. A path not heard at all in a window is left out of that window's
 solve (it is not assumed unchanged: a missing packet says nothing about the path); the linear map is cached per
 set of present paths, so the usual full set costs one matrix-vector product per frame.
 
