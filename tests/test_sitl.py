@@ -189,4 +189,9 @@ def test_the_agent_flies_ardupilot_in_our_scene_and_hands_over_to_the_operator(k
     assert result["outcome"] in ("finished", "stopped"), (result, err[-3000:])
     assert result["outcome"] != "collision"
     assert "Agent: resuming mission" in result["messages"]
-    assert result["detections"] > 50
+    # the map took the sonar cast at ArduPilot's pose: an echo marks one cell of its arc (since b67ce5f; the whole
+    # arc before), so the same mission in our own simulator (vehicle experiment --mission pathfind --vehicle copter
+    # --start 0,0 --set space_size=12 --set speed=1) marks 69 cells (172 before), and against SITL, with the RTL
+    # and the way back in between, 49-66 over eight runs (82-102 before). Half the simulator's count is a floor that
+    # a map without the feed (0) or with most echoes lost misses
+    assert result["detections"] > 35
