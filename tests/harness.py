@@ -9,17 +9,24 @@
   ArduPilot's autotest waits on SITL time), with a wall-clock backstop so a
   vehicle that stops talking fails a test instead of hanging it; ``wait_wall``
   bounds a wait on what runs on the wall clock (the status stream, link loss).
-  Both raise ``WaitTimeout``.
+  Both raise ``WaitTimeout`` saying "waited N s for X; last seen: Y" (as
+  ArduPilot's autotest does). ``during`` paces what a test keeps doing for a
+  while (a flood, collecting frames); ``read_until`` watches a process's output.
+  No test writes a ``while time.monotonic() < deadline`` loop of its own.
 - ``launch_chromium``: Debian's Chromium with the flags that give WebGL
   through SwiftShader (software WebGL); a browser is never downloaded.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import itertools
 import os
+import re
+import selectors
 import socket
+import subprocess
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -134,9 +141,8 @@ def wait_sim(read: Callable[[], tuple[object, float | None]], condition: Callabl
     """The first value ``read()`` gives that ``condition`` holds for, within ``sim_timeout`` seconds of the
     vehicle's simulated time. ``read`` returns (value or None, the vehicle's latest simulated time or None);
     the wall clock only backs the wait up (four times the budget at ``speedup``, and 15 s)."""
-    deadline = time.monotonic() + sim_timeout / speedup * 4 + 15
     start = last = None
-    while time.monotonic() < deadline:
+    for _ in during(sim_timeout / speedup * 4 + 15, period=0):
         value, sim = read()
         if value is not None:
             last = value
@@ -146,26 +152,59 @@ def wait_sim(read: Callable[[], tuple[object, float | None]], condition: Callabl
             start = sim if start is None else start
             if sim - start > sim_timeout:
                 break
-    raise WaitTimeout(f"{what}: not met within {sim_timeout:g} s of simulated time; last: {last}")
+    raise WaitTimeout(f"waited {sim_timeout:g} s of simulated time for {what}; last seen: {last}")
 
 
 def wait_wall(condition: Callable[[], object], timeout: float, what: str = "condition", period: float = 0.05,
-              sleep: Callable[[], None] | None = None):
-    """``condition()``'s first truthy value within ``timeout`` wall seconds (for wall-clock properties).
+              sleep: Callable[[], None] | None = None, done: Callable[[object], object] = bool):
+    """``condition()``'s first value that ``done`` holds for (truthy, unless told) within ``timeout`` wall
+    seconds (for wall-clock properties).
 
     ``sleep`` replaces ``time.sleep(period)``: with Playwright's sync API, events (websocket
     frames, requests) reach their handlers only while Playwright waits, so pass a page's wait."""
     deadline = time.monotonic() + timeout
     while True:
         value = condition()
-        if value:
+        if done(value):
             return value
         if time.monotonic() > deadline:
-            raise WaitTimeout(f"{what} not met within {timeout} s")
+            raise WaitTimeout(f"waited {timeout:g} s for {what}; last seen: {value!r}")
         if sleep is not None:
             sleep()
         else:
             time.sleep(period)
+
+
+def during(seconds: float, period: float = 0.0) -> Iterator[float]:
+    """Yields the seconds left, until ``seconds`` wall seconds have passed, sleeping ``period`` between turns:
+    for what a test keeps doing for a while (commands under a flood, frames a stream brings), not a wait."""
+    deadline = time.monotonic() + seconds
+    while (left := deadline - time.monotonic()) > 0:
+        yield left
+        if period:
+            time.sleep(period)
+
+
+def read_until(process: subprocess.Popen, pattern: str, timeout: float) -> tuple[str, str]:
+    """A process's stdout and stderr (``""`` for one not piped) read until the regular expression ``pattern``
+    matches its stdout, it exits, or ``timeout`` wall seconds pass (the caller asserts on what it read)."""
+    streams = {stream: [] for stream in (process.stdout, process.stderr) if stream is not None}
+    chooser = selectors.DefaultSelector()
+    for stream in streams:
+        chooser.register(stream, selectors.EVENT_READ)
+    for _ in during(timeout):
+        if re.search(pattern, b"".join(streams[process.stdout]).decode(errors="replace")):
+            break
+        for key, _ in chooser.select(timeout=0.2):
+            data = os.read(key.fileobj.fileno(), 65536)
+            if data:
+                streams[key.fileobj].append(data)
+            else:
+                chooser.unregister(key.fileobj)
+        if process.poll() is not None and not chooser.get_map():
+            break
+    chooser.close()
+    return tuple(b"".join(streams.get(s, [])).decode(errors="replace") for s in (process.stdout, process.stderr))
 
 
 # ---- vehicles ---------------------------------------------------------------------------------------------
@@ -275,6 +314,19 @@ class RunningStation:
     def http(self) -> Api:
         """The station's own client, closed with it."""
         return self.api()
+
+
+@contextlib.contextmanager
+def idle_station(scene: Scene | None = None, record_dir: str | Path | None = None, urls: list[str] | None = None,
+                 token: str = TOKEN, **station) -> Iterator[GroundStation]:
+    """A ``GroundStation`` neither started nor served (no MAVLink link unless ``urls``), closed on the way out:
+    for what the station object itself does (replays, its datum, the 3D view's drawing) without a web server.
+    A test of ``serve`` builds its own: ``serve`` closes the station it is given."""
+    ground = GroundStation(urls or [], scene, token, record_dir, **station)
+    try:
+        yield ground
+    finally:
+        ground.close()
 
 
 class Api(httpx.Client):

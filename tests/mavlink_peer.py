@@ -4,14 +4,19 @@ Unlike ``mavlink_gcs.Gcs`` (pymavlink's own connection, a well-behaved ground
 station), a ``Peer`` sends whatever it is given (any system and component id,
 non-finite numbers, floods of broken datagrams) to one address, and parses
 what comes back per datagram. With a signing key it signs as a signed peer
-would.
+would. ``FakeVehicle`` is the one fake vehicle on a socket: a Peer that beats
+and answers as a test tells it; ``Delivered`` is a fake vehicle without one,
+for a test that feeds a ``Fleet`` (or what reads it) directly.
 """
 
 from __future__ import annotations
 
 import math
 import socket
+import threading
 import time
+
+from harness import during
 
 from vehicle.protocol import signing
 from vehicle.protocol.mav import mavlink, pack
@@ -59,29 +64,81 @@ class Peer:
     def receive(self, timeout: float = 0.5) -> list:
         """Every message that came within ``timeout`` s, parsed per datagram."""
         got = []
-        deadline = time.monotonic() + timeout
-        while (left := deadline - time.monotonic()) > 0:
-            self.socket.settimeout(min(left, 0.05))
-            try:
-                data = self.socket.recv(65535)
-            except (TimeoutError, BlockingIOError):
-                continue
-            parser = mavlink.MAVLink(None)
-            parser.robust_parsing = True
-            for message in parser.parse_buffer(data) or []:
-                if message.get_type() == "STATUSTEXT":
-                    self.texts.append(message.text)
-                got.append(message)
+        for left in during(timeout):
+            got += self.datagram(min(left, 0.05))
+        return got
+
+    def datagram(self, timeout: float) -> list:
+        """The messages of the next datagram that comes within ``timeout`` s (none: ``[]``)."""
+        self.socket.settimeout(timeout)
+        try:
+            data = self.socket.recv(65535)
+        except (TimeoutError, BlockingIOError):
+            return []
+        parser = mavlink.MAVLink(None)
+        parser.robust_parsing = True
+        got = parser.parse_buffer(data) or []
+        self.texts += [message.text for message in got if message.get_type() == "STATUSTEXT"]
         return got
 
     def wait(self, condition, timeout: float = 5.0):
         """The first message received for which ``condition`` holds, or None after ``timeout`` wall s."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            for message in self.receive(0.1):
+        for left in during(timeout):
+            for message in self.receive(min(0.1, left)):
                 if condition(message):
                     return message
         return None
+
+
+class FakeVehicle(Peer):
+    """A vehicle's autopilot on a thread of its own: every ``beat`` s it sends a HEARTBEAT (and a
+    GLOBAL_POSITION_INT with ``pose``), and it answers each message it gets as ``answer(self, message)`` says
+    (sending what it likes, or nothing). ``received`` holds every message it got.
+    A context manager (or ``close()``): it beats from the start."""
+
+    def __init__(self, address: tuple[str, int], sysid: int, answer=None, beat: float = 0.5, pose: bool = True):
+        super().__init__(address, sysid)
+        self.answer = answer or (lambda vehicle, message: None)
+        self.beat, self.pose = beat, pose
+        self.received: list = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        beaten = -math.inf
+        while not self._stop.is_set():
+            if time.monotonic() - beaten >= self.beat:
+                beaten = time.monotonic()
+                self.send(vehicle_heartbeat(), *([position()] if self.pose else []))
+            for message in self.datagram(0.02):
+                self.handle(message)
+
+    def handle(self, message) -> None:
+        """Keep the message, then answer it (kept first: once the station hears the answer, a test sees it)."""
+        self.received.append(message)
+        self.answer(self, message)
+
+    def of_type(self, kind: str, command: int | None = None) -> list:
+        return [m for m in list(self.received)
+                if m.get_type() == kind and (command is None or m.command == command)]
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2)
+        super().close()
+
+
+class Delivered:
+    """Packs messages as one component of a system and decodes them, as a link delivers them to a ``Fleet``: a
+    fake vehicle for a test that feeds the fleet (or the view that draws it) directly, with no socket between."""
+
+    def __init__(self, sysid: int, component: int = 1):
+        self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=component)
+        self.parser = mavlink.MAVLink(None)
+
+    def __call__(self, message):
+        return self.parser.decode(bytearray(message.pack(self.packer)))
 
 
 def command(command: int, *params: float, target: int = 1, component: int = 1):

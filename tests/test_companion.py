@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from harness import SCENE_TEXT, RunningStation, command_ok, free_udp_port, small_scene, wait_wall
+from harness import SCENE_TEXT, RunningStation, command_ok, free_udp_port, small_scene, wait_sim, wait_wall
 from mavlink_peer import Peer, command, gcs_heartbeat, vehicle_heartbeat
 
 from vehicle.agent import mavlink_controller
@@ -344,7 +344,11 @@ def test_an_agent_with_the_wrong_key_hears_no_autopilot(tmp_path):
 class ScriptedAutopilot:
     """A copter's autopilot on a UDP link, answering as told: ``answer`` maps a command to its MAV_RESULT
     (None: never answers); ``late_acks`` are (command, result) it sends unasked, as a late answer comes. It sends
-    heartbeats, home and a position until ``stop()``."""
+    heartbeats, home and a position until ``stop()``.
+
+    Not ``mavlink_peer.FakeVehicle``: the agent under test needs a whole autopilot's stream (home, attitude,
+    SYS_STATUS with its pre-arm checks, an armed mode it can change) through the agent's own ``links``, and
+    answers it can hold back and send late, which these tests check the agent against."""
 
     def __init__(self, port: int, mav_type=mavlink.MAV_TYPE_QUADROTOR):
         self.link = links.connect(f"udpout:127.0.0.1:{port}", 1, 1)
@@ -815,11 +819,15 @@ def test_an_agent_that_fails_mid_flight_holds_the_vehicle_says_why_and_ends_in_e
             while watcher.recv_match(blocking=False) is not None:
                 pass  # what it sent during the flight
             poses = []  # then on its own clock, watched from another port: it brakes and stays where it was
-            deadline = time.monotonic() + 30
-            while time.monotonic() < deadline and (not poses or poses[-1][0] - poses[0][0] < 4.0):
+
+            def pose():
                 message = watcher.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=1)
                 if message is not None:
                     poses.append((message.time_boot_ms / 1000, message.lat / 1e7, message.lon / 1e7))
+                return (poses[-1], poses[-1][0]) if poses else (None, None)
+
+            wait_sim(pose, lambda last: last[0] - poses[0][0] >= 4.0, 4.0, speedup=1.0,
+                     what="4 s of its positions after it failed")
             settled = [pose for pose in poses if pose[0] >= poses[0][0] + 1.5]
             (_, lat0, lon0), (_, lat1, lon1) = settled[0], settled[-1]
             moved = math.hypot((lat1 - lat0) * 111_320, (lon1 - lon0) * 111_320 * math.cos(math.radians(lat0)))

@@ -15,7 +15,6 @@ import json
 import logging
 import math
 import os
-import selectors
 import socket
 import ssl
 import subprocess
@@ -35,6 +34,8 @@ from harness import (
     RunningStation,
     free_tcp_port,
     free_udp_port,
+    idle_station,
+    read_until,
     small_scene,
     start_sim,
     take_off,
@@ -146,7 +147,10 @@ def goto_and_wait(api, sysid: int, x: float, y: float, tolerance: float = 0.3, s
 
 # ---- hand-made MAVLink 1 vehicles (ArduPilot-like, no map of their own) ----------------------------
 class Mavlink1Vehicle:
-    """Sends MAVLink 1 packets as ``sysid`` to the station's UDP port, as a plain ArduPilot would."""
+    """Sends MAVLink 1 packets as ``sysid`` to the station's UDP port, as a plain ArduPilot would.
+
+    Not ``mavlink_peer.FakeVehicle`` on purpose: that one speaks MAVLink 2, and these tests check that the
+    station takes an older autopilot's MAVLink 1 (and builds its map from plain DISTANCE_SENSOR readings)."""
 
     def __init__(self, station: RunningStation, sysid: int):
         self.mav = mavlink1.MAVLink(None, srcSystem=sysid, srcComponent=1)
@@ -603,11 +607,13 @@ def test_websocket_streams_the_vehicles_while_they_fly(station, api, flyer):
     frames = []
     try:
         with websockets.sync.client.connect(f"ws://127.0.0.1:{station.http_port}/ws", open_timeout=5) as socket_:
-            deadline = time.monotonic() + 10
-            while len(frames) < 4 and time.monotonic() < deadline:
-                frame = json.loads(socket_.recv(timeout=5))
-                if frame.get("type") == "vehicles":
-                    frames.append(frame)
+            def frame():
+                got = json.loads(socket_.recv(timeout=5))
+                if got.get("type") == "vehicles":
+                    frames.append(got)
+                return len(frames)
+
+            wait_wall(frame, 10, "four frames of the vehicles", period=0, done=lambda count: count >= 4)
     finally:
         assert api.command(1, action="speed", speed=2.5).json()["result"] == "accepted"
     assert len(frames) == 4
@@ -739,26 +745,6 @@ def test_a_gcs_heartbeat_makes_no_vehicle(station, api):
 ])
 def test_is_loopback(host, loopback):
     assert is_loopback(host) is loopback
-
-
-def read_until(process: subprocess.Popen, marker: str, timeout: float) -> tuple[str, str]:
-    """Read the process's stdout and stderr until ``marker`` appears on stdout (or it exits, or time runs out)."""
-    streams = {process.stdout: [], process.stderr: []}
-    chooser = selectors.DefaultSelector()
-    for stream in streams:
-        chooser.register(stream, selectors.EVENT_READ)
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and marker not in b"".join(streams[process.stdout]).decode(errors="replace"):
-        for key, _ in chooser.select(timeout=0.2):
-            data = os.read(key.fileobj.fileno(), 65536)
-            if data:
-                streams[key.fileobj].append(data)
-            else:
-                chooser.unregister(key.fileobj)
-        if process.poll() is not None and not chooser.get_map():
-            break
-    chooser.close()
-    return tuple(b"".join(streams[s]).decode(errors="replace") for s in (process.stdout, process.stderr))
 
 
 def test_serving_beyond_loopback_without_tls_warns(tmp_path):
@@ -919,40 +905,28 @@ def test_the_web_port_listens_before_the_address_is_announced():
 def test_serve_refuses_half_a_tls_setup():
     from groundstation import server
 
-    station = server.GroundStation([], None, TOKEN, record_dir=None)
-    try:
+    with idle_station() as station:
         with pytest.raises(ValueError, match="tls"):
             server.serve(station, "127.0.0.1", 8123, tls_cert="cert.pem", tls_key=None)
-    finally:
-        station.close()
 
 
 @pytest.mark.parametrize(("given", "expected"), [(None, (47.3769, 8.5417, 408.0)),
                                                  ("51.5,-0.12", (51.5, -0.12, 584.0))])
 def test_the_station_takes_its_datum_from_the_option_else_the_scene(given, expected):
     """Vehicles report latitude and longitude; the station must place them with the datum they use."""
-    from groundstation import server
     from vehicle.protocol.geodesy import Datum
     from vehicle.world.scene import parse_scene
 
     scene = parse_scene('#VRML V2.0 utf8\nWorldInfo { info ["datum=47.3769,8.5417,408"] }\n'
                         "Shape { geometry Box { size 10 10 0.1 } }\n")
-    station = server.GroundStation([], scene, TOKEN, record_dir=None,
-                                   datum=Datum.parse(given) if given else None)
-    try:
+    with idle_station(scene, datum=Datum.parse(given) if given else None) as station:
         datum = station.live.datum
         assert (datum.lat, datum.lon, datum.alt) == expected
-    finally:
-        station.close()
 
 
 def test_without_a_scene_the_given_datum_places_live_and_replayed_vehicles():
-    from groundstation import server
     from vehicle.protocol.geodesy import Datum
 
     for given in (Datum(51.5, -0.12, 11.0), None):  # None: the first home heard becomes the origin
-        station = server.GroundStation([], None, TOKEN, record_dir=None, datum=given)
-        try:
+        with idle_station(datum=given) as station:
             assert station.datum == given and station.live.datum == given
-        finally:
-            station.close()

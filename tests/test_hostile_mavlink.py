@@ -35,6 +35,7 @@ from harness import (
     RunningSim,
     RunningStation,
     command_ok,
+    during,
     free_udp_port,
     launch_chromium,
     make_vehicle,
@@ -550,13 +551,11 @@ def test_a_two_byte_datagram_flood_neither_hides_the_vehicle_nor_trips_its_fails
         api.wait_vehicle(1, lambda v: v["link"]["state"] == "ok" and v["position"], what="the vehicle")
         port = station_address(station) if target == "station" else sim.endpoint.links[0].port.getsockname()
         with Flooder([port]) as flood:
-            deadline = time.monotonic() + 3.0  # longer than the vehicle's failsafe timeout
             results = []
-            while time.monotonic() < deadline:
+            for _ in during(3.0, period=0.2):  # longer than the vehicle's failsafe timeout
                 mode = "LOITER" if len(results) % 2 == 0 else "GUIDED"
                 results.append(api.result(1, action="set_mode", mode=mode))
                 assert api.vehicle(1)["link"]["heartbeat_age"] < 3
-                time.sleep(0.2)
         assert flood.sent > 300 and len(results) >= 5 and set(results) == {"accepted"}
         assert not sim.endpoint.in_failsafe
         assert not [m for m in api.vehicle(1)["messages"] if "failsafe" in m["text"]]

@@ -23,7 +23,7 @@ import msgspec
 import pytest
 import viser
 import websockets
-from harness import CHROMIUM, TOKEN, RunningStation, small_scene, start_sim, wait_wall
+from harness import CHROMIUM, TOKEN, RunningStation, during, small_scene, start_sim, wait_wall
 from websockets.sync.client import connect as ws_connect
 
 from groundstation.security import MAX_BODY, NO_HOST, Access, Gate
@@ -289,10 +289,10 @@ def click_message(x: float, y: float) -> bytes:
 
 def targets(stream, seconds: float) -> list[dict]:
     """The target notes a /ws stream brings within ``seconds``."""
-    found, deadline = [], time.monotonic() + seconds
-    while time.monotonic() < deadline:
+    found = []
+    for left in during(seconds):
         try:
-            frame = json.loads(stream.recv(timeout=max(0.01, deadline - time.monotonic())))
+            frame = json.loads(stream.recv(timeout=max(0.01, left)))
         except TimeoutError:
             break
         if frame.get("type") == "target":

@@ -33,6 +33,7 @@ from harness import (
     Api,
     RunningStation,
     command_ok,
+    idle_station,
     small_scene,
     start_sim,
     wait_wall,
@@ -881,10 +882,7 @@ def test_seeking_backwards_gives_the_state_a_direct_seek_gives(experiment_run):
 
 def test_a_replayed_old_log_draws_its_sonar_beams(experiment_run, monkeypatch):
     """The 3D view takes its clock from the station: a log flown months ago draws its beams as live does."""
-    from groundstation.server import GroundStation
-
-    station = GroundStation([], None, record_dir=None)
-    try:
+    with idle_station() as station:
         scene = station.view.server.scene
         drawn, add = [], scene.add_line_segments
         monkeypatch.setattr(scene, "add_line_segments", lambda name, *a, **k: drawn.append(name) or add(name, *a, **k))
@@ -893,8 +891,6 @@ def test_a_replayed_old_log_draws_its_sonar_beams(experiment_run, monkeypatch):
         replay.seek(replay.duration / 2)  # mid-scan
         station.view.draw()
         assert "/layers/beams/1" in drawn
-    finally:
-        station.close()
 
 
 def test_after_a_seek_a_vehicle_was_last_heard_at_its_last_record(tmp_path):

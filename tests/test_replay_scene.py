@@ -26,7 +26,16 @@ import pytest
 import viser
 import websockets.sync.client
 import zstandard
-from harness import CHROMIUM, RunningStation, WaitTimeout, launch_chromium, load_default_scene, start_sim, wait_wall
+from harness import (
+    CHROMIUM,
+    RunningStation,
+    WaitTimeout,
+    during,
+    launch_chromium,
+    load_default_scene,
+    start_sim,
+    wait_wall,
+)
 from PIL import Image
 
 from groundstation.recorder import Recorder
@@ -48,10 +57,11 @@ DEFAULT_DIGEST = hashlib.sha256(default_scene().read_bytes()).hexdigest()[:16]
 def view_nodes(port: int, wanted: str | None = None, seconds: float = 3.0) -> set[str]:
     """Names of the nodes viser sends a new client of the 3D view (until ``wanted`` came, or ``seconds``)."""
     names: set[str] = set()
-    deadline = time.monotonic() + seconds
     with websockets.sync.client.connect(f"ws://127.0.0.1:{port}", max_size=None,
                                         subprotocols=[f"viser-v{viser.__version__}"]) as socket:
-        while time.monotonic() < deadline and wanted not in names:
+        for _ in during(seconds):
+            if wanted in names:
+                break
             try:
                 payload = socket.recv(timeout=0.3)
             except TimeoutError:

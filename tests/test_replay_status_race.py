@@ -7,15 +7,15 @@ from __future__ import annotations
 import threading
 import time
 
-from groundstation.server import GroundStation
+from harness import idle_station
+
 from vehicle.cli import main as vehicle_main
 
 
 def test_heartbeat_ages_stay_sane_while_seeking(tmp_path):
     log = tmp_path / "browse.tlog"
     assert vehicle_main(["experiment", "--mission", "browse", "--time-limit", "120", "--log", str(log)]) == 0
-    station = GroundStation([], None, "token", record_dir=tmp_path)
-    try:
+    with idle_station(record_dir=tmp_path) as station:
         replay = station.replays.start(log)
         replay.playing = False
         assert replay.duration > 10
@@ -36,5 +36,3 @@ def test_heartbeat_ages_stay_sane_while_seeking(tmp_path):
         # heartbeats come at 1 Hz: at any replay time the last one is 0-1.5 s old
         wrong = [a for a in ages if not 0 <= a <= 1.5]
         assert not wrong, f"{len(wrong)} of {len(ages)} ages out of 0..1.5 s, e.g. {sorted(wrong)[:3]}"
-    finally:
-        station.close()

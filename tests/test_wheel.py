@@ -17,14 +17,13 @@ import socket
 import subprocess
 import sys
 import sysconfig
-import time
 import venv
 import zipfile
 from pathlib import Path
 
 import httpx
 import pytest
-from harness import free_port
+from harness import free_port, read_until, wait_wall
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -74,27 +73,24 @@ def test_the_installed_wheel_serves_the_demo_from_an_unrelated_folder(wheel, tmp
                              str(mavlink_port), "--speedup", "4", "--record-dir", "", "--quiet"],
                             cwd=elsewhere, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        address = None
-        deadline = time.monotonic() + 120
-        while address is None and time.monotonic() < deadline:
-            line = demo.stdout.readline()
-            assert line or demo.poll() is None, "the demo exited"
-            if match := re.search(r"(http://127\.0\.0\.1:\d+)/#token=", line):
-                address = match.group(1)
+        out, _ = read_until(demo, r"http://127\.0\.0\.1:\d+/#token=", timeout=120)
+        match = re.search(r"(http://127\.0\.0\.1:\d+)/#token=", out)
+        assert match, f"the demo exited or printed no address: {out}"
+        address = match.group(1)
         assert address == f"http://127.0.0.1:{port}"
         with httpx.Client(base_url=address, timeout=10) as http:
             assert "<html" in http.get("/").text.lower()
             assert http.get("/static/app.js").status_code == 200
             scene = http.get("/api/health").json()["scene"]
             assert scene["name"] == "default.wrl" and scene["triangles"] > 300
-            vehicle = None
-            while time.monotonic() < deadline:  # the simulated copter, flying its mission
+
+            def vehicle():
                 vehicles = http.get("/api/vehicles").json()
-                vehicle = vehicles[0] if vehicles else None
-                if vehicle and vehicle["position"] and vehicle["armed"] and vehicle["position"]["alt"] > 1.0:
-                    break
-                time.sleep(0.2)
-            assert vehicle and vehicle["armed"] and vehicle["position"]["alt"] > 1.0, vehicle
+                return vehicles[0] if vehicles else None
+
+            flying = wait_wall(vehicle, 120, "the simulated copter, flying its mission", period=0.2,
+                               done=lambda v: v and v["position"] and v["armed"] and v["position"]["alt"] > 1.0)
+            assert flying["armed"] and flying["position"]["alt"] > 1.0, flying
     finally:
         demo.terminate()
         demo.wait(timeout=20)
