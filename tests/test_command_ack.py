@@ -7,7 +7,6 @@ only bounds how long the test waits for something that must happen (5 s)."""
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from concurrent.futures import Future
@@ -15,6 +14,7 @@ from contextlib import contextmanager
 
 import pytest
 from harness import StationClock, free_udp_port, wait_wall
+from mavlink_peer import FakeVehicle
 
 from groundstation.link import REPLY_LOOK, Link, LinkError
 from groundstation.state import Fleet
@@ -26,57 +26,32 @@ SHORT = 1 / 1024  # s of the station's clock a try is held short of its timeout:
 HELD = 1.5  # wall s the station's clock is held just short of a second, once: longer than a try on the wall clock
 
 
-class ScriptedVehicle:
-    """Vehicle ``sysid`` heard by the link; answers each COMMAND_LONG/COMMAND_INT try with the next of
-    ``answers[command]`` (a result; None: silence; a callable: sends what it likes), the last one for later
-    tries; unscripted commands are accepted."""
+class ScriptedVehicle(FakeVehicle):
+    """Vehicle ``sysid`` heard by the link (a heartbeat every 0.2 s); answers each COMMAND_LONG/COMMAND_INT try
+    with the next of ``answers[command]`` (a result; None: silence; a callable: sends what it likes), the last
+    one for later tries; unscripted commands are accepted."""
 
     def __init__(self, port: int, sysid: int = 1):
-        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.socket.bind(("127.0.0.1", 0))
-        self.socket.settimeout(0.02)
-        self.target = ("127.0.0.1", port)
-        self.mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1)
-        self.parser = mavlink.MAVLink(None)
         self.answers: dict[int, list] = {}
-        self.received: list = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
+        super().__init__(("127.0.0.1", port), sysid, beat=0.2, pose=False)
 
-    def send(self, message) -> None:
-        self.socket.sendto(message.pack(self.mav), self.target)
+    @property
+    def mav(self):
+        return self.packer
 
     def ack(self, command: int, result: int) -> None:
         self.send(self.mav.command_ack_encode(command, result, 0, 0, 255, 0))
 
-    def _run(self) -> None:
-        beat = 0.0
-        while not self._stop.is_set():
-            if time.monotonic() - beat > 0.2:
-                beat = time.monotonic()
-                self.send(
-                    self.mav.heartbeat_encode(
-                        mavlink.MAV_TYPE_QUADROTOR,
-                        mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                        mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                        4,
-                        4,
-                    )
-                )
-            try:
-                data, _ = self.socket.recvfrom(65535)
-            except (TimeoutError, OSError):
-                continue
-            for message in self.parser.parse_buffer(data) or []:
-                if message.get_type() not in ("COMMAND_LONG", "COMMAND_INT"):
-                    continue
-                script = self.answers.get(message.command, [mavlink.MAV_RESULT_ACCEPTED])
-                answer = script.pop(0) if len(script) > 1 else script[0]
-                self.received.append(message)  # once its answer is taken: a test that sees it may script the next
-                if callable(answer):
-                    answer(self, message)
-                elif answer is not None:
-                    self.ack(message.command, answer)
+    def handle(self, message) -> None:
+        if message.get_type() not in ("COMMAND_LONG", "COMMAND_INT"):
+            return
+        script = self.answers.get(message.command, [mavlink.MAV_RESULT_ACCEPTED])
+        answer = script.pop(0) if len(script) > 1 else script[0]
+        self.received.append(message)  # once its answer is taken: a test that sees it may script the next
+        if callable(answer):
+            answer(self, message)
+        elif answer is not None:
+            self.ack(message.command, answer)
 
     def tries(self, command: int) -> list:
         return [m for m in list(self.received) if m.command == command]
@@ -87,14 +62,11 @@ def station_and_vehicle(retry_clock: StationClock):
     port = free_udp_port()
     link = Link([f"udpin:127.0.0.1:{port}"], Fleet(), retry_clock=retry_clock).start()
     vehicle = ScriptedVehicle(port)
-    vehicle._thread.start()
     try:
         wait_wall(lambda: link.fleet.get(1) is not None and 1 in link.route, 5, "the vehicle heard")
         yield link, vehicle
     finally:
-        vehicle._stop.set()
-        vehicle._thread.join(timeout=2)
-        vehicle.socket.close()
+        vehicle.close()
         link.close()
 
 
@@ -188,9 +160,8 @@ def test_only_the_ack_of_this_command_from_this_vehicle_answers_it():
     def wrong_acks(vehicle, message):
         vehicle.ack(mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_RESULT_ACCEPTED)  # another command
         other = mavlink.MAVLink(None, srcSystem=2, srcComponent=1)
-        vehicle.socket.sendto(
-            other.command_ack_encode(TAKEOFF, mavlink.MAV_RESULT_ACCEPTED, 0, 0, 255, 0).pack(other), vehicle.target
-        )  # another vehicle
+        vehicle.raw(other.command_ack_encode(TAKEOFF, mavlink.MAV_RESULT_ACCEPTED, 0, 0, 255, 0).pack(other))
+        # another vehicle
 
     clock = StationClock()
     with station_and_vehicle(clock) as (link, vehicle):
@@ -401,8 +372,7 @@ def test_a_request_is_sent_again_unchanged_three_times_a_second_apart_unless_tol
 def test_a_command_goes_only_to_the_vehicle_it_is_for():
     """Two vehicles on one link: a command to one is sent to where that one was heard, not to both."""
     with station_and_vehicle(StationClock()) as (link, first):
-        second = ScriptedVehicle(first.target[1], sysid=2)
-        second._thread.start()
+        second = ScriptedVehicle(first.address[1], sysid=2)
         try:
             wait_wall(lambda: link.fleet.get(2) is not None and 2 in link.route, 5, "the second vehicle heard")
             assert answered(lambda: link.command(1, TAKEOFF, 0, 0, 0, 0, 0, 0, 4.0)) == "accepted"
@@ -411,6 +381,4 @@ def test_a_command_goes_only_to_the_vehicle_it_is_for():
             assert len(first.tries(TAKEOFF)) == 1 and not first.tries(land)
             assert len(second.tries(land)) == 1 and not second.tries(TAKEOFF)
         finally:
-            second._stop.set()
-            second._thread.join(timeout=2)
-            second.socket.close()
+            second.close()

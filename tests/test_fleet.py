@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from mavlink_peer import Delivered
 
 from groundstation.state import OWN_MAP_AFTER, Fleet
 from vehicle.mapping.memory_map import HIT
@@ -21,18 +22,7 @@ SYSID = 3
 DATUM = Datum()
 
 
-class Sender:
-    """Packs messages as one component of system SYSID and decodes them, as a link would deliver them."""
-
-    def __init__(self, component: int):
-        self.packer = mavlink.MAVLink(None, srcSystem=SYSID, srcComponent=component)
-        self.parser = mavlink.MAVLink(None)
-
-    def __call__(self, message):
-        return self.parser.decode(bytearray(message.pack(self.packer)))
-
-
-autopilot, companion = Sender(1), Sender(191)
+autopilot, companion = Delivered(SYSID, 1), Delivered(SYSID, 191)
 
 
 def heartbeat(kind=mavlink.MAV_TYPE_QUADROTOR, autopilot_type=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, mode=4):
@@ -74,7 +64,7 @@ def test_the_companions_heartbeat_neither_makes_a_vehicle_nor_changes_its_mode(f
 def test_a_heartbeat_of_another_part_of_the_system_does_not_change_the_vehicles_mode(fleet):
     """A component that sends a vehicle's type with no autopilot (a companion program of another make, a
     gimbal driver) made no vehicle, yet its heartbeat set the vehicle's mode (to custom mode 0) and armed state."""
-    other = Sender(42)
+    other = Delivered(SYSID, 42)
     hear(fleet, 0.0, autopilot(heartbeat(mode=4)))
     hear(fleet, 1.0, other(heartbeat(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_INVALID, 0)))
     vehicle = fleet.get(SYSID)
@@ -88,7 +78,7 @@ def test_only_the_autopilot_makes_the_vehicle_and_sets_its_mode_position_and_bat
     comes from, so a spoofer takes a component id of its own) set the vehicle's mode with a heartbeat of an
     autopilot, and moved it with its positions; heard first, it made the vehicle, and the station then took
     the vehicle's own autopilot for another part of it. Its messages still show, its sensors' readings count."""
-    other = Sender(250)
+    other = Delivered(SYSID, 250)
     hear(fleet, 0.0, other(heartbeat(mode=9)), other(position(500.0, 500.0, 60.0)))
     assert fleet.ids() == []
     hear(fleet, 0.0, autopilot(heartbeat(mode=4)), autopilot(position(1.0, 2.0)),

@@ -13,7 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 from harness import RunningStation, StationClock, small_scene, wait_wall
-from mavlink_peer import Peer, position, vehicle_heartbeat
+from mavlink_peer import FakeVehicle
 
 from groundstation.api.common import EXCHANGES
 from groundstation.link import REPLY_LOOK
@@ -40,37 +40,11 @@ def station(clock):
             running.station.link.retry_clock = time.monotonic
 
 
-class FakeVehicle(Peer):
-    """A vehicle's autopilot that beats and answers what the station sends as ``answer(self, message)`` says."""
-
-    def __init__(self, station: RunningStation, sysid: int, answer):
-        super().__init__(("127.0.0.1", station.mavlink_port), sysid)
-        self.answer = answer
-        self.received: list = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self.send(vehicle_heartbeat(), position())
-        self._thread.start()
-        wait_wall(lambda: station.http.get(f"/api/vehicles/{sysid}").status_code == 200, 10, f"vehicle {sysid}")
-
-    def _run(self) -> None:
-        beat = 0
-        while not self._stop.is_set():
-            beat += 1
-            if beat % 10 == 0:
-                self.send(vehicle_heartbeat(), position())
-            for message in self.receive(0.05):
-                self.received.append(message)
-                self.answer(self, message)
-
-    def of_type(self, kind: str, command: int | None = None) -> list:
-        return [m for m in list(self.received)
-                if m.get_type() == kind and (command is None or m.command == command)]
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2)
-        super().close()
+def heard(station: RunningStation, sysid: int, answer) -> FakeVehicle:
+    """A fake vehicle ``sysid`` answering as ``answer(vehicle, message)`` says, once the station knows it."""
+    vehicle = FakeVehicle(("127.0.0.1", station.mavlink_port), sysid, answer)
+    wait_wall(lambda: station.http.get(f"/api/vehicles/{sysid}").status_code == 200, 10, f"vehicle {sysid}")
+    return vehicle
 
 
 def test_commands_waiting_on_a_silent_vehicle_never_hold_up_what_the_page_draws(station, clock):
@@ -79,7 +53,7 @@ def test_commands_waiting_on_a_silent_vehicle_never_hold_up_what_the_page_draws(
     out on the station's clock."""
     default_threads = min(32, (os.cpu_count() or 1) + 4)  # asyncio.to_thread's pool
     waiting = default_threads + 1
-    silent = FakeVehicle(station, 42, lambda vehicle, message: None)
+    silent = heard(station, 42, lambda vehicle, message: None)
     try:
         with ThreadPoolExecutor(waiting) as pool, station.api(timeout=60) as api:
             commands = [pool.submit(api.command, 42, action="rtl") for _ in range(waiting)]
@@ -108,7 +82,7 @@ def keeps_asking(vehicle: FakeVehicle, message) -> None:
 
 
 def test_a_vehicle_that_keeps_asking_for_items_ends_the_upload_with_the_reason(station):
-    vehicle = FakeVehicle(station, 43, keeps_asking)
+    vehicle = heard(station, 43, keeps_asking)
     try:
         answer = station.http.put("/api/vehicles/43/mission", content=MISSION, headers=station.http.operator)
         assert answer.status_code == 504
@@ -127,7 +101,7 @@ def test_a_second_mission_transfer_to_a_vehicle_in_one_is_refused_and_the_first_
             threading.Thread(target=lambda: release.wait(20) and vehicle.send(
                 mavlink.MAVLink_mission_ack_message(255, 190, mavlink.MAV_MISSION_ACCEPTED, 0)), daemon=True).start()
 
-    vehicle = FakeVehicle(station, 44, accepts_when_released)
+    vehicle = heard(station, 44, accepts_when_released)
     try:
         with ThreadPoolExecutor(1) as pool, station.api() as api:
             first = pool.submit(api.put, "/api/vehicles/44/mission", content=MISSION, headers=api.operator)

@@ -13,7 +13,8 @@ from vehicle.protocol.mav import mavlink
 
 
 class Sender:
-    """A peer on its own UDP socket, sending MAVLink as ``sysid``."""
+    """A peer on its own UDP socket, sending MAVLink as ``sysid``: raw bytes (half packets, garbage before a
+    packet) to the link layer, which these tests check; not a vehicle (``mavlink_peer.FakeVehicle`` is one)."""
 
     def __init__(self, port: int, sysid: int):
         self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

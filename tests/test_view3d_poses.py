@@ -9,25 +9,17 @@ from __future__ import annotations
 
 import pytest
 from harness import wait_wall
-from mavlink_peer import position, vehicle_heartbeat
+from mavlink_peer import Delivered, position, vehicle_heartbeat
 
 import groundstation.viz as viz
 from groundstation.state import Fleet
 from vehicle.protocol.geodesy import Datum
-from vehicle.protocol.mav import mavlink
 
 DATUM = Datum()
 
 
-class Vehicle:
+class Vehicle(Delivered):
     """One autopilot's messages (``mavlink_peer``'s), packed and decoded as a link delivers them to the fleet."""
-
-    def __init__(self, sysid: int):
-        self.packer = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1)
-        self.parser = mavlink.MAVLink(None)
-
-    def __call__(self, message):
-        return self.parser.decode(bytearray(message.pack(self.packer)))
 
     def heartbeat(self):
         return self(vehicle_heartbeat())
