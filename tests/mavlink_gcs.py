@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from harness import WaitTimeout, wait_sim
+from harness import WaitTimeout, during, wait_sim
 
 from vehicle.protocol.mav import AUTOPILOT, mavlink, mavutil
 
@@ -32,8 +32,7 @@ class Gcs:
     def recv(self, timeout: float = 0.2, component: int | None = AUTOPILOT):
         """The next message from the vehicle's ``component`` (None: any), or None if none came in ``timeout``.
         Every STATUSTEXT of the vehicle, whichever component sent it, goes to ``texts``."""
-        deadline = time.monotonic() + timeout
-        while (left := deadline - time.monotonic()) > 0:
+        for left in during(timeout):
             message = self.conn.recv_match(blocking=True, timeout=left)
             if message is None or message.get_type() == "BAD_DATA" or message.get_srcSystem() != self.target:
                 continue

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 import random
 import socket
-import time
 from contextlib import contextmanager
 
 import numpy as np
@@ -555,9 +554,7 @@ def test_vehicle_log_records_both_directions(fly, tmp_path):
     gcs, sim = fly(log=str(log))
     assert gcs.set_mode(5) == mavlink.MAV_RESULT_ACCEPTED
     sim.stop()
-    deadline = time.monotonic() + 5
-    while not sim.log._file.closed and time.monotonic() < deadline:  # the loop closes it on its way out
-        time.sleep(0.05)
+    wait_wall(lambda: sim.log._file.closed, 5, "the vehicle's log closed")  # the loop closes it on its way out
     reader = mavutil.mavlink_connection(str(log))
     kinds = set()
     while (message := reader.recv_match()) is not None:
