@@ -196,8 +196,17 @@ class Replay:
         replay._data = Path(path).read_bytes()
         replay._decoder = mavlink.MAVLink(None)
         replay._decoder.robust_parsing = True
-        replay.seek(0.0)
+        replay.seek(replay.first_vehicle_at())
         return replay
+
+    def first_vehicle_at(self) -> float:
+        """Seconds into the log of the first heartbeat that makes a vehicle (0 if none does): a replay opens
+        there, so a page that asks after the vehicle it saw live finds it at once, not a 404 while the log's
+        first records (the station's own, a text) play."""
+        made = self._vehicles_made()
+        if not made:
+            return 0.0
+        return max(float(self.index.times[min(made.values())]) - self.index.start, 0.0)
 
     @property
     def duration(self) -> float:

@@ -527,7 +527,9 @@ def test_no_error_in_the_console_live_in_a_replay_and_in_an_export(browser_page,
             shots.append(colours(standalone.screenshot(timeout=15_000)))
         except PlaywrightTimeout:
             return False
-        return shots[-1][0] > 100 and shots[-1][1] < 0.5
+        # an empty view is one colour (98 %) and the axes; the export opens on its first vehicle, from above the
+        # scene, where the lit ground fills more than half of the middle (58 %) among hundreds of colours
+        return shots[-1][0] > 100 and shots[-1][1] < 0.8
 
     try:
         wait_wall(drawn, 90, "the export draws its scene", sleep=lambda: standalone.wait_for_timeout(500))

@@ -1695,3 +1695,28 @@ def test_replay_controls_apply_in_order_pause_seek_step_play(tmp_path):
     assert status["time"] == 0.0 and status["playing"] is True
     status = replay.control(play=False)
     assert status["time"] == 0.0 and status["playing"] is False
+
+
+def test_a_replay_opens_at_its_first_vehicle_so_a_page_asking_after_it_finds_it(tmp_path):
+    """A station's recording starts with its own records (a text, its heartbeat) before any vehicle's heartbeat:
+    a replay opened at 0 held no vehicle for a moment, and a page still showing that vehicle live asked for its map
+    and history and got 404s. It opens at the first vehicle's heartbeat; a log with no vehicle opens at 0."""
+    log = TlogWriter()
+    station = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    rover = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    for k in range(5):
+        log.write(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, f"station {k}".encode(), 0, 0),
+                  station)
+    beat = log.write(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GROUND_ROVER,
+                                                       mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 10, 4, 3), rover)
+    for k in range(20):
+        log.write(mavlink.MAVLink_local_position_ned_message(k * 100, float(k), 0.0, 0.0, 0.0, 0.0, 0.0), rover)
+    replay = Replay.open(log.save(tmp_path / "station_first.tlog"), Fleet(Datum()))
+    assert replay.clock > 0 and replay.clock == pytest.approx(beat - PLANE_START)
+    assert replay.fleet.get(1) is not None
+
+    empty = TlogWriter()
+    for _ in range(5):
+        empty.write(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, b"alone", 0, 0), station)
+    lonely = Replay.open(empty.save(tmp_path / "no_vehicle.tlog"), Fleet(Datum()))
+    assert lonely.clock == 0.0 and not lonely.fleet.vehicles
