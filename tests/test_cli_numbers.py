@@ -84,6 +84,8 @@ def test_a_point_west_of_the_origin_or_south_of_the_equator_is_a_value_not_an_op
         ["--start=-1,2", "--heading", "-90", "--datum=-.5,1", "-h"]
     assert options.glue_negative_points(["--sta", "-1,2", "--start", "--json", "--", "--start", "-3,4"]) == \
         ["--sta=-1,2", "--start", "--json", "--", "--start", "-3,4"]
+    assert options.glue_negative_points(["--bounds", "-1,-2,3,4", "--targets", "-1,2;3,-4"]) == \
+        ["--bounds=-1,-2,3,4", "--targets=-1,2;3,-4"]
 
 
 @pytest.mark.parametrize("main, args, option", [

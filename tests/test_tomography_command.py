@@ -104,6 +104,8 @@ def test_bad_gzip_and_bad_options_exit_2(walk_file, tmp_path, capsys):
     assert code == 2 and str(broken) in err and "Traceback" not in err
     code, _, err = run(capsys, walk_file, "--bounds", "1,1,1,5", "--json", tmp_path / "o.json")
     assert code == 2 and "zero area" in err
+    code, _, err = run(capsys, walk_file, "--bounds", "-1,-1,-1,5", "--json", tmp_path / "o.json")
+    assert code == 2 and "zero area" in err  # a west or south edge below 0 is a value, not an option
     for bad in (["--bounds", "1,2,3"], ["--cell", "0"], ["--window", "nan"]):
         with pytest.raises(SystemExit) as stop:
             main(["rti", "reconstruct", str(walk_file), "--json", str(tmp_path / "o.json"), *bad])

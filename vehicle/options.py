@@ -71,7 +71,8 @@ def link_url(text: str) -> str:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
-POINT_OPTIONS = ("--start", "--datum")  # their values are comma-separated numbers: X,Y[,Z] or LAT,LON[,ALT]
+# their values are comma-separated numbers (X,Y[,Z], LAT,LON[,ALT], X0,Y0,X1,Y1, X,Y[;X,Y...])
+POINT_OPTIONS = ("--start", "--datum", "--bounds", "--targets")
 _NEGATIVE = re.compile(r"-\.?\d")
 
 
