@@ -21,7 +21,8 @@ from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import AUTOPILOT, COMPANION, mavlink
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, number_of
 
-Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed"]
+Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed",
+                 "auto"]
 GOTO_REACH = 1000.0  # m from home a goto may go when neither the vehicle's map nor a scene bounds its space
 SCENE_MARGIN = 20.0  # m beyond the scene's bounds a goto may go
 PROBE_ABOVE = 0.5  # m above the vehicle's height (a rover's: its ground) where a goto's target is looked at
@@ -132,6 +133,24 @@ def solid_at(scene, x: float, y: float, z: float) -> str | None:
     return names[index] if index < len(names) and names[index] else f"shape {index}"
 
 
+def fly_mission(link: Link, vehicle: VehicleState, set_mode) -> str:
+    """The autopilot's own mission, in AUTO: armed first if it is not (a copter in GUIDED, as ArduPilot arms in
+    no AUTO), then AUTO and MISSION_START to the autopilot, never to an agent. The first answer that is not
+    "accepted" is the result, named by its step."""
+    steps = []
+    if not vehicle.armed:
+        if vehicle.kind == "copter":
+            steps.append(("GUIDED", lambda: set_mode("GUIDED")))
+        steps.append(("arm", lambda: link.command(vehicle.sysid, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)))
+    steps += [("AUTO", lambda: set_mode("AUTO")),
+              ("mission start", lambda: link.command(vehicle.sysid, mavlink.MAV_CMD_MISSION_START))]
+    for name, step in steps:
+        result = step()
+        if result != "accepted":
+            return f"{result} ({name})"
+    return "accepted"
+
+
 def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | None, now: float) -> str:
     """``now``: the receiver's clock, to tell whether the vehicle's companion is still heard."""
     sysid = vehicle.sysid
@@ -162,6 +181,8 @@ def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | 
             return link.command(sysid, mavlink.MAV_CMD_MISSION_START, component=COMPANION)
         result = set_mode("AUTO")
         return result if result != "accepted" else link.command(sysid, mavlink.MAV_CMD_MISSION_START)
+    if action == "auto":
+        return fly_mission(link, vehicle, set_mode)
     if action == "speed":
         return link.command(sysid, mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, command.speed, -1)
     if action == "goto":  # to its agent when it has one (which plans round what its map knows), else the autopilot

@@ -110,6 +110,8 @@ class Link:
         self._pruned = 0.0
         self._waiters: list[_Waiter] = []
         self._transfers: set[int] = set()  # system ids a mission goes to or comes from now
+        # sysid -> the last mission transfer's {"direction", "done", "total", "result"}, for the plan view's bar
+        self.transfer_progress: dict[int, dict] = {}
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="mavlink", daemon=True)
@@ -367,26 +369,39 @@ class Link:
 
     # ---- the mission protocol, ground station side ----------------------------------------------------
     def download_mission(self, sysid: int, timeout: float = 1.0) -> list[MissionItem]:
-        with self._transfer(sysid):
-            return mission.download(self, sysid, timeout=timeout)
+        with self._transfer(sysid, "download"):
+            items = mission.download(self, sysid, timeout=timeout, progress=self._progress(sysid))
+            self.transfer_progress[sysid]["result"] = "done"
+            return items
 
     def upload_mission(self, sysid: int, items: list[MissionItem], timeout: float = 1.0) -> str:
         """Upload items (item 0 is home); returns the vehicle's MISSION_ACK result as a word."""
-        with self._transfer(sysid):
+        with self._transfer(sysid, "upload"):
             try:
-                return mission.upload(self, sysid, items, timeout=timeout)
+                result = mission.upload(self, sysid, items, timeout=timeout, progress=self._progress(sysid))
             except mission.MissionError as error:
                 raise LinkError(str(error)) from None
+            self.transfer_progress[sysid]["result"] = result
+            return result
+
+    def _progress(self, sysid: int) -> Callable[[int, int], None]:
+        def told(done: int, total: int) -> None:
+            self.transfer_progress[sysid].update(done=done, total=total)
+        return told
 
     @contextlib.contextmanager
-    def _transfer(self, sysid: int):
+    def _transfer(self, sysid: int, direction: str):
         """One mission transfer per vehicle at a time (else TransferBusy): two would take each other's replies."""
         with self._lock:
             if sysid in self._transfers:
                 raise TransferBusy(f"a mission transfer with vehicle {sysid} is under way; try again when it ends")
             self._transfers.add(sysid)
+            self.transfer_progress[sysid] = {"direction": direction, "done": 0, "total": None, "result": None}
         try:
             yield
+        except Exception as error:
+            self.transfer_progress[sysid]["result"] = f"failed: {error}"
+            raise
         finally:
             with self._lock:
                 self._transfers.discard(sysid)

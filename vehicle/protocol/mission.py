@@ -25,10 +25,12 @@ MISSION = mav.MAV_MISSION_TYPE_MISSION
 NAV_WAYPOINT = mav.MAV_CMD_NAV_WAYPOINT
 NAV_TAKEOFF = mav.MAV_CMD_NAV_TAKEOFF
 NAV_LOITER_UNLIM = mav.MAV_CMD_NAV_LOITER_UNLIM
+NAV_LOITER_TIME = mav.MAV_CMD_NAV_LOITER_TIME
 NAV_LAND = mav.MAV_CMD_NAV_LAND
 NAV_RETURN_TO_LAUNCH = mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
 DO_CHANGE_SPEED = mav.MAV_CMD_DO_CHANGE_SPEED
-SUPPORTED_ITEMS = {NAV_WAYPOINT, NAV_TAKEOFF, NAV_LOITER_UNLIM, NAV_LAND, NAV_RETURN_TO_LAUNCH, DO_CHANGE_SPEED}
+SUPPORTED_ITEMS = {NAV_WAYPOINT, NAV_TAKEOFF, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_LAND, NAV_RETURN_TO_LAUNCH,
+                   DO_CHANGE_SPEED}
 ALTITUDE_LIMIT = 1000.0  # m above home: the most a target may ask (the top of ArduPilot's FENCE_ALT_MAX range)
 
 
@@ -57,7 +59,8 @@ class MissionItem:
 
     @property
     def has_position(self) -> bool:
-        return self.command in (NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LAND) and bool(self.lat or self.lon)
+        positioned = (NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_LAND)
+        return self.command in positioned and bool(self.lat or self.lon)
 
 
 @dataclass(slots=True)
@@ -82,7 +85,7 @@ def item_problem(item: MissionItem) -> int | None:
         return mav.MAV_MISSION_INVALID_PARAM6_Y
     if not (math.isfinite(item.alt) and abs(item.alt) <= ALTITUDE_LIMIT):
         return mav.MAV_MISSION_INVALID_PARAM7
-    if item.command == NAV_WAYPOINT and not (math.isfinite(item.param1) and item.param1 >= 0):
+    if item.command in (NAV_WAYPOINT, NAV_LOITER_TIME) and not (math.isfinite(item.param1) and item.param1 >= 0):
         return mav.MAV_MISSION_INVALID_PARAM1
     return None
 
@@ -127,8 +130,10 @@ class Requester(Protocol):
     def send(self, message, sysid: int | None = None) -> None: ...
 
 
-def download(link: Requester, sysid: int, component: int = 1, timeout: float = 1.0) -> list[MissionItem]:
-    """The vehicle's mission: MISSION_REQUEST_LIST, then each item in turn, then MISSION_ACK."""
+def download(link: Requester, sysid: int, component: int = 1, timeout: float = 1.0,
+             progress: Callable[[int, int], None] | None = None) -> list[MissionItem]:
+    """The vehicle's mission: MISSION_REQUEST_LIST, then each item in turn, then MISSION_ACK (``progress`` as
+    ``upload``'s)."""
     count = link.request(sysid, mav.MAVLink_mission_request_list_message(sysid, component, MISSION),
                          lambda m: m.get_type() == "MISSION_COUNT", timeout).count
     items = []
@@ -137,6 +142,8 @@ def download(link: Requester, sysid: int, component: int = 1, timeout: float = 1
                              lambda m, s=seq: m.get_type() in ("MISSION_ITEM_INT", "MISSION_ITEM") and m.seq == s,
                              timeout)
         items.append(item_from(reply))
+        if progress is not None:
+            progress(seq + 1, count)
     link.send(mav.MAVLink_mission_ack_message(sysid, component, mav.MAV_MISSION_ACCEPTED, MISSION), sysid)
     return items
 
@@ -149,8 +156,10 @@ class MissionError(Exception):
     """The vehicle asked for an item the upload does not have, or kept asking without accepting the mission."""
 
 
-def upload(link: Requester, sysid: int, items: list[MissionItem], component: int = 1, timeout: float = 1.0) -> str:
-    """Upload items (item 0 is home); returns the vehicle's MISSION_ACK result as a word ("accepted", ...)."""
+def upload(link: Requester, sysid: int, items: list[MissionItem], component: int = 1, timeout: float = 1.0,
+           progress: Callable[[int, int], None] | None = None) -> str:
+    """Upload items (item 0 is home); returns the vehicle's MISSION_ACK result as a word ("accepted", ...).
+    ``progress(sent, count)`` is told each item as it goes, for a page to show."""
     def wanted(m) -> bool:
         return m.get_type() in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK")
 
@@ -165,6 +174,8 @@ def upload(link: Requester, sysid: int, items: list[MissionItem], component: int
         seq = reply.seq
         if not 0 <= seq < len(items):
             raise MissionError(f"vehicle {sysid} asked for mission item {seq} of {len(items)}")
+        if progress is not None:
+            progress(seq + 1, len(items))
         reply = link.request(sysid, item_message(items[seq], seq, (sysid, component), False),
                              lambda m, s=seq: wanted(m) and (m.get_type() == "MISSION_ACK" or m.seq != s), timeout)
     raise MissionError(f"vehicle {sysid} asked for {most} items of a {len(items)}-item mission and did not accept it")

@@ -44,7 +44,7 @@ def load_mission(path: str | Path, source: str | None = None) -> list[MissionIte
     items = [MissionItem(command=w.command, lat=w.x, lon=w.y, alt=w.z, param1=w.param1, param2=w.param2,
                          param3=w.param3, param4=w.param4, frame=w.frame, autocontinue=w.autocontinue)
              for w in (loader.wp(i) for i in range(loader.count()))]
-    _check(items, source)
+    check_items(items, source)
     return items
 
 
@@ -101,7 +101,7 @@ def _check_fields(text: str, source: str) -> None:
         seq += 1
 
 
-def _check(items: list[MissionItem], source: str) -> None:
+def check_items(items: list[MissionItem], source: str) -> None:
     """What MAVLink can carry: a bounded count, finite coordinates on Earth, fields that fit their types."""
     if len(items) > MAX_ITEMS:
         raise WaypointError(f"{source}: {len(items)} items; MAVLink carries at most {MAX_ITEMS}")

@@ -22,6 +22,7 @@ from vehicle.protocol.mission import (
     ALTITUDE_LIMIT,
     DO_CHANGE_SPEED,
     NAV_LAND,
+    NAV_LOITER_TIME,
     NAV_LOITER_UNLIM,
     NAV_RETURN_TO_LAUNCH,
     NAV_TAKEOFF,
@@ -512,7 +513,8 @@ class Autopilot:
                                                 self.body.pose.z >= self.home[2] + item.alt - 0.1):
                 self._advance()
                 continue
-            if item.command not in (NAV_TAKEOFF, NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LAND, NAV_RETURN_TO_LAUNCH):
+            if item.command not in (NAV_TAKEOFF, NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_LAND,
+                                    NAV_RETURN_TO_LAUNCH):
                 self.say(f"Mission: skipping unsupported command {item.command}", mav.MAV_SEVERITY_WARNING)
                 self._advance()
                 continue

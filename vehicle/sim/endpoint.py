@@ -329,10 +329,11 @@ class Endpoint:
         return self.autopilot.set_mode(name, source="gcs", agent_on_board=self.onboard is not None)
 
     def _mission_start(self, first: int) -> int:
-        """AUTO + MISSION_START: start the onboard mission if it waits, resume it if paused, else run AUTO."""
+        """AUTO + MISSION_START: fly the mission a ground station uploaded; else start the onboard mission if it
+        waits, resume it if paused; else run AUTO."""
         if self.autopilot.mode != "AUTO":
             return DENIED
-        if self.onboard is not None and self.onboard.mission_start():
+        if self.onboard is not None and not self.missions.holds_station_mission and self.onboard.mission_start():
             return ACCEPTED
         return self.autopilot.start_mission(first)
 

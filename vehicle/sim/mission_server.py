@@ -5,14 +5,17 @@ the legacy MISSION_REQUEST) n -> MISSION_ITEM_INT n, ended by the GCS's
 MISSION_ACK. Upload: MISSION_COUNT -> we request each item in turn (again if it
 does not come within a second, up to five times) and answer the last with
 MISSION_ACK; the new mission replaces the old one only when complete.
-MISSION_CLEAR_ALL empties it, MISSION_SET_CURRENT picks the next item. Only
+MISSION_CLEAR_ALL empties it, MISSION_SET_CURRENT picks the next item. It
+remembers whether the mission on board is one a ground station uploaded (not
+the vehicle's own companion): MISSION_START then flies it, and does not start
+an onboard agent's mission instead. Only
 the main mission type is kept; fence and rally requests are answered with an
 empty list.
 """
 
 from __future__ import annotations
 
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import COMPANION, mavlink
 from vehicle.protocol.mission import MISSION, MissionItem, item_from, item_message, item_problem
 from vehicle.sim.autopilot import Autopilot
 
@@ -30,6 +33,12 @@ class MissionServer:
         self._asked_at = 0.0
         self._asks = 0
         self.uploads = 0
+        self._from_station: list[MissionItem] | None = None  # the autopilot's mission, if a station uploaded it
+
+    @property
+    def holds_station_mission(self) -> bool:
+        """The autopilot flies a mission a ground station uploaded (replaced by no one since)."""
+        return self._from_station is not None and self.autopilot.mission is self._from_station
 
     def handle(self, message, now: float) -> list:
         kind = message.get_type()
@@ -106,6 +115,7 @@ class MissionServer:
             return self._request_next(now)
         items, self._upload = self._upload, None
         self.autopilot.set_mission(items)
+        self._from_station = self.autopilot.mission if peer[1] != COMPANION else None
         self.uploads += 1
         return [self._ack(peer, mavlink.MAV_MISSION_ACCEPTED, MISSION)]
 
