@@ -14,6 +14,7 @@
 //   operator.js    the fleet list (the selection), the selected vehicle's instruments, the warning banner
 //   map2d.js       the 2D map;  plots.js  the selected vehicle's telemetry against time
 //   view3d.js      this page's own 3D view: camera modes, keys, layers
+//   plan.js        the plan view: a mission clicked on the 2D map, checked, uploaded, imported, exported, flown
 //
 // The contract: every event is a CustomEvent on `window`, its payload in `event.detail`. Each script adds its
 // listeners when it runs and starts talking on DOMContentLoaded, so no script misses another's first word.
@@ -34,6 +35,11 @@
 //   station-token-rejected  common.js (describeResult), a command answered 401: {} -> auth
 //   vehicle-selected operator.js, the operator picked a vehicle: {sysid}; also window.selectedVehicle
 //                    -> map2d, plots, view3d
+//   map2d-click      map2d.js, a click on the 2D map (not a drag, not measuring) while the plan edits: {x, y} (m)
+//                    -> plan
+//   plan-changed     plan.js, the plan to draw: {editing, items: [{action, x, y, alt, ...}], home: [x, y]|null,
+//                    legs: [{blocked}], selected: index|null, current: index|null} -> map2d
+//   plan-move        map2d.js, a plan item dragged on the map: {index, x, y, done} (done when let go) -> plan
 
 export const EVENTS = Object.freeze({
   status: "station-status",
@@ -45,6 +51,9 @@ export const EVENTS = Object.freeze({
   auth: "station-auth",
   tokenRejected: "station-token-rejected",
   selected: "vehicle-selected",
+  mapClick: "map2d-click",
+  plan: "plan-changed",
+  planMove: "plan-move",
 });
 
 /** Send one of EVENTS with its payload. */
@@ -169,6 +178,22 @@ export async function api(method, path, body) {
   }
 }
 
+/** Send text (a mission file) and read the answer as text: {status, text} (status 0: unreachable). */
+export async function apiText(method, path, text, type = "text/plain") {
+  const headers = { "Content-Type": type };
+  if (token) headers.Authorization = `Bearer ${token}`;
+  const abort = new AbortController();
+  const timer = setTimeout(() => abort.abort(), REQUEST_TIMEOUT_MS);
+  try {
+    const res = await fetch(path, { method, headers, signal: abort.signal, body: text });
+    return { status: res.status, text: await res.text() };
+  } catch (err) {
+    return { status: 0, text: err.name === "AbortError" ? "no answer from server" : "server unreachable" };
+  } finally {
+    clearTimeout(timer);
+  }
+}
+
 /** GET a JSON document: its data, or null when the answer is not a success. */
 export async function getJson(path) {
   const { status, data } = await api("GET", path);
@@ -176,7 +201,7 @@ export async function getJson(path) {
 }
 
 /** FastAPI's `detail` is a string or a list of {loc, msg}; make it one readable line. */
-function detailText(data) {
+export function detailText(data) {
   const detail = data && data.detail;
   if (typeof detail === "string") return detail;
   if (Array.isArray(detail)) {

@@ -2,9 +2,11 @@
 // merged), every vehicle in its colour with its heading, trail, waypoints and planned path; a scale bar, a
 // north arrow, the coordinates under the cursor and a distance tool (Measure, then click two points).
 // Drag to pan, wheel to zoom towards the cursor. Scene metres: x east, y north. Pictures come as PNG data
-// URLs from /api/map2d/*; vehicles from the status frames ("station-status", see common.js).
+// URLs from /api/map2d/*; vehicles from the status frames ("station-status", see common.js). While the plan view
+// edits (plan.js), a click is a new waypoint ("map2d-click") and a waypoint dragged moves it ("plan-move"); the
+// plan is drawn with its legs, a leg the scene blocks in red.
 
-import { $, EVENTS, fmt, getJson, isNum, on } from "./common.js";
+import { $, EVENTS, emit, fmt, getJson, isNum, on } from "./common.js";
 
 const POLL_MS = 2000;  // memory maps and trails
 const colourRe = /^#[0-9a-f]{6}$/i;
@@ -21,7 +23,9 @@ let measuring = false;
 let measure = [];      // up to two [x, y]
 let drag = null;
 let cursor = null;
-const map2d = { view, measure, get distance() { return distance(); } };
+let plan = { editing: false, items: [], legs: [], home: null, selected: null, current: null };
+const GRAB_PX = 10;  // a plan item this close to the pointer is dragged, not the map
+const map2d = { view, measure, get distance() { return distance(); }, toScreen: (x, y) => toScreen(x, y) };
 window.map2d = map2d;  // what the map shows, for tests and the page's other scripts
 
 function image(url) {
@@ -263,10 +267,54 @@ function draw() {
     }
     polyline(v.path, "#ffd23f", 2);
   }
+  drawPlan();
   for (const v of vehicles) drawVehicle(v);
   drawMeasure();
   drawScale(w, h);
   drawNorth(w);
+}
+
+const PLAN_LABELS = { takeoff: "T", land: "L", rtl: "R", loiter: "O" };
+
+/** The plan: its legs from home (red where the scene blocks one), each item a numbered disc. */
+function drawPlan() {
+  const items = plan.items.filter((p) => isNum(p.x) && isNum(p.y));
+  if (!items.length) return;
+  let from = plan.home || [items[0].x, items[0].y];
+  plan.items.forEach((p, i) => {
+    const to = p.action === "rtl" && plan.home ? plan.home : [p.x, p.y];
+    const blocked = plan.legs[i] && plan.legs[i].blocked;
+    polyline([from, to], blocked ? "#ff4d4f" : "#39c5ff", blocked ? 4 : 2, blocked ? [] : [6, 3]);
+    from = to;
+  });
+  plan.items.forEach((p, i) => {
+    if (p.action === "rtl") return;
+    const [sx, sy] = toScreen(p.x, p.y);
+    ctx.beginPath();
+    ctx.arc(sx, sy, 8, 0, Math.PI * 2);
+    ctx.fillStyle = i === plan.current ? "#ffd23f" : "#0f6e99";
+    ctx.fill();
+    ctx.lineWidth = i === plan.selected ? 3 : 1.5;
+    ctx.strokeStyle = i === plan.selected ? "#ffffff" : "#bfefff";
+    ctx.stroke();
+    ctx.fillStyle = i === plan.current ? "#0b0e11" : "#ffffff";
+    ctx.font = "bold 10px system-ui, sans-serif";
+    ctx.textAlign = "center";
+    ctx.fillText(PLAN_LABELS[p.action] || String(i + 1), sx, sy + 3.5);
+    ctx.textAlign = "start";
+  });
+}
+
+/** The plan item under the pointer (within GRAB_PX), or null. */
+function planItemAt(px, py) {
+  let best = null, bestDistance = GRAB_PX;
+  plan.items.forEach((p, i) => {
+    if (p.action === "rtl") return;
+    const [sx, sy] = toScreen(p.x, p.y);
+    const d = Math.hypot(sx - px, sy - py);
+    if (d <= bestDistance) { best = i; bestDistance = d; }
+  });
+  return best;
 }
 
 // ---- interaction --------------------------------------------------------------------------
@@ -282,7 +330,8 @@ function showDistance() {
 }
 
 canvas.addEventListener("pointerdown", (event) => {
-  drag = { start: local(event), cx: view.cx, cy: view.cy, moved: false };
+  const item = plan.editing && !measuring ? planItemAt(...local(event)) : null;
+  drag = { start: local(event), cx: view.cx, cy: view.cy, moved: false, item };
   canvas.setPointerCapture(event.pointerId);
 });
 canvas.addEventListener("pointermove", (event) => {
@@ -292,7 +341,9 @@ canvas.addEventListener("pointermove", (event) => {
   if (drag) {
     const dx = px - drag.start[0], dy = py - drag.start[1];
     if (Math.hypot(dx, dy) > 4) drag.moved = true;
-    if (drag.moved) {
+    if (drag.moved && drag.item !== null) {
+      emit(EVENTS.planMove, { index: drag.item, x: cursor[0], y: cursor[1], done: false });
+    } else if (drag.moved) {
       view.cx = drag.cx - dx / view.scale;
       view.cy = drag.cy + dy / view.scale;
       draw();
@@ -301,9 +352,20 @@ canvas.addEventListener("pointermove", (event) => {
 });
 canvas.addEventListener("pointerup", (event) => {
   const wasDrag = drag && drag.moved;
+  const item = drag ? drag.item : null;
   drag = null;
-  if (wasDrag || !measuring) return;
   const [px, py] = local(event);
+  if (wasDrag && item !== null) {
+    const [x, y] = toScene(px, py);
+    emit(EVENTS.planMove, { index: item, x, y, done: true });
+    return;
+  }
+  if (!wasDrag && !measuring && plan.editing && item === null) {
+    const [x, y] = toScene(px, py);
+    emit(EVENTS.mapClick, { x, y });
+    return;
+  }
+  if (wasDrag || !measuring) return;
   if (measure.length >= 2) measure.length = 0;
   measure.push(toScene(px, py));
   showDistance();
@@ -329,6 +391,13 @@ $("#map2d-measure").addEventListener("click", () => {
   draw();
 });
 $("#map2d-fit").addEventListener("click", () => { fit(); draw(); });
+$("#map2d-grow").addEventListener("click", () => {
+  const large = $("#map2d-pane").classList.toggle("large");
+  $("#map2d-grow").setAttribute("aria-pressed", String(large));
+  $("#map2d-grow").title = large ? "Back to the corner of the 3D view" : "Fill the 3D view with the map";
+  fit();
+  draw();
+});
 $("#map2d-layer").addEventListener("change", loadOverlay);
 $("#map2d-toggle").addEventListener("click", () => {
   const pane = $("#map2d-pane");
@@ -339,6 +408,13 @@ $("#map2d-toggle").addEventListener("click", () => {
   if (!collapsed) { poll(); draw(); }
 });
 window.addEventListener("resize", draw);
+on(EVENTS.plan, (detail) => {
+  plan = { editing: Boolean(detail.editing), items: Array.isArray(detail.items) ? detail.items : [],
+           legs: Array.isArray(detail.legs) ? detail.legs : [], home: detail.home || null,
+           selected: detail.selected ?? null, current: detail.current ?? null };
+  canvas.classList.toggle("planning", plan.editing);
+  draw();
+});
 on(EVENTS.selected, () => { loadOverlay(); draw(); });
 on(EVENTS.status, (msg) => {
   const held = mapsHeld().join();

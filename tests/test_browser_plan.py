@@ -1,0 +1,226 @@
+"""The plan view in a real headless Chromium, driven as a person would: waypoints clicked on the 2D map, one
+dragged, an altitude typed, a leg through a building marked before upload, the upload's progress and the
+vehicle's MISSION_ACK, files exported and imported (a hostile one refused with its reason), then Fly (AUTO), and
+the vehicle seen flying the plan: its mode AUTO and its current item past waypoint 2 in /api/vehicles. Once on our
+simulated copter (its onboard agent waiting: AUTO flies the uploaded plan, not the agent's mission), once on
+ArduPilot's ArduCopter SITL (skipped with a reason where ../shared/sitl is absent).
+
+The 3D view's frame gets an empty page (see ``test_browser``): this is about the panel and the 2D map.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import tempfile
+from pathlib import Path
+
+import pytest
+from harness import CHROMIUM, RunningStation, start_sim, wait_wall
+
+from vehicle.agent.settings import Settings
+from vehicle.protocol.waypoints import parse_mission
+
+pytestmark = pytest.mark.browser
+
+if not Path(CHROMIUM).exists():
+    pytest.skip("needs Debian's chromium at /usr/bin/chromium (./scripts/test.sh installs it)", allow_module_level=True)
+
+from playwright.sync_api import expect  # noqa: E402 - once Chromium is known to exist
+
+TOKEN = "plan-view-test-token"
+SPEEDUP = 5.0
+UI_TIMEOUT = 20_000
+SCREENSHOTS = Path(os.environ.get("SCREENSHOTS_DIR") or tempfile.mkdtemp())  # static/ for the README's
+SITL = Path(__file__).resolve().parents[2] / "shared" / "sitl"
+# In the default scene's open middle, round home at the origin: (8, 0), (8, 8), (0, 8) fly free; a leg from
+# (0, 8) to (0, 25) passes through the Warehouse.
+FIRST, SECOND_CLICKED, SECOND, THIRD, THROUGH_WAREHOUSE = (8, 0), (5, 10), (8, 8), (0, 8), (0, 25)
+
+expect.set_options(timeout=UI_TIMEOUT)
+
+
+def open_page(browser, station: RunningStation):
+    context = browser.new_context(viewport={"width": 1500, "height": 950})
+    context.set_default_timeout(UI_TIMEOUT)
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.on("console", lambda m: errors.append(m.text) if "Content Security Policy" in m.text else None)
+    page.route("**/viz/**", lambda route: route.fulfill(body="<!doctype html><title>3D view left out</title>",
+                                                        content_type="text/html"))
+    page.goto(f"{station.base}/#token={TOKEN}")
+    expect(page.locator("#auth-status")).to_have_text("Signed in")
+    return context, page, errors
+
+
+def screen(page, x: float, y: float) -> tuple[float, float]:
+    """Where scene point (x, y) is on the screen, through the 2D map's own projection."""
+    box = page.locator("#map2d").bounding_box()
+    sx, sy = page.evaluate("([x, y]) => window.map2d.toScreen(x, y)", [x, y])
+    return box["x"] + sx, box["y"] + sy
+
+
+def click_map(page, x: float, y: float) -> None:
+    page.mouse.click(*screen(page, x, y))
+
+
+def drag_on_map(page, start: tuple[float, float], end: tuple[float, float]) -> None:
+    page.mouse.move(*screen(page, *start))
+    page.mouse.down()
+    page.mouse.move(*screen(page, *end), steps=8)
+    page.mouse.up()
+
+
+def rows(page):
+    return page.locator("#plan-items tr")
+
+
+def plan_by_clicks(page, sysid: int, picture: Path | None = None) -> None:
+    """Click, drag and type a take-off and three waypoints; see a leg through the Warehouse marked, then deleted."""
+    expect(page.locator("#plan-vehicle")).to_contain_text(f"vehicle {sysid}")
+    page.click("#map2d-grow")
+    expect(page.locator("#map2d-pane")).to_have_class(re.compile(r"\blarge\b"))
+    page.click("#map2d-fit")
+    scale_fitted = page.evaluate("window.map2d.view.scale")
+    page.mouse.move(*screen(page, 4, 8))
+    page.mouse.wheel(0, -700)  # zoom in round the plan (three times)
+    wait_wall(lambda: page.evaluate("window.map2d.view.scale") > 2.5 * scale_fitted, 10, "the map zoomed in")
+    page.click("#plan-edit")
+    expect(page.locator("#plan-edit")).to_have_attribute("aria-pressed", "true")
+    for point in (FIRST, SECOND_CLICKED, THIRD):
+        click_map(page, *point)
+    expect(rows(page)).to_have_count(4)  # the copter's take-off at home came with the first click
+    expect(rows(page).nth(0).locator("select")).to_have_value("takeoff")
+    expect(rows(page).nth(2).locator("select")).to_have_value("waypoint")
+    near = 1.5 / page.evaluate("window.map2d.view.scale") + 0.01  # m: a pixel and a half
+    clicked = page.evaluate("window.plan.items[2]")
+    assert abs(clicked["x"] - SECOND_CLICKED[0]) < near and abs(clicked["y"] - SECOND_CLICKED[1]) < near, clicked
+
+    drag_on_map(page, SECOND_CLICKED, SECOND)  # the second waypoint, dragged to where it should be
+    moved = page.evaluate("window.plan.items[2]")
+    assert abs(moved["x"] - SECOND[0]) < near and abs(moved["y"] - SECOND[1]) < near, moved
+    assert page.evaluate("window.plan.items.length") == 4  # a drag adds nothing
+    page.fill('#plan-items tr:nth-child(3) input[data-field="alt"]', "6")
+    page.press('#plan-items tr:nth-child(3) input[data-field="alt"]', "Enter")
+    page.locator('#plan-items tr:nth-child(3) input[data-field="alt"]').blur()
+    wait_wall(lambda: page.evaluate("window.plan.items[2].alt") == 6, 10, "the altitude typed in")
+
+    # a leg through a building is marked before upload, on the map and in words; deleted, the mark goes
+    click_map(page, *THROUGH_WAREHOUSE)
+    expect(rows(page)).to_have_count(5)
+    expect(page.locator("#plan-blocked")).to_be_visible()
+    expect(page.locator("#plan-blocked")).to_contain_text("Leg to item 5 goes through Warehouse at (0.0, 18.0, 5.0)")
+    expect(rows(page).nth(4).locator("td.leg")).to_have_class(re.compile(r"\bblocked\b"))
+    if picture is not None:
+        page.locator("#plan").scroll_into_view_if_needed()
+        page.screenshot(path=str(picture))
+    rows(page).nth(4).locator(".plan-delete").click()
+    expect(rows(page)).to_have_count(4)
+    expect(page.locator("#plan-blocked")).to_be_hidden()
+    expect(rows(page).nth(3).locator("td.leg")).to_have_text(re.compile(r"^\d+\.\d m$"))
+    expect(page.locator("#plan-summary")).to_contain_text(re.compile(r"4 items · \d+\.\d m · about \d+ s"))
+    page.click("#plan-edit")  # editing off: a click pans and measures again
+
+
+def upload(page, station: RunningStation, sysid: int) -> list:
+    page.click("#plan-upload")
+    expect(page.locator("#plan-ack")).to_have_text(
+        re.compile(rf"^Upload to vehicle {sysid}: accepted \(MISSION_ACK, 5 items with home\) · "), timeout=60_000)
+    assert page.evaluate("[document.querySelector('#plan-progress').value, "
+                         "document.querySelector('#plan-progress').max]") == [5, 5]
+    on_board = parse_mission(station.http.get(f"/api/vehicles/{sysid}/mission").text)
+    assert len(on_board) == 5 and [round(i.alt, 3) for i in on_board[1:]] == [5, 5, 6, 5]
+    return on_board
+
+
+def fly_and_watch(page, station: RunningStation, sysid: int, speedup: float, tries: int = 1) -> dict:
+    """Fly (AUTO), and see the vehicle in AUTO reach waypoint 2 (mission item 3: home 0, take-off 1)."""
+    ack = page.locator("#plan-ack")
+    for attempt in range(tries):
+        page.click("#plan-fly")
+        expect(ack).not_to_contain_text("sending")
+        if re.match(rf"^Fly \(AUTO\) vehicle {sysid}: accepted · ", ack.inner_text()) or attempt == tries - 1:
+            break
+        station.http.wait_sim_time(sysid, 10, speedup)  # ArduPilot arms once its position estimate settles
+    expect(ack).to_have_text(re.compile(rf"^Fly \(AUTO\) vehicle {sysid}: accepted · "))
+    station.http.wait_vehicle(sysid, lambda v: v["mode"] == "AUTO" and (v["mission"]["current"] or 0) >= 2, 60,
+                              speedup, "AUTO, flying the plan")
+    expect(page.locator("#plan-items tr.current")).to_have_count(1)
+    return station.http.wait_vehicle(
+        sysid, lambda v: v["mode"] == "AUTO" and (v["mission"]["reached"] or 0) >= 3, 180, speedup,
+        "waypoint 2 (mission item 3) reached")
+
+
+def round_trip_files(page, tmp: Path) -> None:
+    """Export WPL and .plan, import each back (the same plan), and a hostile file refused with its reason."""
+    before = page.evaluate("window.plan.items")
+    for button, name in (("#plan-export-wpl", "mission.waypoints"), ("#plan-export-plan", "mission.plan")):
+        with page.expect_download() as download:
+            page.click(button)
+        path = tmp / name
+        download.value.save_as(path)
+        assert download.value.suggested_filename == name
+        if name.endswith(".plan"):
+            assert json.loads(path.read_text())["fileType"] == "Plan"
+        page.click("#plan-clear")
+        expect(rows(page)).to_have_count(0)
+        page.set_input_files("#plan-file", str(path))
+        expect(page.locator("#plan-ack")).to_have_text(re.compile(rf"^Import {re.escape(name)}: 4 items · "))
+        after = page.evaluate("window.plan.items")
+        for a, b in zip(before, after, strict=True):
+            assert a["action"] == b["action"] and abs(a["x"] - b["x"]) < 0.01 and abs(a["y"] - b["y"]) < 0.01
+            assert abs(a["alt"] - b["alt"]) < 0.01
+    hostile = tmp / "hostile.plan"
+    hostile.write_text(json.dumps({"fileType": "Plan", "mission": {"plannedHomePosition": [-35.36, 149.16, 584],
+                                                                   "items": [{"type": "ComplexItem",
+                                                                              "complexItemType": "survey"}]}}))
+    page.set_input_files("#plan-file", str(hostile))
+    expect(page.locator("#plan-ack")).to_have_text(re.compile(
+        r"^Import hostile\.plan: the \.plan file: item 1 is a survey pattern; turn it into waypoints"))
+    assert len(page.evaluate("window.plan.items")) == 4  # nothing lost
+
+
+def test_plan_on_the_map_upload_and_fly_auto_on_our_copter(browser, scene, station, tmp_path):
+    sysid = 1
+    copter = start_sim(station, scene, sysid, "copter", "browse", False, None, Settings(), SPEEDUP).start()
+    context = None
+    try:
+        station.http.wait_vehicle(sysid, lambda v: v["position"] is not None and v["home"] is not None, 30, SPEEDUP,
+                                  "position and home heard")
+        context, page, errors = open_page(browser, station)
+        plan_by_clicks(page, sysid, SCREENSHOTS / "operator-plan.png")
+        round_trip_files(page, tmp_path)
+        upload(page, station, sysid)
+        flown = fly_and_watch(page, station, sysid, SPEEDUP)
+        assert flown["agent"]["state"] != "RUNNING"  # the agent's own mission never started: AUTO flew the plan
+        page.screenshot(path=str(SCREENSHOTS / "operator-auto.png"))
+        assert not errors, f"JavaScript errors or policy violations on the page: {errors}"
+    finally:
+        if context is not None:
+            context.close()
+        copter.stop()
+
+
+@pytest.mark.skipif(not (SITL / "arducopter").exists(),
+                    reason="needs ArduPilot SITL in ../shared/sitl (absent in a bare clone)")
+def test_plan_on_the_map_upload_and_fly_auto_on_ardupilot_sitl(browser, scene, tmp_path):
+    from test_sitl import SPEEDUP as SITL_SPEEDUP
+    from test_sitl import sitl
+
+    sysid = 1
+    with sitl("copter", 6, tmp_path) as (first, _), \
+            RunningStation(scene, tmp_path / "recordings", TOKEN, urls=[f"tcp:127.0.0.1:{first}"]) as station:
+        station.http.wait_vehicle(sysid, lambda v: v["position"] is not None and v["home"] is not None, 120,
+                                  SITL_SPEEDUP, "ArduCopter's position and home")
+        context, page, errors = open_page(browser, station)
+        try:
+            plan_by_clicks(page, sysid)
+            upload(page, station, sysid)
+            station.http.wait_vehicle(sysid, lambda v: v["time_boot_s"] > 50, 120, SITL_SPEEDUP,
+                                      "ArduCopter's position estimate settles")
+            fly_and_watch(page, station, sysid, SITL_SPEEDUP, tries=6)
+            assert not errors, f"JavaScript errors or policy violations on the page: {errors}"
+        finally:
+            context.close()
