@@ -1,12 +1,13 @@
-// The plan view: a mission for the selected vehicle. With "Edit on map" pressed, a click on the 2D map adds a
-// waypoint (a copter's first click adds its take-off at home first) and a waypoint dragged there moves it
-// ("map2d-click", "plan-move" from map2d.js); each item's action, altitude, speed and hold are set in the
-// table. The station checks every leg against the scene (POST /api/plan/check: a leg through a building is
-// red on the map and named here), reads and writes the files (QGC WPL 110 and QGroundControl .plan, so a
-// hostile file meets the same checks as an upload), and uploads through the MAVLink mission protocol (PUT
-// /api/vehicles/{id}/mission, its items counted by .../mission/progress, the vehicle's MISSION_ACK shown).
-// "Fly (AUTO)" arms if needed, sets AUTO and starts the uploaded mission (the station's "auto" action); the
-// item being flown is marked, from the vehicle's MISSION_CURRENT in the status frames.
+// The plan view: a mission for the selected vehicle. With "Edit on map" pressed, a click on the 2D map (or on
+// the ground in the 3D view, "station-target") adds a waypoint (a copter's first click adds its take-off at
+// home first) and a waypoint dragged there moves it ("map2d-click", "plan-move" from map2d.js); each item's
+// action, altitude, speed and hold are set in the table. The station checks every leg against the scene
+// (POST /api/plan/check: a leg through a building is red on the map and named here), reads and writes the
+// files (QGC WPL 110 and QGroundControl .plan, so a hostile file meets the same checks as an upload), and
+// uploads through the MAVLink mission protocol (PUT /api/vehicles/{id}/mission, its items counted by
+// .../mission/progress, the vehicle's MISSION_ACK shown). "Fly (AUTO)" arms if needed, sets AUTO and starts
+// the uploaded mission (the station's "auto" action); the item being flown is marked, from the vehicle's
+// MISSION_CURRENT in the status frames.
 
 import {
   $, EVENTS, api, apiText, commandBlocker, detailText, el, emit, fmt, getJson, isNum, on, postWithAck, setEnabled,
@@ -203,8 +204,9 @@ function newItem(action, x, y) {
   return { action, x, y, alt: isNum(alt) && alt >= 0 ? alt : 5, speed: null, hold: 0 };
 }
 
-on(EVENTS.mapClick, ({ x, y }) => {
-  if (!editing) return;
+/** A click on the 2D map, or on the ground in the 3D view, while editing: a waypoint there. */
+function addWaypoint({ x, y }) {
+  if (!editing || !isNum(x) || !isNum(y)) return;
   const v = vehicle();
   if (!items.length && (!v || v.type === "copter")) {
     const [hx, hy] = home();
@@ -213,7 +215,9 @@ on(EVENTS.mapClick, ({ x, y }) => {
   items.push(newItem("waypoint", x, y));
   selected = items.length - 1;
   changed();
-});
+}
+on(EVENTS.mapClick, addWaypoint);
+on(EVENTS.target, addWaypoint);
 
 on(EVENTS.planMove, ({ index, x, y, done }) => {
   const p = items[index];
