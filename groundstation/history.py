@@ -6,12 +6,22 @@ messages, the onboard agent's phases, near misses between two vehicles). The Fle
 messages, live and in replay alike, so a field means the same in both: a
 sample is the vehicle's state as the Fleet knew it at that moment. Series are
 numpy ring buffers (an hour at two samples a second is half a megabyte per
-vehicle), events a bounded deque. Nothing stored is ever NaN on the way out:
-a value that is missing or not finite is sent as null.
+vehicle). Events that matter (the operator's commands and their answers, mode
+changes, arming, failsafes, warnings and errors, the agent's state, crashes,
+near misses) are kept for the whole flight (up to KEPT_EVENTS); routine ones
+(the onboard agent's own commands acknowledged, information messages) go to a
+bounded deque, and an acknowledgement of the agent's own command is only
+counted: an agent flying a search sent 961 of the last 1,000 events as
+"DO_REPOSITION: accepted", and the operator's commands were pushed out. Each
+event names its source (autopilot, agent, operator, station) and has a
+severity (MAVLink's, 0 emergency .. 7 debug), by which the page filters.
+Nothing stored is ever NaN on the way out: a value that is missing or not
+finite is sent as null.
 """
 
 from __future__ import annotations
 
+import heapq
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -20,7 +30,10 @@ import numpy as np
 
 SAMPLE_EVERY = 0.5  # s of the fleet's clock between samples of a vehicle
 SAMPLES_KEPT = 7200  # an hour at SAMPLE_EVERY
-EVENTS_KEPT = 1000
+EVENTS_KEPT = 1000  # routine events (the newest)
+KEPT_EVENTS = 20000  # events that matter: a flight's worth (a safety bound, not a window)
+SOURCES = ("autopilot", "agent", "operator", "station")
+MATTERS_AT = 4  # MAV_SEVERITY_WARNING: this or worse always matters
 MAX_SONARS = 12  # sonar columns per vehicle; more sensors are not plotted
 
 # (name, unit): the fields every vehicle has; each sonar adds "sonar ID" (m)
@@ -34,12 +47,14 @@ UNITS = dict(FIELDS)
 @dataclass
 class Event:
     time: float
-    kind: str  # mode, armed, command, ack, message, agent, near miss
+    kind: str  # mode, armed, command, ack, message, agent, near miss, crash
     text: str
-    severity: int | None = None  # MAVLink severity of a message (0 emergency .. 7 debug)
+    severity: int | None = None  # MAVLink severity (0 emergency .. 7 debug)
+    source: str = "autopilot"  # autopilot, agent, operator or station
 
     def as_json(self) -> dict:
-        return {"t": round(self.time, 3), "kind": self.kind, "text": self.text, "severity": self.severity}
+        return {"t": round(self.time, 3), "kind": self.kind, "text": self.text, "severity": self.severity,
+                "source": self.source}
 
 
 @dataclass
@@ -50,7 +65,9 @@ class VehicleHistory:
     columns: dict[str, int] = field(default_factory=lambda: {name: i for i, name in enumerate(BASE)})
     count: int = 0  # samples ever taken (the ring holds the last ``capacity``)
     last: float = -math.inf
-    events: deque = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))
+    events: deque = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))  # routine, the newest
+    kept: deque = field(default_factory=lambda: deque(maxlen=KEPT_EVENTS))  # what matters, the whole flight
+    counted: dict = field(default_factory=dict)  # (source, text) -> [times, last time]: routine, not listed
 
     def __post_init__(self) -> None:
         self.times = np.zeros(self.capacity)
@@ -98,10 +115,25 @@ class VehicleHistory:
             if np.isnan(column).all():
                 continue
             series[name] = [None if math.isnan(v) else round(float(v), 3) for v in column]
-        events = [e.as_json() for e in self.events if since is None or e.time > since]
+        events = [e.as_json() for e in heapq.merge(self.kept, self.events, key=lambda e: e.time)
+                  if since is None or e.time > since]
+        counted = [{"source": source, "text": text, "count": count, "last": round(last, 3)}
+                   for (source, text), (count, last) in self.counted.items()]
         return {"t": [round(float(t), 3) for t in times], "series": series,
                 "units": {name: UNITS.get(name, "m" if name.startswith("sonar") else "") for name in series},
-                "events": events}
+                "events": events, "counted": counted}
+
+    def add_event(self, event: Event, routine: bool) -> None:
+        """``routine``: may be dropped for newer ones, unless its severity is a warning or worse."""
+        if routine and (event.severity is None or event.severity > MATTERS_AT):
+            self.events.append(event)
+        else:
+            self.kept.append(event)
+
+    def count_event(self, time: float, source: str, text: str) -> None:
+        entry = self.counted.setdefault((source, text), [0, time])
+        entry[0] += 1
+        entry[1] = time
 
 
 class History:
@@ -126,8 +158,13 @@ class History:
     def sample(self, sysid: int, now: float, values: dict[str, float | None]) -> None:
         self.of(sysid).add(now, values)
 
-    def event(self, sysid: int, now: float, kind: str, text: str, severity: int | None = None) -> None:
-        self.of(sysid).events.append(Event(now, kind, text[:300], severity))
+    def event(self, sysid: int, now: float, kind: str, text: str, severity: int | None = None,
+              source: str = "autopilot", routine: bool = False) -> None:
+        self.of(sysid).add_event(Event(now, kind, text[:300], severity, source), routine)
+
+    def count(self, sysid: int, now: float, source: str, text: str) -> None:
+        """A routine event counted, not listed (an acknowledgement of the onboard agent's own command)."""
+        self.of(sysid).count_event(now, source, text)
 
     def clear(self) -> None:
         self.vehicles.clear()
@@ -173,7 +210,7 @@ class NearMisses:
                         f"{self.margin:g} m separation margin")
                 for each in pair:
                     self.counts[each] = self.counts.get(each, 0) + 1
-                    history.event(each, now, "near miss", text, 4)  # MAV_SEVERITY_WARNING
+                    history.event(each, now, "near miss", text, 4, "station")  # MAV_SEVERITY_WARNING
 
     def clear(self) -> None:
         self.close.clear()

@@ -64,6 +64,8 @@ COLOURS = [(64, 156, 255), (255, 140, 40), (80, 210, 110), (230, 90, 220), (70, 
 QUIET_COMMANDS = {mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE}
 SEVERE = mavlink.MAV_SEVERITY_WARNING  # this severity or worse is shown as a banner on the page
 OWN_SYSID = 255  # this station's system id (the link's)
+FALL_FROM = 1.0  # m above home: a copter disarmed higher falls (a kill's fall is a crash)
+LANDED_BELOW = 0.3  # m above home: a falling copter is down
 ORDERED_WITHIN = 5.0  # s after this station's order (or the companion's) a mode change is taken as its doing
 # (a mode other than the one it named is not)
 MAX_STATIONS = 16  # other ground stations remembered
@@ -166,6 +168,8 @@ class VehicleState:
     ordered: tuple[float, int | None] = (-math.inf, None)  # when this station or the companion last ordered a
     # mode change, and the mode (custom_mode) if the order named one
     version: int = 0  # bumps on every change, for views that redraw
+    falling: tuple[float, float, float] | None = None  # a fall after a disarm in the air: from (m), since, fastest
+    crash: tuple[float, str] | None = None  # the last crash or fall: when (receiver clock), what
 
     @property
     def kind(self) -> str:
@@ -348,9 +352,17 @@ class Fleet:
 
     def _command_ack(self, vehicle, m, now) -> None:
         result = RESULT_WORDS.get(m.result, f"result {m.result}")
-        if m.command not in QUIET_COMMANDS:
-            self.history.event(vehicle.sysid, now, "ack", f"{_command_name(m.command)}: {result}")
         target = getattr(m, "target_system", 0)
+        text = f"{_command_name(m.command)}: {result}"
+        source = "agent" if m.get_srcComponent() == COMPANION else "autopilot"
+        if m.command in QUIET_COMMANDS:
+            pass
+        elif target == vehicle.sysid and m.result == mavlink.MAV_RESULT_ACCEPTED:  # the agent's routine order
+            self.history.count(vehicle.sysid, now, "agent", text)
+        else:
+            refused = m.result != mavlink.MAV_RESULT_ACCEPTED
+            self.history.event(vehicle.sysid, now, "ack", text, 4 if refused else 6,
+                               "agent" if target == vehicle.sysid else source)
         if target == vehicle.sysid:  # the companion's order
             vehicle.ordered = (now, None)
         elif target not in (0, self.own_sysid):
@@ -389,12 +401,15 @@ class Fleet:
         armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         mode = heartbeat_mode(m)
         if vehicle.last_heartbeat is None:
-            self.history.event(vehicle.sysid, now, "mode", f"first heard: {mode}{', armed' if armed else ''}")
+            self.history.event(vehicle.sysid, now, "mode", f"first heard: {mode}{', armed' if armed else ''}", 6)
         else:
             if mode != vehicle.mode:
-                self.history.event(vehicle.sysid, now, "mode", f"mode {vehicle.mode} → {mode}")
+                self.history.event(vehicle.sysid, now, "mode", f"mode {vehicle.mode} → {mode}", 5)
             if armed != vehicle.armed:
-                self.history.event(vehicle.sysid, now, "armed", "armed" if armed else "disarmed")
+                self.history.event(vehicle.sysid, now, "armed", "armed" if armed else "disarmed", 5)
+            if vehicle.armed and not armed and vehicle.kind == "copter" and (vehicle.alt or 0.0) > FALL_FROM:
+                vehicle.falling = (vehicle.alt, now, 0.0)
+                self._crash(vehicle, now, f"disarmed in the air at {vehicle.alt:.1f} m above home: falling")
         vehicle.armed = armed
         vehicle.mode = mode
         if changed:
@@ -418,6 +433,7 @@ class Fleet:
         vehicle.x, vehicle.y = datum.to_local(lat, lon)
         vehicle.speed = math.hypot(m.vx, m.vy) / 100.0
         vehicle.climb = -m.vz / 100.0
+        self._fall(vehicle, now)
         if m.hdg != 65535:
             vehicle.yaw = math.radians(m.hdg / 100.0)
         if vehicle.home is None:  # until HOME_POSITION comes, the first fix is home
@@ -435,6 +451,22 @@ class Fleet:
             vehicle.speed = math.hypot(m.vx, m.vy)
             vehicle.climb = -m.vz
         self._extend_trail(vehicle)
+
+    def _fall(self, vehicle, now: float) -> None:
+        """A copter that fell after a disarm in the air: its impact, once it is down, is an event too."""
+        if vehicle.falling is None:
+            return
+        start, when, fastest = vehicle.falling
+        fastest = max(fastest, -vehicle.climb)
+        vehicle.falling = (start, when, fastest)
+        if vehicle.alt <= LANDED_BELOW:
+            vehicle.falling = None
+            self._crash(vehicle, now, f"crashed: fell {start - vehicle.alt:.1f} m in {now - when:.1f} s, "
+                                      f"hitting the ground at {fastest:.1f} m/s")
+
+    def _crash(self, vehicle, now: float, text: str) -> None:
+        vehicle.crash = (now, text)
+        self.history.event(vehicle.sysid, now, "crash", text, mavlink.MAV_SEVERITY_CRITICAL, "station")
 
     def _extend_trail(self, vehicle) -> None:
         point = (vehicle.x, vehicle.y, self.height(vehicle))
@@ -474,7 +506,10 @@ class Fleet:
         for severity, text in self.texts.feed(m, now):  # whole texts, put together from their chunks
             vehicle.status = text
             vehicle.messages.append({"time": now, "severity": severity, "text": text})
-            self.history.event(vehicle.sysid, now, "message", text, severity)
+            source = "agent" if m.get_srcComponent() == COMPANION else "autopilot"
+            self.history.event(vehicle.sysid, now, "message", text, severity, source, routine=True)
+            if "crash" in text.lower() and severity <= mavlink.MAV_SEVERITY_CRITICAL:  # ArduPilot's "Crash: Disarming"
+                vehicle.crash = (now, text)
 
     def _command_sent(self, m, now: float) -> None:
         """A command from a ground station to a vehicle we know: an event on the vehicle's timeline (a retry,
@@ -482,7 +517,7 @@ class Fleet:
         vehicle = self.vehicles.get(m.target_system)
         if vehicle is None or m.command in QUIET_COMMANDS or getattr(m, "confirmation", 0):
             return
-        self.history.event(vehicle.sysid, now, "command", f"sent {_command_text(vehicle, m)}")
+        self.history.event(vehicle.sysid, now, "command", f"sent {_command_text(vehicle, m)}", 5, "operator")
 
     def _mission_current(self, vehicle, m, now) -> None:
         vehicle.mission_current = m.seq
@@ -497,7 +532,8 @@ class Fleet:
         if m.payload_type == agent_status.AGENT_STATUS:
             status = agent_status.decode(payload)
             if status is not None and status != vehicle.agent:
-                self.history.event(vehicle.sysid, now, "agent", _agent_text(status))
+                worry = status.paused or status.outcome == "stopped"
+                self.history.event(vehicle.sysid, now, "agent", _agent_text(status), 4 if worry else 6, "agent")
             vehicle.agent = status or vehicle.agent
         else:
             vehicle.map_stream.feed(m.payload_type, payload)
@@ -559,6 +595,7 @@ class Fleet:
             "sonar": [{"id": ident, "distance": _round(s.distance), "max_range": _round(s.max_range),
                        "bearing": _round(s.yaw_offset % 360, 1), "beam": _round(s.beam, 1),
                        "age": _round(max(0.0, now - s.time))} for ident, s in sorted(v.sonar.items())],
+            "crash": None if v.crash is None else {"text": v.crash[1], "age": _round(now - v.crash[0], 1)},
             "other_gcs": None if v.other_gcs is None else {"sysid": v.other_gcs[0], "last": v.other_gcs[1],
                                                            "age": _round(now - v.other_gcs[2], 1)},
         }

@@ -8,7 +8,7 @@ import math
 
 from groundstation.history import EVENTS_KEPT, History
 from groundstation.state import Fleet
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import COMPANION, mavlink
 
 
 def test_samples_are_bounded_thinned_and_never_nan():
@@ -32,9 +32,12 @@ def test_samples_are_bounded_thinned_and_never_nan():
 def test_events_are_bounded_and_cut():
     history = History()
     for i in range(EVENTS_KEPT + 10):
-        history.event(1, float(i), "message", "x" * 1000, 4)
+        history.event(1, float(i), "message", "x" * 1000, 6, routine=True)
     events = history.of(1).as_json()["events"]
     assert len(events) == EVENTS_KEPT and events[0]["t"] == 10.0 and len(events[0]["text"]) == 300
+    for i in range(3):  # a warning is kept however routine its kind
+        history.event(1, 2000.0 + i, "message", "warning", 4, routine=True)
+    assert len(history.of(1).as_json()["events"]) == EVENTS_KEPT + 3
 
 
 def message(cls, *args, src=1, comp=1):
@@ -66,3 +69,46 @@ def test_the_fleet_marks_modes_arming_commands_and_acks():
                       (102.0, "command", "sent DO_SET_MODE RTL"), (102.1, "ack", "DO_SET_MODE: accepted"),
                       (103.0, "mode", "mode GUIDED → RTL")]
     assert fleet.vehicles[1].other_gcs is None  # our own order, not another station's
+
+
+def test_routine_acks_are_counted_and_what_matters_outlives_a_flood():
+    """An agent's search acknowledged 961 of the last 1,000 events as "DO_REPOSITION: accepted" and pushed the
+    operator's commands out: now they are counted, and commands, modes and warnings stay for the flight."""
+    fleet = Fleet()
+    fleet.apply(heartbeat(4, True), 100.0)
+    command = message(mavlink.MAVLink_command_long_message, 1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0,
+                      mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6, 0, 0, 0, 0, 0, src=255, comp=190)
+    fleet.apply(command, 101.0)
+    for i in range(3000):  # the autopilot answers the agent (system 1, component 191)
+        fleet.apply(message(mavlink.MAVLink_command_ack_message, mavlink.MAV_CMD_DO_REPOSITION, 0, 0, 0, 1,
+                            COMPANION), 102.0 + i * 0.01)
+    for i in range(EVENTS_KEPT + 5):  # chatter, then one warning among it
+        fleet.apply(message(mavlink.MAVLink_statustext_message, 6, f"info {i}".encode()), 140.0 + i * 0.01)
+    fleet.apply(message(mavlink.MAVLink_statustext_message, 4, b"Battery low", comp=COMPANION), 200.0)
+    answer = fleet.history.of(1).as_json()
+    texts = [(e["source"], e["text"]) for e in answer["events"]]
+    assert ("operator", "sent DO_SET_MODE RTL") in texts and ("autopilot", "first heard: GUIDED, armed") in texts
+    assert ("agent", "Battery low") in texts
+    assert not any("DO_REPOSITION" in text for _, text in texts)
+    assert answer["counted"] == [{"source": "agent", "text": "DO_REPOSITION: accepted", "count": 3000,
+                                  "last": 131.99}]
+    assert len([t for s, t in texts if t.startswith("info")]) == EVENTS_KEPT  # routine ones stay bounded
+    assert [e["t"] for e in answer["events"]] == sorted(e["t"] for e in answer["events"])
+
+
+def test_a_fall_after_a_kill_in_the_air_is_a_crash():
+    fleet = Fleet()
+    fleet.apply(heartbeat(4, True), 100.0)
+
+    def position(alt: float, vz: float, t: float):
+        fleet.apply(message(mavlink.MAVLink_global_position_int_message, 0, -353632620, 1491652370, 0,
+                            int(alt * 1000), 0, 0, int(vz * 100), 0), t)
+
+    position(4.0, 0.0, 100.5)
+    fleet.apply(heartbeat(4, False), 101.0)  # killed at 4 m
+    for i, alt in enumerate((3.5, 2.0, 0.1)):
+        position(alt, 3.0 + 3 * i, 101.2 + 0.2 * i)
+    crashes = [(e["text"], e["severity"]) for e in fleet.history.of(1).as_json()["events"] if e["kind"] == "crash"]
+    assert crashes == [("disarmed in the air at 4.0 m above home: falling", 2),
+                       ("crashed: fell 3.9 m in 0.6 s, hitting the ground at 9.0 m/s", 2)]
+    assert fleet.describe(fleet.vehicles[1], 102.0)["crash"]["text"].startswith("crashed: fell 3.9 m")
