@@ -408,3 +408,26 @@ def take_off(api: Api, sysid: int, altitude: float = 4.0, hover: bool = True) ->
 # ---- the browser -------------------------------------------------------------------------------------------
 def launch_chromium(playwright):
     return playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+
+
+@contextlib.contextmanager
+def operator_page(browser, base: str, token: str, width: int = 1400, height: int = 900, timeout_ms: int = 20_000):
+    """The page signed in with ``token``, its 3D view's frame an empty page (the panel and the 2D map are what
+    such a test is about); fails on the way out if the page had JavaScript errors or policy violations."""
+    from playwright.sync_api import expect
+
+    context = browser.new_context(viewport={"width": width, "height": height})
+    context.set_default_timeout(timeout_ms)
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.on("console", lambda m: errors.append(m.text) if "Content Security Policy" in m.text else None)
+    page.route("**/viz/**", lambda route: route.fulfill(body="<!doctype html><title>3D view left out</title>",
+                                                        content_type="text/html"))
+    try:
+        page.goto(f"{base}/#token={token}")
+        expect(page.locator("#auth-status")).to_have_text("Signed in", timeout=timeout_ms)
+        yield page
+    finally:
+        context.close()
+    assert not errors, f"JavaScript errors or policy violations on the page: {errors}"

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from harness import CHROMIUM, RunningStation, start_sim, wait_wall
+from harness import CHROMIUM, RunningStation, operator_page, start_sim, wait_wall
 from PIL import Image
 
 from vehicle.agent.settings import Settings
@@ -57,19 +57,8 @@ def copters(scene, station):
 
 @pytest.fixture
 def page(browser, station, copters):
-    context = browser.new_context(viewport={"width": 1400, "height": 900})
-    context.set_default_timeout(UI_TIMEOUT)
-    found = context.new_page()
-    errors: list[str] = []
-    found.on("pageerror", lambda error: errors.append(str(error)))
-    found.on("console", lambda m: errors.append(m.text) if "Content Security Policy" in m.text else None)
-    found.route("**/viz/**", lambda route: route.fulfill(body="<!doctype html><title>3D view left out</title>",
-                                                         content_type="text/html"))
-    found.goto(f"{station.base}/#token={TOKEN}")
-    expect(found.locator("#auth-status")).to_have_text("Signed in")
-    yield found
-    context.close()
-    assert not errors, f"JavaScript errors or policy violations on the page: {errors}"
+    with operator_page(browser, station.base, TOKEN, timeout_ms=UI_TIMEOUT) as found:
+        yield found
 
 
 def wait_sim(station: RunningStation, sysid: int, condition, sim_timeout: float, what: str) -> dict:

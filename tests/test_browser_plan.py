@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 import pytest
-from harness import CHROMIUM, RunningStation, start_sim, wait_wall
+from harness import CHROMIUM, RunningStation, operator_page, start_sim, wait_wall
 
 from vehicle.agent.settings import Settings
 from vehicle.protocol.waypoints import parse_mission
@@ -39,20 +39,6 @@ SITL = Path(__file__).resolve().parents[2] / "shared" / "sitl"
 FIRST, SECOND_CLICKED, SECOND, THIRD, THROUGH_WAREHOUSE = (8, 0), (5, 10), (8, 8), (0, 8), (0, 25)
 
 expect.set_options(timeout=UI_TIMEOUT)
-
-
-def open_page(browser, station: RunningStation):
-    context = browser.new_context(viewport={"width": 1500, "height": 950})
-    context.set_default_timeout(UI_TIMEOUT)
-    page = context.new_page()
-    errors: list[str] = []
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    page.on("console", lambda m: errors.append(m.text) if "Content Security Policy" in m.text else None)
-    page.route("**/viz/**", lambda route: route.fulfill(body="<!doctype html><title>3D view left out</title>",
-                                                        content_type="text/html"))
-    page.goto(f"{station.base}/#token={TOKEN}")
-    expect(page.locator("#auth-status")).to_have_text("Signed in")
-    return context, page, errors
 
 
 def screen(page, x: float, y: float) -> tuple[float, float]:
@@ -185,21 +171,17 @@ def round_trip_files(page, tmp: Path) -> None:
 def test_plan_on_the_map_upload_and_fly_auto_on_our_copter(browser, scene, station, tmp_path):
     sysid = 1
     copter = start_sim(station, scene, sysid, "copter", "browse", False, None, Settings(), SPEEDUP).start()
-    context = None
     try:
         station.http.wait_vehicle(sysid, lambda v: v["position"] is not None and v["home"] is not None, 30, SPEEDUP,
                                   "position and home heard")
-        context, page, errors = open_page(browser, station)
-        plan_by_clicks(page, sysid, SCREENSHOTS / "operator-plan.png")
-        round_trip_files(page, tmp_path)
-        upload(page, station, sysid)
-        flown = fly_and_watch(page, station, sysid, SPEEDUP)
-        assert flown["agent"]["state"] != "RUNNING"  # the agent's own mission never started: AUTO flew the plan
-        page.screenshot(path=str(SCREENSHOTS / "operator-auto.png"))
-        assert not errors, f"JavaScript errors or policy violations on the page: {errors}"
+        with operator_page(browser, station.base, TOKEN, 1500, 950, UI_TIMEOUT) as page:
+            plan_by_clicks(page, sysid, SCREENSHOTS / "operator-plan.png")
+            round_trip_files(page, tmp_path)
+            upload(page, station, sysid)
+            flown = fly_and_watch(page, station, sysid, SPEEDUP)
+            assert flown["agent"]["state"] != "RUNNING"  # the agent's own mission never started: AUTO flew the plan
+            page.screenshot(path=str(SCREENSHOTS / "operator-auto.png"))
     finally:
-        if context is not None:
-            context.close()
         copter.stop()
 
 
@@ -214,13 +196,9 @@ def test_plan_on_the_map_upload_and_fly_auto_on_ardupilot_sitl(browser, scene, t
             RunningStation(scene, tmp_path / "recordings", TOKEN, urls=[f"tcp:127.0.0.1:{first}"]) as station:
         station.http.wait_vehicle(sysid, lambda v: v["position"] is not None and v["home"] is not None, 120,
                                   SITL_SPEEDUP, "ArduCopter's position and home")
-        context, page, errors = open_page(browser, station)
-        try:
+        with operator_page(browser, station.base, TOKEN, 1500, 950, UI_TIMEOUT) as page:
             plan_by_clicks(page, sysid)
             upload(page, station, sysid)
             station.http.wait_vehicle(sysid, lambda v: v["time_boot_s"] > 50, 120, SITL_SPEEDUP,
                                       "ArduCopter's position estimate settles")
             fly_and_watch(page, station, sysid, SITL_SPEEDUP, tries=6)
-            assert not errors, f"JavaScript errors or policy violations on the page: {errors}"
-        finally:
-            context.close()
