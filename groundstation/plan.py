@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, Field
@@ -45,10 +45,13 @@ class PlanError(ValueError):
     """A plan or a plan file that cannot be flown here, and why."""
 
 
+Metres = Annotated[float, Field(allow_inf_nan=False, ge=-1e6, le=1e6)]
+
+
 class PlanItem(BaseModel):
     action: Action
-    x: float = Field(allow_inf_nan=False, ge=-1e6, le=1e6)
-    y: float = Field(allow_inf_nan=False, ge=-1e6, le=1e6)
+    x: Metres
+    y: Metres
     alt: float = Field(0.0, allow_inf_nan=False, ge=-MAX_ALTITUDE, le=MAX_ALTITUDE, description="m above home")
     speed: float | None = Field(None, allow_inf_nan=False, gt=0, le=100, description="m/s from this item on")
     hold: float = Field(0.0, allow_inf_nan=False, ge=0, le=86400, description="s (a loiter's time, a waypoint's "
@@ -57,7 +60,7 @@ class PlanItem(BaseModel):
 
 class Plan(BaseModel):
     items: list[PlanItem] = Field(max_length=MAX_PLAN_ITEMS)
-    home: tuple[float, float] | None = Field(None, description="scene x, y of home (default: the scene's origin)")
+    home: tuple[Metres, Metres] | None = Field(None, description="scene x, y of home (default: the scene's origin)")
 
 
 # ---- plan <-> mission items ------------------------------------------------------------------------------

@@ -152,7 +152,10 @@ def test_the_api_checks_imports_and_exports(wall_scene, tmp_path):
         refused = http.post("/api/plan/import", content=b"{\"fileType\": \"Plan\", \"mission\": []}",
                             headers=http.operator)
         assert refused.status_code == 422 and "no mission with a list of items" in refused.json()["detail"]
-        for bad in ({"items": [{"action": "fly", "x": 0, "y": 0}]}, {"items": [{"action": "waypoint", "x": 1e9,
-                                                                                 "y": 0}]}):
-            assert http.post("/api/plan/check", json=bad, headers=http.operator).status_code == 422
+        for bad in ('{"items": [{"action": "fly", "x": 0, "y": 0}]}', '{"items": [{"action": "waypoint", "x": 1e9, '
+                    '"y": 0}]}', '{"home": [NaN, 0], "items": []}', '{"items": [{"action": "land", "x": 0, "y": '
+                    'Infinity}]}', '{"items": [{"action": "loiter", "x": 0, "y": 0, "hold": -1}]}'):
+            refused = http.post("/api/plan/check", content=bad, headers={**http.operator,
+                                                                         "Content-Type": "application/json"})
+            assert refused.status_code == 422, (bad, refused.text)
         assert http.get("/api/vehicles/7/mission/progress").status_code == 404
