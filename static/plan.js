@@ -178,6 +178,10 @@ async function check() {
   legs = [];
   render();
   if (!items.length) return;
+  if (auth !== "valid") {  // the station reads plans for its operator only
+    showAck($("#plan-ack"), "Check", "sign in with the operator token to check the legs against the scene", "bad");
+    return;
+  }
   const { status, data } = await api("POST", "/api/plan/check", planBody());
   if (seq !== checkSeq) return;
   legs = status === 200 && data && Array.isArray(data.legs) ? data.legs : [];
@@ -402,8 +406,13 @@ $("#plan-export-wpl").addEventListener("click", () => exportAs("wpl"));
 $("#plan-export-plan").addEventListener("click", () => exportAs("plan"));
 
 // ---- the rest of the page -------------------------------------------------------------------------------
-on(EVENTS.auth, (detail) => { auth = detail.auth; updateControls(); });
-on(EVENTS.selected, () => { measureDrain(); render(); });
+on(EVENTS.auth, (detail) => {
+  const was = auth;
+  auth = detail.auth;
+  updateControls();
+  if (auth === "valid" && was !== "valid" && items.length) check();
+});
+on(EVENTS.selected, () => { measureDrain(); changed(); });  // another vehicle: another home, other legs
 let lastCurrent = null;
 on(EVENTS.status, (msg) => {
   mode = msg.mode;
