@@ -288,7 +288,12 @@ function updateControls() {
   const empty = items.length ? "" : "The plan has no items";
   setEnabled($("#plan-upload"), reason || none || empty, "Upload the plan to the selected vehicle");
   setEnabled($("#plan-download"), reason || none, "Download the selected vehicle's mission into the plan");
-  setEnabled($("#plan-fly"), reason || none, "Arm if needed, AUTO, and start the vehicle's uploaded mission");
+  // a mission this station uploaded or downloaded (its waypoints), or one MISSION_CURRENT counts past home
+  const holds = v && ((Array.isArray(v.waypoints) && v.waypoints.length) || (v.mission && isNum(v.mission.total)
+    && v.mission.total > 1));
+  const noMission = holds ? "" : "The vehicle holds no mission: upload the plan (or download its own) first";
+  setEnabled($("#plan-fly"), reason || none || noMission,
+    "Arm if needed, AUTO, and start the vehicle's uploaded mission");
   showHint($("#plan .command-hint"), reason);
   setText($("#plan-vehicle"), v ? `· vehicle ${v.sysid} ${v.type || ""}` : "");
 }

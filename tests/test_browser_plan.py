@@ -111,11 +111,14 @@ def plan_by_clicks(page, sysid: int, picture: Path | None = None) -> None:
 
 
 def upload(page, station: RunningStation, sysid: int) -> list:
+    expect(page.locator("#plan-fly")).to_be_disabled()  # nothing to fly yet, and the button says so
+    expect(page.locator("#plan-fly")).to_have_attribute("title", re.compile("^The vehicle holds no mission"))
     page.click("#plan-upload")
     expect(page.locator("#plan-ack")).to_have_text(
         re.compile(rf"^Upload to vehicle {sysid}: accepted \(MISSION_ACK, 5 items with home\) · "), timeout=60_000)
     assert page.evaluate("[document.querySelector('#plan-progress').value, "
                          "document.querySelector('#plan-progress').max]") == [5, 5]
+    expect(page.locator("#plan-fly")).to_be_enabled()
     on_board = parse_mission(station.http.get(f"/api/vehicles/{sysid}/mission").text)
     assert len(on_board) == 5 and [round(i.alt, 3) for i in on_board[1:]] == [5, 5, 6, 5]
     return on_board
