@@ -291,7 +291,8 @@ def cmd_rti_reconstruct(args: argparse.Namespace) -> int:
         for warning in source.warnings() if source else ():
             print(f"warning: {warning}", file=sys.stderr)
     result = reconstruct(records, calibration, args.calibration_seconds, args.bounds, args.cell, args.window,
-                         args.peaks, args.solver, args.model, span=args.smooth, measure=args.measure)
+                         args.peaks, args.solver, args.model, span=args.smooth, measure=args.measure,
+                         variance=args.variance, reference=args.reference, prior=args.prior)
     Path(args.json).write_text(json.dumps(result.to_json(images=args.images)) + "\n", encoding="utf-8")
     if args.png:
         draw(result, args.png)
@@ -325,9 +326,20 @@ def _rti_commands(commands) -> None:
     rec.add_argument("--smooth", type=options.whole(1), default=3, metavar="N",
                      help="average each window's measurements with its neighbours', N windows in all "
                           "(default %(default)s; 1 = none)")
-    rec.add_argument("--measure", choices=["kernel", "mean"], default="kernel",
-                     help="per link and window: the kernel distance of its RSS histogram from the empty area's "
-                          "(KRTI), or the mean attenuation in dB (default %(default)s)")
+    rec.add_argument("--measure", choices=["kernel", "mean", "variance"], default="kernel",
+                     help="per link and window: the kernel distance of its RSS histogram from the long-term one "
+                          "(KRTI), the mean attenuation in dB, or the variance of its RSS (VRTI, moving people "
+                          "only) (default %(default)s)")
+    rec.add_argument("--reference", choices=["auto", "file", "empty"], default="auto",
+                     help="with --measure kernel, the long-term histogram: the whole file's, or the empty area's "
+                          "(sees a person who stands still all along); auto: the file's with --window, else the "
+                          "empty area's (default %(default)s)")
+    rec.add_argument("--variance", choices=["sub-mean", "plain"], default="sub-mean",
+                     help="with --measure variance, take off each link's empty-room variance, or not "
+                          "(default %(default)s)")
+    rec.add_argument("--prior", choices=["exponential", "difference"], default="exponential",
+                     help="the image prior: exponential covariance, or the Tikhonov gradient penalty of VRTI "
+                          "(default %(default)s)")
     rec.add_argument("--solver", choices=["ls", "tv"], default="ls",
                      help="regularised least squares with a spatial prior, or total variation (default %(default)s)")
     rec.add_argument("--model", choices=["ellipse", "exponential"], default="ellipse",

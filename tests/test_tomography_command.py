@@ -123,10 +123,12 @@ def test_gzip_is_read_transparently(walk_file, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("case", ["basement_walk1", "basement_walk2"])
-def test_the_real_walks_with_the_defaults_and_their_cli_options(case, tmp_path, capsys):
+@pytest.mark.parametrize("measure, line", [("kernel", 1.3), ("variance", 1.65)])
+def test_the_real_walks_with_the_defaults_and_their_cli_options(case, measure, line, tmp_path, capsys):
     """The README's figures: the data set author's own RTI scores 1.655 / 1.627 m on these walks, his VRTI
     1.424 / 1.379 m. The issue's goal, under 1.2 m, is not reached (see docs/rti.md); the kernel distance
-    (the default) scores 1.335 / 1.419 m, and this holds the line there with a margin."""
+    (the default, its long-term histogram the file's with --window) scores 1.228 / 1.209 m (1.335 / 1.419 m
+    against the empty room's), the variance 1.53 / 1.533 m; this holds the line there with a margin."""
     directory = SHARED / case
     if not directory.exists():
         pytest.skip("needs ../shared/rti (the basement walks; absent in a bare clone)")
@@ -140,8 +142,8 @@ def test_the_real_walks_with_the_defaults_and_their_cli_options(case, tmp_path, 
     out = tmp_path / "out.json"
     code, _, err = run(capsys, directory / "links.csv.gz", "--calibration", directory / cli["calibration"],
                        "--bounds", ",".join(map(str, cli["bounds"])), "--cell", cli["cell"], "--window",
-                       cli["window"], "--peaks", cli["peaks"], "--json", out)
+                       cli["window"], "--peaks", cli["peaks"], "--measure", measure, "--json", out)
     assert code == 0, err
     score = score_walk(truth, json.loads(out.read_text()))
     assert score["frames_missing"] == 0 and score["frames_without_peak"] == 0
-    assert score["rmse_m"] < 1.5, score
+    assert score["rmse_m"] < line, score

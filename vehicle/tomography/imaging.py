@@ -26,8 +26,9 @@ from scipy.ndimage import maximum_filter
 from vehicle.tomography.calibration import Levels, channel_weights, empty_levels, file_levels, group_mean
 from vehicle.tomography.kernel import kernel_distances, kernel_width, reference_rows
 from vehicle.tomography.links import LinkTable, Records, link_table
-from vehicle.tomography.solvers import RegularisedLS, tv_discrepancy
+from vehicle.tomography.solvers import RegularisedLS, difference_prior_times, tv_discrepancy
 from vehicle.tomography.tracking import Tracker
+from vehicle.tomography.variance import variance_measurements
 from vehicle.tomography.weights import LAMBDA, Grid, WeightCache, default_cell
 
 CORRELATION = 0.5  # m: the prior's correlation distance, about a person's width, the size of what we image
@@ -36,7 +37,9 @@ DRIFT_ROUNDS = 4
 WORST_SHARE = 2 / 3  # a round takes out the paths within this share of the worst deviation
 DRIFT_MIN_DB = 5.0  # what a person near a link's line does to it in a room: 1 dB typically, 7 dB at the 90th percentile
 SOLVERS = ("ls", "tv")
-MEASURES = ("mean", "kernel")
+MEASURES = ("mean", "kernel", "variance")
+PRIORS = ("exponential", "difference")
+REFERENCES = ("auto", "file", "empty")
 SMOOTH = 3  # windows: the centred moving average of each path's measurement (see smooth)
 
 
@@ -58,8 +61,10 @@ class Imager:
     """Images of one grid from path measurements: the library's live face (the station calls it per window)."""
 
     def __init__(self, grid: Grid, model: str = "ellipse", lam: float = LAMBDA, delta: float = CORRELATION,
-                 maps: int = 32):
-        self.grid, self.delta = grid, delta
+                 maps: int = 32, prior: str = "exponential"):
+        if prior not in PRIORS:
+            raise ValueError(f"unknown prior {prior!r} (one of {', '.join(PRIORS)})")
+        self.grid, self.delta, self.prior = grid, delta, prior
         self.weights = WeightCache(grid, model, lam)
         self._centres = grid.centres()
         self._maps: OrderedDict[bytes, tuple[RegularisedLS, object]] = OrderedDict()
@@ -70,8 +75,11 @@ class Imager:
         deviation ``sigma`` (so that the noise is white), and that weight matrix; cached."""
         key = np.round(paths, 3).tobytes() + np.round(sigma, 3).tobytes()
         if key not in self._maps:
-            W = sp.diags(1.0 / sigma) @ self.weights.matrix(paths)
-            self._maps[key] = (RegularisedLS(W.tocsr(), self._centres, self.delta), W)
+            W = (sp.diags(1.0 / sigma) @ self.weights.matrix(paths)).tocsr()
+            B = None  # the exponential covariance: RegularisedLS builds C W^T itself
+            if self.prior == "difference":
+                B = difference_prior_times(self.grid.shape, W, self.delta / self.grid.cell)
+            self._maps[key] = (RegularisedLS(W, self._centres, self.delta, B), W)
             while len(self._maps) > self._size:
                 self._maps.popitem(last=False)
         self._maps.move_to_end(key)
@@ -162,12 +170,15 @@ def window_measurements(records: Records, table: LinkTable, levels: Levels, weig
 
 
 def kernel_measurements(records: Records, table: LinkTable, calibration: Records | None, drifted: np.ndarray,
-                        weights: np.ndarray, start: float, window: float | None, span: int) -> tuple[np.ndarray, dict]:
+                        weights: np.ndarray, start: float, window: float | None, span: int,
+                        reference: str) -> tuple[np.ndarray, dict]:
     """The (frames x paths) kernel distances (vehicle.tomography.kernel), the short-term histogram of a frame
-    pooling ``span`` windows; drifted paths are compared with the file's own long-term histogram."""
+    pooling ``span`` windows, the long-term one the file's own (``reference`` "file", KRTI's) or the empty
+    area's ("empty"; drifted paths then the file's)."""
     use = (records.t >= start) & (weights[table.row_lc] > 0)
     frame, frames = frame_index(records.t[use], start, window)
-    reference = reference_rows(records, table, calibration, drifted[table.lc_path])
+    empty = calibration if reference == "empty" else None
+    reference = reference_rows(records, table, empty, drifted[table.lc_path])
     width = kernel_width(*reference)
     per_lc = kernel_distances(records, table, reference, use, frame, frames, span, width)
     return path_means(per_lc, table, weights), {"kernel_db": round(width, 3)}
@@ -176,12 +187,15 @@ def kernel_measurements(records: Records, table: LinkTable, calibration: Records
 def reconstruct(records: Records, calibration: Records | None = None, calibration_seconds: float | None = None,
                 bounds: tuple[float, float, float, float] | None = None, cell: float | None = None,
                 window: float | None = None, peaks: int = 3, solver: str = "ls", model: str = "ellipse",
-                drift: bool = True, span: int = SMOOTH, measure: str = "kernel") -> Result:
+                drift: bool = True, span: int = SMOOTH, measure: str = "kernel", variance: str = "sub-mean",
+                reference: str = "auto", prior: str = "exponential") -> Result:
     """The whole method on one file (see the module's docstring and docs/rti.md)."""
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r} (one of {', '.join(SOLVERS)})")
     if measure not in MEASURES:
         raise ValueError(f"unknown measure {measure!r} (one of {', '.join(MEASURES)})")
+    if reference not in REFERENCES:
+        raise ValueError(f"unknown reference {reference!r} (one of {', '.join(REFERENCES)})")
     if window is not None and not (window > 0 and math.isfinite(window)):
         raise ValueError(f"window {window:g} must be a positive number of seconds")
     start = float(records.t.min())
@@ -203,7 +217,7 @@ def reconstruct(records: Records, calibration: Records | None = None, calibratio
     weights = channel_weights(table, levels.fade)
     times, Y = window_measurements(records, table, levels, weights, start, window)
     sigma = np.ones(len(table.paths))  # paths weigh alike: see docs/rti.md on weighting by the empty-area noise
-    imager = Imager(grid, model)
+    imager = Imager(grid, model, prior=prior)
     alpha = choose_alpha(imager, table.paths, Y, sigma)
     drifted = np.zeros(len(table.paths), bool)
     if drift and levels.calibrated.any():
@@ -215,7 +229,14 @@ def reconstruct(records: Records, calibration: Records | None = None, calibratio
     span = span if window else 1
     extra = {}
     if measure == "kernel":
-        Y, extra = kernel_measurements(records, table, calibration, drifted, weights, start, window, span)
+        reference = ("file" if window else "empty") if reference == "auto" else reference
+        Y, extra = kernel_measurements(records, table, calibration, drifted, weights, start, window, span, reference)
+        extra["reference"] = reference
+    elif measure == "variance":
+        use = (records.t >= start) & (weights[table.row_lc] > 0)
+        frame, frames = frame_index(records.t[use], start, window)
+        per_lc = variance_measurements(records, table, calibration, use, frame, frames, window, span, variance)
+        Y, extra = path_means(per_lc, table, weights), {"variance": variance}
     else:
         Y = smooth(Y, span)
     alpha = choose_alpha(imager, table.paths, Y, sigma)  # on what is imaged: smoothing lowered the noise
@@ -238,7 +259,8 @@ def reconstruct(records: Records, calibration: Records | None = None, calibratio
             frame["track"] = tracker.step(window, (best["x"], best["y"]) if best else None)
         frames.append(frame)
     info = {
-        "measure": measure, **extra, "solver": solver, "model": model, "smooth_windows": span if window else None,
+        "measure": measure, **extra, "solver": solver, "model": model, "prior": prior,
+        "smooth_windows": span if window else None,
         "alpha": alpha,
         "correlation_m": CORRELATION, "lambda_m": LAMBDA,
         "links": {"link_channels": len(table.lc_keys), "paths": len(table.paths),

@@ -52,6 +52,15 @@ def kernel_width(lc: np.ndarray, rssi: np.ndarray) -> float:
     return max(STEP_DB, float(np.sqrt(np.mean((rssi - median) ** 2))))
 
 
+def pool_span(frame: np.ndarray, frames: int, span: int, *columns: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Each record once for every frame whose span (``span`` windows centred on it) covers its window: the
+    frame indices and the columns repeated alike, within 0 .. frames - 1."""
+    half = span // 2
+    f = np.concatenate([frame + s for s in range(-half, span - half)])
+    keep = (f >= 0) & (f < frames)
+    return (f[keep], *(np.tile(column, span)[keep] for column in columns))
+
+
 def kernel_distances(records: Records, table: LinkTable, reference: tuple[np.ndarray, np.ndarray],
                      use: np.ndarray, frame: np.ndarray, frames: int, span: int, width: float) -> np.ndarray:
     """(frames x link-channels) squared kernel distances, NaN where a link-channel was not heard in a frame's
@@ -71,13 +80,8 @@ def kernel_distances(records: Records, table: LinkTable, reference: tuple[np.nda
     square = kernel[(np.arange(bins)[:, None] - np.arange(bins)[None, :]) + bins - 1]
     Kq = q @ square
     qKq = (Kq * q).sum(axis=1)
-    # short-term readings: each record belongs to the frames whose span covers its window
-    half = span // 2
-    lc, value = table.row_lc[use], (np.round(records.rssi[use]) - low).astype(np.int64)
-    shifted = [(frame + s, lc, value) for s in range(-half, span - half)]
-    f = np.concatenate([s[0] for s in shifted])
-    keep = (f >= 0) & (f < frames)
-    f, lc, value = f[keep], np.concatenate([s[1] for s in shifted])[keep], np.concatenate([s[2] for s in shifted])[keep]
+    f, lc, value = pool_span(frame, frames, span, table.row_lc[use],
+                             (np.round(records.rssi[use]) - low).astype(np.int64))
     group = f * n_lc + lc
     size = frames * n_lc
     counts = np.bincount(group, minlength=size).astype(float)

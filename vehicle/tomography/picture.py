@@ -61,6 +61,7 @@ def draw(result: Result, path: str) -> None:
         y = MARGIN + (1 - fraction) * height
         pen.line([bx + 16, y, bx + 20, y], fill="black")
         pen.text((bx + 23, y - 6), f"{fraction * top:.3g}", fill="black", font=font)
-    unit = "dB/px" if result.info.get("measure") == "mean" else "D²/px"  # attenuation, or squared kernel distance
+    # attenuation, RSS variance, or squared kernel distance
+    unit = {"mean": "dB/px", "variance": "dB^2/px"}.get(result.info.get("measure"), "D^2/px")  # the font has no ²
     pen.text((bx - 4, MARGIN - 20), unit, fill="black", font=font)
     picture.save(path)
