@@ -102,7 +102,7 @@ def home_distance(result):
 def test_registry_lists_every_mission_module_and_only_those():
     package = Path(missions_package.__file__).parent
     modules = {p.stem for p in package.glob("*.py")} - {"__init__", "base", "routines"}
-    assert set(MISSIONS) == modules == {"square", "browse", "search", "pathfind"}
+    assert set(MISSIONS) == modules == {"square", "browse", "search", "pathfind", "rti"}
     assert list(MISSIONS) == sorted(MISSIONS)
     for name in MISSIONS:
         cls = mission_class(name.title())

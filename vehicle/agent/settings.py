@@ -11,7 +11,7 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from vehicle.protocol.map_bounds import MAX_RESOLUTION, MAX_SIDE, MAX_SPACE, MIN_RESOLUTION
 
@@ -44,6 +44,37 @@ class Settings(BaseModel):
                                  ge=0.5, le=50)
     share_maps: float = _setting(1.0, "0/1", "1: take the team-mates' map updates into the memory map; 0: map alone",
                                  "SCN_SHARE_MAPS", ge=0, le=1)
+    # radio tomography (--mission rti, vehicle.agent.missions.rti)
+    rti_planner: float = _setting(0.0, "0/1", "rti: 0 (or 'uncertainty'): where the image is least sure; 1 (or "
+                                  "'perimeter'): pairs across the region stepping round it", "RTI_PLANNER", ge=0, le=1)
+    rti_x0: float = _setting(0.0, "m", "rti: the region's west edge (all four edges 0: the scene's object nearest "
+                             "the start)", "RTI_X0", ge=-MAX_SPACE, le=MAX_SPACE)
+    rti_y0: float = _setting(0.0, "m", "rti: the region's south edge", "RTI_Y0", ge=-MAX_SPACE, le=MAX_SPACE)
+    rti_x1: float = _setting(0.0, "m", "rti: the region's east edge", "RTI_X1", ge=-MAX_SPACE, le=MAX_SPACE)
+    rti_y1: float = _setting(0.0, "m", "rti: the region's north edge", "RTI_Y1", ge=-MAX_SPACE, le=MAX_SPACE)
+    rti_dwell: float = _setting(3.0, "s", "rti: time the team holds at a pair of spots while the radios measure",
+                                "RTI_DWELL", ge=0.5, le=600)
+    rti_offset: float = _setting(1.5, "m", "rti: how far outside the region the spots lie", "RTI_OFFSET",
+                                 ge=0.5, le=50)
+    rti_wait: float = _setting(60.0, "s", "rti: how long a vehicle at its spot waits for a late partner before "
+                               "it counts as lost", "RTI_WAIT", ge=1, le=3600)
+    rti_rounds: float = _setting(40.0, "pairs", "rti: pairs of spots measured before the mission is done",
+                                 "RTI_ROUNDS", ge=1, le=10000)
+
+    @field_validator("rti_planner", mode="before")
+    @classmethod
+    def _planner_by_name(cls, value):
+        """--set rti_planner=perimeter as well as =1."""
+        names = {"uncertainty": 0.0, "perimeter": 1.0}
+        return names.get(value.strip().lower(), value) if isinstance(value, str) else value
+
+    @model_validator(mode="after")
+    def _region(self) -> Settings:
+        edges = (self.rti_x0, self.rti_y0, self.rti_x1, self.rti_y1)
+        if any(edges) and not (self.rti_x1 > self.rti_x0 and self.rti_y1 > self.rti_y0):
+            raise ValueError(f"the rti region {','.join(f'{v:g}' for v in edges)} has no area (need rti_x0 < "
+                             "rti_x1 and rti_y0 < rti_y1, or all four 0 for the object nearest the start)")
+        return self
 
     @model_validator(mode="after")
     def _map_fits_the_stream(self) -> Settings:

@@ -14,6 +14,8 @@ import importlib
 MISSIONS = {
     "browse": "turn in place at home in yaw_step increments, scanning one full circle",
     "pathfind": "visit waypoints in order (a square around home by default), replanning with A* when blocked",
+    "rti": "radio tomography: a team (or one vehicle with fixed radio nodes) stops at paired spots round a region, "
+           "waiting for each other while the radios measure; the next spots go where the image is least sure",
     "search": "scan, move towards far detections with open space beside them at a stand-off distance, repeat",
     "square": "fly preplanned AUTO waypoints in a square around home (or the given waypoints)",
 }

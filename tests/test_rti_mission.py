@@ -1,0 +1,107 @@
+"""--mission rti: a team stops at paired spots round the region and waits for each other; a late partner is
+waited for, a lost one is said and the mission ends with that reason, never a silent stop."""
+
+from __future__ import annotations
+
+import math
+
+from vehicle.agent.missions.rti import Phase
+from vehicle.agent.settings import Settings
+from vehicle.lab.stepper import TeamStepper, simulate_team
+
+REGION = {"rti_x0": 4.0, "rti_y0": 4.0, "rti_x1": 10.0, "rti_y1": 10.0}
+
+
+def team(scene, count=2, **settings) -> TeamStepper:
+    values = {"time_limit": 400, "rti_dwell": 2.0, "rti_rounds": 3, **REGION, **settings}
+    return simulate_team(scene, "rti", count, settings=Settings().updated(values))
+
+
+def fly(stepper: TeamStepper, until: float, asleep: dict[int, float] | None = None, watch=None) -> None:
+    """Step the team to ``until`` s (or every agent done); vehicle k's agent is not stepped before
+    ``asleep[k]`` s (a partner that is late: its autopilot waits on the ground). ``watch()`` after every step."""
+    asleep = asleep or {}
+    for index, agent in enumerate(stepper.agents):
+        wake = asleep.get(index)
+        if wake is not None:
+            awake = agent.step
+            agent.step = lambda awake=awake, wake=wake: awake() if stepper.team.time >= wake else None
+    while stepper.team.time < until and not all(a.done for a in stepper.agents):
+        stepper.step()
+        if watch is not None:
+            watch()
+
+
+def said(agent, words: str) -> list[str]:
+    return [m for m in agent.messages if words in m]
+
+
+def test_a_pair_flies_its_rounds_at_the_same_spots_and_measures_together(flat_scene):
+    stepper = team(flat_scene)
+    dwelling = []  # (each one's position, each one's plan of the round) while both dwell
+
+    def watch():
+        missions = [a.mission for a in stepper.agents]
+        if all(a.phase == "mission" and getattr(a.mission, "phase", None) is Phase.DWELL for a in stepper.agents):
+            dwelling.append(([(s.pose.x, s.pose.y) for s in stepper.team.simulations], [m.spots for m in missions]))
+
+    fly(stepper, 400, watch=watch)
+    first, second = stepper.agents
+    assert [a.outcome for a in stepper.agents] == ["finished", "finished"], [a.reason for a in stepper.agents]
+    assert first.reason == second.reason == "3 rounds measured, 3 links"
+    assert dwelling, "the two never dwelt at the same time"
+    rounds = set()
+    for positions, (plan_1, plan_2) in dwelling:
+        assert plan_1 == plan_2  # the same plan on both, exchanging nothing
+        assert math.dist(positions[0], plan_1[1]) < 0.5 and math.dist(positions[1], plan_1[2]) < 0.5
+        rounds.add(tuple(plan_1.items()))
+    assert len(rounds) == 3  # three rounds, each at its own pair of spots
+    assert stepper.team.closest_gap >= Settings().separation
+
+
+def test_a_late_partner_is_waited_for(flat_scene):
+    stepper = team(flat_scene, rti_rounds=1, rti_wait=120)
+    first, second = stepper.agents
+    held = []
+
+    def watch():
+        mission = getattr(first, "mission", None)
+        if getattr(mission, "phase", None) is Phase.WAIT:
+            held.append((stepper.team.time, first.fc.pose.x, first.fc.pose.y, mission.rounds))
+
+    fly(stepper, 300, asleep={1: 60.0}, watch=watch)
+    assert held and held[0][0] < 40  # vehicle 1 was at its spot long before its partner woke
+    assert held[-1][0] > 60  # and held there, waiting, till after it
+    spot = first.mission.spot
+    assert all(math.dist((x, y), spot) < 0.8 and rounds == 0 for _, x, y, rounds in held)
+    assert [a.outcome for a in stepper.agents] == ["finished", "finished"]
+    assert not said(first, "lost")
+
+
+def test_a_lost_partner_is_said_and_ends_the_mission_with_that_reason(flat_scene):
+    stepper = team(flat_scene, rti_wait=15)
+    first, second = stepper.agents
+    fly(stepper, 200, asleep={1: 1e9})  # vehicle 2 never leaves the ground
+    assert first.outcome == "stopped"
+    assert first.reason == "partner vehicle 2 lost in round 1: no link left to measure"
+    assert said(first, "Rti: partner vehicle 2 did not reach its spot")
+    assert said(first, "in 15 s (last seen at (-4.0, -4.0)): lost")
+    assert first.done  # it went home and landed: no silent stop mid-air
+
+
+def test_a_team_of_three_goes_on_without_a_lost_partner(flat_scene):
+    stepper = team(flat_scene, count=3, rti_wait=15, rti_rounds=2)
+    first, second, third = stepper.agents
+    fly(stepper, 300, asleep={2: 1e9})
+    for agent in (first, second):
+        assert agent.outcome == "finished", agent.reason
+        assert said(agent, "Rti: going on with vehicles 1, 2")
+        assert said(agent, "partner vehicle 3 did not reach its spot")
+
+
+def test_one_vehicle_alone_without_radio_nodes_says_why_it_cannot(flat_scene):
+    stepper = team(flat_scene, count=1)
+    fly(stepper, 100)
+    (agent,) = stepper.agents
+    assert agent.outcome == "stopped"
+    assert agent.reason == "rti needs a team of two or more, or fixed radio nodes"

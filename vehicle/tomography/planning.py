@@ -1,0 +1,215 @@
+"""Where a team's radios stop next to image a region: the uncertainty-driven plan, or the perimeter plan.
+
+Uncertainty-driven (a greedy D-optimal design): the reconstruction is linear-Gaussian (vehicle.tomography.solvers:
+a prior covariance C over the pixels, measurements y = W x + noise), so the posterior covariance
+P = (C^-1 + W^T W / noise)^-1 depends only on WHICH links were measured, never on what they read. Every agent of
+a team can therefore compute the same plan from the same history of positions, exchanging no measurements. The
+next step is the pair of candidate spots whose link w has the largest posterior variance w^T P w (the information
+it brings, log(1 + w^T P w / noise), is largest), per second of flying there and dwelling; P then takes the
+rank-one update of that link, and the next step looks where the image is least sure of now.
+
+Perimeter (the obvious plan): the two radios on opposite sides of the region, stepping round it together: straight
+across first (north-south links, then east-west ones), then laps with the partner shifted along its side, for
+oblique links.
+
+Candidate spots lie on a ring around the region (its bounds grown by ``offset``), every ``spacing`` metres, kept
+where the scene leaves room for a body; the two spots of a pair are at least ``apart`` metres from each other.
+With more than two vehicles, each further spot is chosen the same greedy way against the spots already chosen;
+with fixed radio nodes, every chosen spot's links to them count too.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+from scipy.linalg import blas
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial.distance import cdist
+
+from vehicle.tomography.weights import Grid, WeightCache
+
+CORRELATION = 0.5  # m: the prior's correlation distance (as the imaging's)
+NOISE = 0.5  # a link's noise variance, in units of a pixel's prior variance
+CELL = 0.3  # m: the planner's pixel (coarser than an image's: the plan needs where, not detail) ...
+MAX_SIDE_PIXELS = 36  # ... and at most this many along the longer side: P holds pixels^2 numbers
+PLANNERS = ("uncertainty", "perimeter")
+
+Point = tuple[float, float]
+
+
+def ring(bounds: tuple[float, float, float, float], offset: float, spacing: float) -> np.ndarray:
+    """(n, 2) spots every ``spacing`` m (at most) round the rectangle ``bounds`` grown by ``offset``,
+    anticlockwise from its south-west corner."""
+    x0, y0, x1, y1 = bounds[0] - offset, bounds[1] - offset, bounds[2] + offset, bounds[3] + offset
+    corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]])
+    spots = []
+    for a, b in itertools.pairwise(corners):
+        n = max(1, math.ceil(np.linalg.norm(b - a) / spacing))
+        spots.extend(a + (b - a) * k / n for k in range(n))
+    return np.array(spots)
+
+
+def nearest_object(scene, start: Point, margin: float = 0.5) -> tuple[float, float, float, float]:
+    """The ground footprint (bounds, grown by ``margin``) of the scene's object nearest ``start``; the ground
+    itself (an object less than 0.2 m tall) is none."""
+    triangles = np.asarray(scene.triangles).reshape(-1, 3, 3)
+    owner = np.asarray(scene.face_object)
+    best, footprint = math.inf, None
+    for index in np.unique(owner):
+        corners = triangles[owner == index].reshape(-1, 3)
+        low, high = corners.min(axis=0), corners.max(axis=0)
+        if high[2] - low[2] < 0.2:
+            continue
+        gap = math.hypot(max(low[0] - start[0], 0.0, start[0] - high[0]),
+                         max(low[1] - start[1], 0.0, start[1] - high[1]))
+        if gap < best:
+            best, footprint = gap, (low[0] - margin, low[1] - margin, high[0] + margin, high[1] + margin)
+    if footprint is None:
+        raise ValueError("the scene has no object to image: give the region's bounds")
+    return tuple(round(float(v), 3) for v in footprint)
+
+
+def clear_spots(spots: np.ndarray, scene, radius: float, altitude: float, padding: float) -> np.ndarray:
+    """The spots where a body of ``radius`` at ``altitude`` above the ground keeps ``padding`` from the scene."""
+    from vehicle.world.collision import Collider
+
+    collider = Collider(scene, radius, search=radius + padding + 1.0)
+    keep = [collider.clearance(np.array([x, y, altitude])) > radius + padding for x, y in spots]
+    return spots[np.array(keep, bool)] if len(spots) else spots
+
+
+class Planner:
+    """The plan of one team round a region; every agent holds its own and, given the same history, computes
+    the same next spots (see the module's docstring)."""
+
+    def __init__(self, bounds: tuple[float, float, float, float], spots: np.ndarray, kind: str = "uncertainty",
+                 fixed: list[Point] | None = None, apart: float = 2.6, dwell: float = 5.0, speed: float = 2.5):
+        if kind not in PLANNERS:
+            raise ValueError(f"unknown planner {kind!r} (one of {', '.join(PLANNERS)})")
+        if len(spots) < 2:
+            raise ValueError("fewer than two clear spots round the region: the scene leaves no room to fly round it")
+        self.kind, self.bounds, self.spots = kind, bounds, np.asarray(spots, float)
+        self.fixed = [tuple(map(float, p)) for p in (fixed or [])]
+        self.apart, self.dwell, self.speed = apart, dwell, speed
+        side = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
+        self.grid = Grid(bounds, max(CELL, side / MAX_SIDE_PIXELS))
+        self.weights = WeightCache(self.grid)
+        centres = self.grid.centres()
+        self.P = np.exp(-cdist(centres, centres) / CORRELATION)  # the posterior covariance, the prior before any link
+        self.steps = 0
+        self.links = 0
+        pairs = np.array([(i, j) for i, j in itertools.combinations(range(len(self.spots)), 2)
+                          if np.linalg.norm(self.spots[i] - self.spots[j]) >= apart])
+        self.pairs = pairs
+        self._pair_rows = self.weights.matrix(np.hstack([self.spots[pairs[:, 0]], self.spots[pairs[:, 1]]]))
+        self._pair_variance = self.variance_along(self._pair_rows)  # kept up to date by each rank-one update
+
+    # ---- the posterior ----------------------------------------------------------------------
+    def variance_along(self, rows) -> np.ndarray:
+        """w^T P w for each row w (a sparse matrix of links x pixels)."""
+        if not rows.shape[0]:
+            return np.zeros(0)
+        return np.asarray(rows.multiply(rows @ self.P).sum(axis=1)).ravel()
+
+    def measured(self, a: Point, b: Point) -> None:
+        """Take the link between ``a`` and ``b`` as measured: P's rank-one update."""
+        w = self.weights.matrix(np.array([[*a, *b]], float)).toarray().ravel()
+        if not w.any():
+            return
+        Pw = self.P @ w
+        c = NOISE + w @ Pw
+        blas.dger(-1.0 / c, Pw, Pw, a=self.P.T, overwrite_a=True)  # P -= Pw Pw^T / c, in place (P is symmetric)
+        self._pair_variance -= (self._pair_rows @ Pw) ** 2 / c
+        self.links += 1
+
+    def uncertainty(self) -> float:
+        """The mean posterior variance of the region's pixels (1 before any link)."""
+        return float(np.mean(np.diag(self.P)))
+
+    # ---- the next spots ---------------------------------------------------------------------
+    def next_spots(self, previous: list[Point], known: bool = True) -> list[Point]:
+        """Where the ``len(previous)`` vehicles stop next, in their order; the links among them and to the fixed
+        nodes are then taken as measured. ``previous``: where each was, its spot of the last step, which every
+        agent knows alike (``known``): the spots go to the vehicles with the least travel in all, and travel
+        time counts in the choice. Not ``known`` (the first step, from where each agent sees the others now):
+        travel does not count, and in their order each vehicle takes the spot nearest to it, so that one already
+        on its way there keeps it whoever plans."""
+        count = len(previous)
+        if self.kind == "perimeter":
+            chosen = self._perimeter(count)
+        else:
+            chosen = self._greedy(count, previous if known else None)
+        spots = [tuple(float(v) for v in self.spots[i]) for i in chosen]
+        if known:
+            cost = np.array([[math.dist(p, s) for s in spots] for p in previous])
+            spots = [spots[k] for k in linear_sum_assignment(cost)[1]]
+        else:
+            free, spots = spots, []
+            for p in previous:
+                spots.append(free.pop(min(range(len(free)), key=lambda k: (math.dist(p, free[k]), k))))
+        for a, b in itertools.combinations(spots, 2):
+            self.measured(a, b)
+        for a in spots:
+            for node in self.fixed:
+                self.measured(a, node)
+        self.steps += 1
+        return spots
+
+    def _greedy(self, count: int, previous: list[Point] | None) -> list[int]:
+        """The pair (or, with fixed nodes, the spot) of most information per second, then further spots the
+        same way against those chosen."""
+        travel = np.zeros(len(self.spots))
+        if previous is not None:
+            here = np.asarray(previous, float)
+            travel = np.linalg.norm(self.spots[:, None, :] - here[None, :, :], axis=2).min(axis=1) / self.speed
+        if self.fixed:
+            chosen = [self._best_spot([], travel)]
+        else:
+            gain = np.log1p(np.maximum(self._pair_variance, 0.0) / NOISE)
+            seconds = self.dwell + np.maximum(travel[self.pairs[:, 0]], travel[self.pairs[:, 1]])
+            chosen = list(self.pairs[int(np.argmax(gain / seconds))])
+        while len(chosen) < count:
+            chosen.append(self._best_spot(chosen, travel))
+        return chosen
+
+    def _best_spot(self, chosen: list[int], travel: np.ndarray) -> int:
+        """The spot, apart from those chosen, whose links to them and to the fixed nodes bring the most."""
+        others = [tuple(self.spots[i]) for i in chosen] + self.fixed
+        far = np.array([all(math.dist(s, self.spots[i]) >= self.apart for i in chosen) for s in self.spots])
+        gain = np.zeros(len(self.spots))
+        for other in others:
+            rows = self.weights.matrix(np.array([[*s, *other] for s in self.spots], float))
+            gain += np.log1p(self.variance_along(rows) / NOISE)
+        return int(np.argmax(np.where(far, gain / (self.dwell + travel), -np.inf)))
+
+    def _perimeter(self, count: int) -> list[int]:
+        """Step k: a spot on the south or east half of the ring, its partner across the region (shifted
+        along its side on later laps); further vehicles spread evenly between them."""
+        n = len(self.spots)
+        half = n // 2
+        lap, along = divmod(self.steps, half)
+        shifts = [0, n // 8, -(n // 8), n // 16, -(n // 16)]
+        shift = shifts[lap % len(shifts)]
+        first = along
+        partner = self._across(first, shift)
+        chosen = [first, partner]
+        for k in range(2, count):
+            chosen.append((first + k * n // count) % n)
+        return chosen
+
+    def _across(self, index: int, shift: int) -> int:
+        """The spot straight across the region from spot ``index`` (mirrored through the region's centre
+        along one axis), moved ``shift`` spots along the ring, and at least ``apart`` from it."""
+        x, y = self.spots[index]
+        cx, cy = (self.bounds[0] + self.bounds[2]) / 2, (self.bounds[1] + self.bounds[3]) / 2
+        rx0, ry0 = self.spots.min(axis=0)
+        rx1, ry1 = self.spots.max(axis=0)
+        on_x_side = min(abs(y - ry0), abs(y - ry1)) <= min(abs(x - rx0), abs(x - rx1))
+        mirror = (x, 2 * cy - y) if on_x_side else (2 * cx - x, y)
+        target = int(np.argmin(np.linalg.norm(self.spots - mirror, axis=1)))
+        target = (target + shift) % len(self.spots)
+        while np.linalg.norm(self.spots[target] - self.spots[index]) < self.apart:
+            target = (target + 1) % len(self.spots)
+        return target
