@@ -2,7 +2,8 @@
 
 Both walks with the command's defaults and each truth.json's cli options, scored by ../shared/rti/score.py
 (RMSE, median and 90th percentile of the strongest peak's error), beside the comparison figures, and the same
-with the mean attenuation instead of the kernel distance, and without the calibration; the time to
+with the empty room's long-term histogram, with the RSS variance (VRTI) or the mean attenuation instead of the
+kernel distance, and without the calibration; the time to
 build the weights of 1,000 links on a 100 x 100 grid; the time per frame once a set of links' map is built
 (goal: under 5 ms, for live imaging at 10 Hz on one core); peak memory.
 Run: python bench/rti.py   (BLAS on one thread, as the station would run it beside its other work)
@@ -41,10 +42,16 @@ def walks() -> list[list[object]]:
         cli = truth["cli"]
         records = read_links(SHARED / case / "links.csv.gz")
         calibration = read_links(SHARED / case / cli["calibration"])
-        variants = (("defaults (--measure kernel)", calibration, {}),
+        variants = (("defaults (--measure kernel, reference the file's)", calibration, {}),
+                    ("--reference empty (the defaults before)", calibration, {"reference": "empty"}),
+                    ("--measure variance (sub-mean)", calibration, {"measure": "variance"}),
+                    ("--measure variance --variance plain", calibration, {"measure": "variance", "variance": "plain"}),
+                    ("--measure variance --prior difference", calibration,
+                     {"measure": "variance", "prior": "difference"}),
                     ("--measure mean", calibration, {"measure": "mean"}),
                     ("--measure mean --smooth 1", calibration, {"measure": "mean", "span": 1}),
-                    ("no --calibration", None, {}), ("no --calibration, --measure mean", None, {"measure": "mean"}))
+                    ("no --calibration", None, {}), ("no --calibration, --measure mean", None, {"measure": "mean"}),
+                    ("no --calibration, --measure variance", None, {"measure": "variance"}))
         for name, empty, options in variants:
             started = time.perf_counter()
             result = reconstruct(records, empty, bounds=cli["bounds"], cell=cli["cell"], window=cli["window"],
