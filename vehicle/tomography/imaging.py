@@ -1,10 +1,13 @@
 """From link records to images, one per time window: attenuations, drift, solving, peaks and the track.
 
-Per window, a link-channel's measurement is the kernel distance of its RSS histogram from the empty area's
-(vehicle.tomography.kernel; the default), or its attenuation, the empty-area level minus the mean of its RSS in
-the window; a path's measurement (the unordered pair of positions: both directions see the same obstacles) is
-the mean over its anti-faded channels that were heard. A path not heard at all in a window is left out of that window's
-solve (it is not assumed unchanged: a missing packet says nothing about the path); the linear map is cached per
+Per window, a link-channel's measurement is the kernel distance of its RSS histogram from a long-term one
+(vehicle.tomography.kernel; the default: the file's when windows are imaged, as KRTI's long-term window, since
+against a quiet empty capture every link the walker's multipath stirs looks changed; the capture's for one
+image of the whole file), its RSS variance (vehicle.tomography.variance, VRTI: motion only), or its
+attenuation, the empty-area level minus the mean of its RSS in the window; a path's measurement (the
+unordered pair of positions: both directions see the same obstacles) is the mean over its anti-faded channels
+that were heard. A path not heard at all in a window is left out of that window's solve (it is not assumed
+unchanged: a missing packet says nothing about the path); the linear map is cached per
 set of present paths, so the usual full set costs one matrix-vector product per frame.
 
 Drift: a path whose median attenuation over the file is not predicted by the other paths (its leave-one-out

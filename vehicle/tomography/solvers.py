@@ -4,8 +4,10 @@ Regularised least squares (Wilson and Patwari 2010): x = argmin |W x - y|^2 + al
 exponential covariance exp(-distance / delta) of a pixel's attenuation with its neighbours'. By the
 push-through identity x = C W^T (W C W^T + alpha I)^-1 y: with the eigendecomposition W C W^T = U S U^T (links x
 links, small) the map from measurements to image, for any alpha, is G diag(1 / (S + alpha)) U^T with G = C W^T U,
-computed once per set of links; a frame is two matrix-vector products. alpha is chosen by generalised
-cross-validation (Golub, Heath and Wahba 1979), whose terms are cheap in that basis.
+computed once per set of links; a frame is two matrix-vector products. VRTI's prior (Wilson and Patwari
+2011), a Tikhonov penalty on the image's gradient, is the same map with C = Q^-1 (difference_prior_times).
+alpha is chosen by generalised cross-validation (Golub, Heath and Wahba 1979), whose terms are cheap in that
+basis.
 
 Total variation (Wilson, Patwari and Vasquez): x = argmin 1/2 |W x - y|^2 + mu sum sqrt(dx^2 + dy^2 + eps^2),
 with dx, dy forward differences along the image's rows and columns (a true 2-D gradient: nothing wraps from
