@@ -84,6 +84,14 @@ def _system_ids(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(f"--sysids wants system ids 1 to 255 separated by commas: {error}") from None
 
 
+def _team_sizes(text: str) -> list[int]:
+    """``1,2,4``: team sizes for a sweep."""
+    try:
+        return [options.whole(1, 8)(v) for v in text.split(",")]
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(f"--vehicles wants team sizes 1 to 8 separated by commas: {error}") from None
+
+
 def settings_from(args: argparse.Namespace, scene, **extra):
     """Mission parameters: defaults < the scene's suggestions < --config < --set < --altitude and the like."""
     from vehicle.agent.settings import load_settings
@@ -384,7 +392,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise ValueError(f"unknown mission {name!r}; missions: {', '.join(MISSIONS)}")
     scenes = args.scene or (preset["scenes"]() if preset else [str(DEFAULT_SCENE)])
     grid = {**preset.get("grid", {}), **parse_grid(args.grid)}
-    spec = SweepSpec(mission_names, scenes, grid, args.seeds, args.vehicle)
+    spec = SweepSpec(mission_names, scenes, grid, args.seeds, args.vehicle, args.vehicles or [1], args.targets or [""])
     print(f"{len(spec.jobs())} runs: {len(mission_names)} missions x {len(scenes)} scenes x "
           f"{len(spec.jobs()) // max(1, len(mission_names) * len(scenes) * args.seeds)} settings x {args.seeds} seeds",
           file=sys.stderr)
@@ -501,6 +509,12 @@ def main(argv: list[str] | None = None) -> int:
                        help="values of a setting to sweep (repeatable; added to the preset's)")
     sweep.add_argument("--seeds", type=options.whole(1), default=1, help="seeds per combination (default 1)")
     sweep.add_argument("--vehicle", default="copter", choices=["rover", "copter"])
+    sweep.add_argument("--vehicles", type=_team_sizes, metavar="N,N,...",
+                       help="team sizes to sweep (1 to 8; default 1): a team flies in one world, as experiment "
+                            "--vehicles N")
+    sweep.add_argument("--targets", action="append", metavar="X,Y[;X,Y...]",
+                       help="radio tomography targets to sweep, one set per --targets (repeatable): the runs "
+                            "measure radio links and report what the image found (vehicle.lab.tomograph)")
     sweep.add_argument("--workers", type=options.whole(1), help="local worker processes (default: one per core)")
     sweep.add_argument("--dask", metavar="tcp://HOST:PORT", help="run on this Dask scheduler instead")
     sweep.add_argument("--out", default="sweep-results", help="output folder (default: %(default)s)")

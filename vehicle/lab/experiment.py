@@ -177,10 +177,12 @@ def warm_up() -> float:
     return time.perf_counter() - started
 
 
-def run_team(experiment: Experiment, stepper: TeamStepper) -> dict:
+def run_team(experiment: Experiment, stepper: TeamStepper,
+             on_step: Callable[[TeamStepper], None] | None = None) -> dict:
     """Fly a team (``simulate_team``, made and checked by the caller before anything starts) to its outcome:
     every vehicle done or wrecked, or the time limit. A vehicle that crashes is reported as such and the rest
-    fly on. The result has what a lone run reports, per vehicle, and the team's figures."""
+    fly on. The result has what a lone run reports, per vehicle, and the team's figures. ``on_step(stepper)``
+    after every step (the radios of a tomography run, ``vehicle.lab.tomograph``)."""
     started = time.perf_counter()
     settings = experiment.settings
     team = stepper.team
@@ -192,6 +194,8 @@ def run_team(experiment: Experiment, stepper: TeamStepper) -> dict:
     try:
         while team.time < limit:
             stepper.step()
+            if on_step is not None:
+                on_step(stepper)
             if stepper.monitor_due and all(agent.done or sim.collision is not None
                                            for agent, sim in zip(stepper.agents, team.simulations, strict=True)):
                 break

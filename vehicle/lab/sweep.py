@@ -35,6 +35,8 @@ class Job:
     settings: tuple[tuple[str, float], ...]  # the swept values (on top of the scene's suggestions)
     seed: int = 0
     vehicle: str = "copter"
+    vehicles: int = 1  # a team of this many, in one world
+    targets: str = ""  # radio tomography's targets, X,Y[;X,Y...] ("": none)
 
     @property
     def scene_path(self) -> str:
@@ -54,9 +56,16 @@ class SweepSpec:
     grid: dict[str, list[float]] = field(default_factory=dict)
     seeds: int = 1
     vehicle: str = "copter"
+    teams: list[int] = field(default_factory=lambda: [1])  # team sizes
+    targets: list[str] = field(default_factory=lambda: [""])  # tomography targets, one X,Y[;X,Y] per value
 
     def __post_init__(self):
         """Every run's inputs checked before any run starts, so a typo is not found in a worker, minutes in."""
+        for text in self.targets:
+            if text:
+                from vehicle.world.radio import parse_targets
+
+                parse_targets(text)
         for scene in self.scenes:
             if "@" in scene:
                 scene_start(scene)
@@ -70,9 +79,9 @@ class SweepSpec:
     def jobs(self) -> list[Job]:
         names = list(self.grid)
         combos = list(itertools.product(*(self.grid[n] for n in names))) or [()]
-        return [Job(scene, mission, tuple(zip(names, values, strict=True)), seed, self.vehicle)
+        return [Job(scene, mission, tuple(zip(names, values, strict=True)), seed, self.vehicle, team, targets)
                 for scene in self.scenes for mission in self.missions for values in combos
-                for seed in range(self.seeds)]
+                for team in self.teams for targets in self.targets for seed in range(self.seeds)]
 
 
 def scene_start(spec: str) -> tuple[float, float]:
@@ -115,9 +124,21 @@ def run_job(job: Job, map_out: str | None = None) -> dict:
     """One run of a sweep (a top-level function, so worker processes and Dask can call it)."""
     scene = _scene(job.scene_path)
     settings = load_settings(scene_hints=scene.hints).updated(dict(job.settings))
-    result = run_experiment(Experiment(job.scene_path, job.mission, job.vehicle, job.start, None, settings,
-                                       job.seed), scene=scene, map_out=map_out)
+    experiment = Experiment(job.scene_path, job.mission, job.vehicle, job.start, None, settings, job.seed)
+    if job.vehicles > 1 or job.targets or job.mission == "rti":
+        from vehicle.lab.tomograph import run_team_experiment
+
+        targets = []
+        if job.targets:
+            from vehicle.world.radio import parse_targets
+
+            targets = parse_targets(job.targets)
+        starts = [job.start] if job.start and job.vehicles == 1 else None
+        result = run_team_experiment(experiment, scene, job.vehicles, targets, starts)
+    else:
+        result = run_experiment(experiment, scene=scene, map_out=map_out)
     result["scene_spec"] = job.scene
+    result["targets_spec"] = job.targets
     result["swept"] = dict(job.settings)
     return result
 
@@ -151,30 +172,37 @@ def run_sweep(spec: SweepSpec, out: str | Path, workers: int | None = None, dask
     runner = run_dask(jobs, dask) if dask is not None else run_local(jobs, workers)
     results = list(tqdm(runner, total=len(jobs), desc="sweep", unit="run", disable=not progress))
     order = {job: index for index, job in enumerate(jobs)}  # results in the order of the spec
-    results.sort(key=lambda r: order[Job(r["scene_spec"], r["mission"], tuple(r["swept"].items()), r["seed"],
-                                         r["vehicle"])])
+    results.sort(key=lambda r: order[job_of(r)])
     write_csv(results, out / "results.csv")
     best = best_runs(results)
     (out / "best.md").write_text(markdown_table(best), encoding="utf-8")
     maps = out / "maps"
     for result in best.values():
-        job = Job(result["scene_spec"], result["mission"], tuple(result["swept"].items()), result["seed"],
-                  result["vehicle"])
-        run_job(job, map_out=str(maps))
+        job = job_of(result)
+        if job.vehicles == 1 and job.mission != "rti":  # a team's run draws no map
+            run_job(job, map_out=str(maps))
     return results
 
 
-FIELDS = ["mission", "scene", "vehicle", "seed", "version", "outcome", "reason", "detections", "cells_ever_hit",
-          "sim_time_s", "wall_time_s", "distance_m"]
+def job_of(result: dict) -> Job:
+    """The job a result came from."""
+    return Job(result["scene_spec"], result["mission"], tuple(result["swept"].items()), result["seed"],
+               result["vehicle"], result.get("team", 1), result.get("targets_spec", ""))
+
+
+FIELDS = ["mission", "scene", "vehicle", "team", "targets_spec", "seed", "version", "outcome", "reason", "detections",
+          "cells_ever_hit", "sim_time_s", "wall_time_s", "distance_m"]
+RTI_FIELDS = ["found", "found_s", "links_heard", "links_imaged"]  # of a tomography run (vehicle.lab.tomograph)
 
 
 def write_csv(results: list[dict], path: Path) -> None:
     setting_names = list(Settings.model_fields)
     with open(path, "w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        writer.writerow(["scene_spec", *FIELDS, *setting_names])
+        writer.writerow(["scene_spec", *FIELDS, *(f"rti_{f}" for f in RTI_FIELDS), *setting_names])
         for r in results:
-            writer.writerow([r["scene_spec"], *(r.get(f, "") for f in FIELDS),
+            rti = r.get("rti") or {}
+            writer.writerow([r["scene_spec"], *(r.get(f, "") for f in FIELDS), *(rti.get(f, "") for f in RTI_FIELDS),
                              *(r.get("settings", {}).get(n, "") for n in setting_names)])
 
 

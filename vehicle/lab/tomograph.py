@@ -1,0 +1,154 @@
+"""Scoring a radio tomography run: the links the team measured while it dwelt, imaged as the run goes, and how far
+each target lies from the image's nearest peak over time.
+
+Only the records measured while every radio stood at its spot are imaged (a record from a moving radio is a
+link of its own, seen once: it says little and every one of them would grow the solve). The empty-area levels
+come from a calibration capture of the same links with the targets away (``empty``): the plan does not depend
+on what the radios read, so a team that flies it once over the empty area stops at the same spots, and the
+simulation measures that capture beside the real one, at the same instants, with its own noise. The image is
+``vehicle.tomography.reconstruct`` over everything so far, at most one per ``every`` seconds, with as many peaks
+as there are targets: a target is found when a peak lies within ``FOUND_M`` of it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vehicle.tomography.imaging import reconstruct
+from vehicle.tomography.links import Records
+
+FOUND_M = 0.5  # m: a target this close to a peak is found
+EVERY = 5.0  # s of simulated time between two images
+
+
+def as_records(rows: list, name: str) -> Records:
+    """LinkRecords (t, tx, rx, tx_x, tx_y, rx_x, rx_y, rssi, channel) as the reconstruction's columns."""
+    if not rows:
+        return Records(name, np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64))
+    t, tx_x, tx_y, rx_x, rx_y, rssi, channel = (np.array([getattr(r, k) for r in rows], float) for k in
+                                                ("t", "tx_x", "tx_y", "rx_x", "rx_y", "rssi", "channel"))
+    return Records(name, t, np.column_stack([tx_x, tx_y]), np.column_stack([rx_x, rx_y]), rssi,
+                   channel.astype(np.int64))
+
+
+@dataclass
+class Tomograph:
+    targets: list[tuple[float, float]]
+    bounds: tuple[float, float, float, float]
+    every: float = EVERY
+    records: list = field(default_factory=list)
+    empty: list = field(default_factory=list)
+    heard: int = 0  # every record received, moving or not
+    frames: list[dict] = field(default_factory=list)  # {"t", "distances", "peaks"}
+    found_s: float | None = None
+    _last: float = -math.inf
+    _new: bool = False
+
+    def note(self, t: float, received: list, empty: list, still: bool) -> None:
+        """The records received in the step ending at ``t`` and their empty-area twins; ``still``: every radio
+        stood at its spot through it."""
+        self.heard += len(received)
+        if still and received:
+            self.records.extend(received)
+            self.empty.extend(empty)
+            self._new = True
+        if self._new and t - self._last >= self.every:
+            self.image(t)
+
+    def image(self, t: float) -> dict | None:
+        """Image what was kept so far; note each target's distance to the nearest peak."""
+        self._last, self._new = t, False
+        if len(self.records) < 2:
+            return None
+        result = reconstruct(as_records(self.records, "run"), calibration=as_records(self.empty, "empty"),
+                             bounds=self.bounds, peaks=len(self.targets))
+        peaks = result.frames[0]["peaks"]
+        distances = [min((math.dist(target, (p["x"], p["y"])) for p in peaks), default=math.inf)
+                     for target in self.targets]
+        frame = {"t": round(t, 2), "distances": [round(d, 3) if math.isfinite(d) else None for d in distances],
+                 "peaks": peaks, "paths": result.info["links"]["paths"]}
+        self.frames.append(frame)
+        if self.found_s is None and all(d <= FOUND_M for d in distances):
+            self.found_s = round(t, 2)
+        return frame
+
+    def result(self, t: float) -> dict:
+        """The run's figures: the last image's peaks and distances, when all were first found, the links."""
+        if self._new or not self.frames:
+            self.image(t)
+        last = self.frames[-1] if self.frames else {"distances": [None] * len(self.targets), "peaks": [], "paths": 0}
+        found = all(d is not None and d <= FOUND_M for d in last["distances"])
+        return {"targets": [list(p) for p in self.targets], "bounds": list(self.bounds),
+                "links_heard": self.heard, "links_imaged": len(self.records), "paths": last["paths"],
+                "peaks": last["peaks"], "distances_m": last["distances"], "found": found,
+                "found_s": self.found_s, "found_within_m": FOUND_M,
+                "over_time": [[f["t"], *f["distances"]] for f in self.frames]}
+
+
+RADIO_PERIOD = 0.1  # s of simulated time measured at once (a round of the radios' slots is shorter)
+NODE_IDS = 200  # fixed radio node k has the id NODE_IDS + k (vehicles keep their system ids)
+
+
+class RadioRun:
+    """The radios of a team's vehicles (and fixed nodes) measured beside its flight, and the tomograph fed: an
+    ``on_step`` for ``run_team``. Two channels with one model and scene: the targets' and the empty area's
+    (its own noise), measured at the same instants from the same positions."""
+
+    def __init__(self, scene, targets: list[tuple[float, float]], bounds, seed: int = 0,
+                 nodes: list[tuple[float, ...]] | None = None, model=None):
+        from vehicle.world.radio import RadioChannel, RadioModel
+
+        model = model or RadioModel()
+        self.channel = RadioChannel(scene, model, seed)
+        self.empty = RadioChannel(scene, model, seed + 7919)
+        self.targets = [tuple(t) for t in targets]
+        self.nodes = {NODE_IDS + k: (*p[:2], p[2] if len(p) > 2 else 1.0) for k, p in enumerate(nodes or [])}
+        self.tomograph = Tomograph(self.targets, tuple(bounds))
+        self._since = 0.0
+
+    def __call__(self, stepper) -> None:
+        now = stepper.team.time
+        if now - self._since < RADIO_PERIOD - 1e-9:
+            return
+        radios = {sysid: tuple(sim.body.pose.xyz()) for sysid, sim in zip(stepper.team.ids, stepper.team.simulations,
+                                                                           strict=True)}
+        radios.update(self.nodes)
+        received = self.channel.measure(self._since, now, radios, self.targets)
+        empty = self.empty.measure(self._since, now, radios, [])
+        self._since = now
+        self.tomograph.note(now, received, empty, all(dwelling(agent) for agent in stepper.agents))
+
+
+def dwelling(agent) -> bool:
+    """The agent's rti mission holds at its spot while the radios measure."""
+    from vehicle.agent.missions.rti import Phase
+
+    return agent.phase == "mission" and getattr(agent.mission, "phase", None) is Phase.DWELL
+
+
+def run_team_experiment(experiment, scene, count: int, targets: list[tuple[float, float]],
+                        starts: list[tuple[float, ...]] | None = None, ids: list[int] | None = None,
+                        nodes: list[tuple[float, ...]] | None = None, waypoints=None, model=None) -> dict:
+    """A team run (``run_team``), with radios measuring when the mission is rti or targets are given: the
+    result then has ``rti`` (``Tomograph.result``). Raises PlacementError (and ValueError) before anything flies."""
+    from vehicle.agent.missions.rti import region
+    from vehicle.lab.experiment import run_team
+    from vehicle.lab.stepper import simulate_team
+
+    settings = experiment.settings
+    stepper = simulate_team(scene, experiment.mission, count, experiment.vehicle, settings, starts, ids,
+                            [waypoints] * count if waypoints else None, seed=experiment.seed,
+                            suite=experiment.sensors, datum=experiment.datum)
+    radios = None
+    if experiment.mission == "rti" or targets:
+        home = stepper.team.simulations[0].home
+        radios = RadioRun(scene, targets, region(settings, scene, (home[0], home[1])), experiment.seed, nodes, model)
+        for controller in stepper.controllers:
+            controller.radio_nodes = [p[:2] for p in (nodes or [])]
+    result = run_team(experiment, stepper, radios)
+    if radios is not None:
+        result["rti"] = radios.tomograph.result(stepper.team.time)
+    return result
