@@ -105,3 +105,13 @@ def test_one_vehicle_alone_without_radio_nodes_says_why_it_cannot(flat_scene):
     (agent,) = stepper.agents
     assert agent.outcome == "stopped"
     assert agent.reason == "rti needs a team of two or more, or fixed radio nodes"
+
+
+def test_one_vehicle_with_fixed_radio_nodes_measures_its_links_to_them(flat_scene):
+    stepper = team(flat_scene, count=1, rti_rounds=3)
+    (agent,) = stepper.agents
+    stepper.controllers[0].radio_nodes = [(2.0, 7.0), (12.0, 7.0)]  # west and east of the region
+    fly(stepper, 300)
+    assert agent.outcome == "finished", agent.reason
+    assert agent.reason == "3 rounds measured, 6 links"
+    assert said(agent, "with vehicles 1 and 2 fixed radio nodes")
