@@ -3,7 +3,12 @@
 Each returns the vehicle's COMMAND_ACK result as a word ("accepted",
 "denied", ...) or raises ``LinkError`` when the vehicle never answered. What
 "stop" means depends on the vehicle: a rover holds, a copter brakes, a plane
-loiters.
+loiters. With an onboard agent, Pause, Take control and Continue go to the
+agent (DO_PAUSE_CONTINUE to component 191): it holds the vehicle and waits,
+or commands nothing more until handed back (then a goto goes to the
+autopilot). ``refusal`` refuses before sending what cannot mean what its
+name says (a resume of a mission that runs), and ``explain`` puts every
+answer but "accepted" into words a person can act on.
 """
 
 from __future__ import annotations
@@ -22,7 +27,14 @@ from vehicle.protocol.mav import AUTOPILOT, COMPANION, mavlink
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, number_of
 
 Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed",
-                 "auto"]
+                 "auto", "pause", "continue", "take_control"]
+WHY = {  # what a refusal means, when the vehicle said nothing more
+    "denied": "the vehicle refused it in its present state",
+    "temporarily rejected": "the vehicle cannot do it just now (busy, or not ready): try again in a moment",
+    "unsupported": "this vehicle does not know this command",
+    "failed": "the vehicle tried and failed",
+    "cancelled": "the vehicle cancelled it",
+}
 GOTO_REACH = 1000.0  # m from home a goto may go when neither the vehicle's map nor a scene bounds its space
 SCENE_MARGIN = 20.0  # m beyond the scene's bounds a goto may go
 PROBE_ABOVE = 0.5  # m above the vehicle's height (a rover's: its ground) where a goto's target is looked at
@@ -133,6 +145,57 @@ def solid_at(scene, x: float, y: float, z: float) -> str | None:
     return names[index] if index < len(names) and names[index] else f"shape {index}"
 
 
+def agent_of(vehicle: VehicleState, now: float):
+    """The onboard agent's status when one speaks for the vehicle (on a companion, heard lately), else None."""
+    return vehicle.agent if vehicle.agent is not None and vehicle.has_companion(now) else None
+
+
+def refusal(vehicle: VehicleState, command: Command, now: float) -> str | None:
+    """Why the command is refused before anything is sent because it cannot do what its name says, or None."""
+    agent = agent_of(vehicle, now)
+    action = command.action
+    if action == "resume" and agent is not None and agent.state == "running":
+        return ("the agent's mission is already running: there is nothing to resume. Pause holds it where it is; "
+                "Take control hands it to you")
+    if action == "take_control" and agent is None:
+        return "no onboard agent commands this vehicle: you have control already"
+    if action == "continue" and agent is not None and not agent.paused:
+        return f"the agent's mission is {agent.state}, not paused: there is nothing to continue"
+    return None
+
+
+def note(vehicle: VehicleState, command: Command, now: float) -> str | None:
+    """What an accepted command did that its answer alone does not say, in words."""
+    agent = agent_of(vehicle, now)
+    if _takes_control(vehicle, command, now):
+        return ("the agent stopped and handed you control: the vehicle holds in GUIDED until you send it "
+                "somewhere (Go here) or hand back (Continue)")
+    if command.action == "take_control":
+        return "the agent holds the vehicle and commands nothing more until you hand back (Continue)"
+    if command.action == "pause":
+        return "the vehicle holds where it is; Continue resumes the mission" if agent is not None else None
+    return None
+
+
+def _takes_control(vehicle: VehicleState, command: Command, now: float) -> bool:
+    """GUIDED while the agent flies its mission (in GUIDED already: the mode alone would change nothing) takes
+    control from the agent first."""
+    agent = agent_of(vehicle, now)
+    return (command.action == "set_mode" and command.mode.upper() == "GUIDED" and agent is not None
+            and agent.state == "running")
+
+
+def explain(result: str, said: list[str]) -> str | None:
+    """Why a command was not accepted, in words: what the vehicle said about it (``said``: its warnings since
+    the command went), else what its answer means. None when accepted."""
+    if result == "accepted":
+        return None
+    if said:
+        return "; ".join(said[-2:])
+    word = result.split(" (")[0]
+    return WHY.get(word, f"the vehicle answered {result}")
+
+
 def fly_mission(link: Link, vehicle: VehicleState, set_mode) -> str:
     """The autopilot's own mission, in AUTO: armed first if it is not (a copter in GUIDED, as ArduPilot arms in
     no AUTO), then AUTO and MISSION_START to the autopilot, never to an agent. The first answer that is not
@@ -151,6 +214,11 @@ def fly_mission(link: Link, vehicle: VehicleState, set_mode) -> str:
     return "accepted"
 
 
+def _agent_flies(vehicle: VehicleState, now: float) -> bool:
+    """An onboard agent flies a goto (planned round what its map knows) unless the operator took control."""
+    return vehicle.has_companion(now) and not (vehicle.agent is not None and vehicle.agent.operator == "control")
+
+
 def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | None, now: float) -> str:
     """``now``: the receiver's clock, to tell whether the vehicle's companion is still heard."""
     sysid = vehicle.sysid
@@ -166,6 +234,10 @@ def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | 
         return set_mode(STOP_MODE.get(vehicle.kind, "LOITER"))
     if action == "rtl":
         return set_mode("RTL")
+    if action == "set_mode" and _takes_control(vehicle, command, now):
+        taken = link.command(sysid, mavlink.MAV_CMD_DO_PAUSE_CONTINUE, 0.0, 1.0, component=COMPANION)
+        if taken != "accepted":
+            return f"{taken} (take control)"
     if action == "set_mode":
         return set_mode(command.mode)
     if action == "land":
@@ -176,6 +248,11 @@ def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | 
         return link.command(sysid, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0, FORCE_DISARM)
     if action == "takeoff":
         return link.command(sysid, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, command.altitude)
+    if action in ("pause", "continue", "take_control"):  # to the agent if one flies, else to the autopilot
+        to_agent = action == "take_control" or (vehicle.has_companion(now) and vehicle.agent is not None)
+        params = {"pause": (0.0, 0.0), "take_control": (0.0, 1.0), "continue": (1.0, 0.0)}[action]
+        return link.command(sysid, mavlink.MAV_CMD_DO_PAUSE_CONTINUE, *params,
+                            component=COMPANION if to_agent else AUTOPILOT)
     if action == "resume":
         if vehicle.has_companion(now):  # its agent on a companion computer: to the autopilot this would start AUTO
             return link.command(sysid, mavlink.MAV_CMD_MISSION_START, component=COMPANION)
@@ -192,5 +269,5 @@ def execute(link: Link, vehicle: VehicleState, command: Command, datum: Datum | 
         return link.command_int(sysid, mavlink.MAV_CMD_DO_REPOSITION, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
                                 [-1, mavlink.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 0, float("nan")],
                                 int(round(lat * 1e7)), int(round(lon * 1e7)), float("nan"),
-                                component=COMPANION if vehicle.has_companion(now) else AUTOPILOT)
+                                component=COMPANION if _agent_flies(vehicle, now) else AUTOPILOT)
     raise ValueError(f"unknown action {action}")

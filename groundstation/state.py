@@ -66,6 +66,7 @@ SEVERE = mavlink.MAV_SEVERITY_WARNING  # this severity or worse is shown as a ba
 OWN_SYSID = 255  # this station's system id (the link's)
 FALL_FROM = 1.0  # m above home: a copter disarmed higher falls (a kill's fall is a crash)
 LANDED_BELOW = 0.3  # m above home: a falling copter is down
+STILL = 0.2  # m/s of descent: a falling copter slower than this has come to rest
 ORDERED_WITHIN = 5.0  # s after this station's order (or the companion's) a mode change is taken as its doing
 # (a mode other than the one it named is not)
 MAX_STATIONS = 16  # other ground stations remembered
@@ -168,7 +169,8 @@ class VehicleState:
     ordered: tuple[float, int | None] = (-math.inf, None)  # when this station or the companion last ordered a
     # mode change, and the mode (custom_mode) if the order named one
     version: int = 0  # bumps on every change, for views that redraw
-    falling: tuple[float, float, float] | None = None  # a fall after a disarm in the air: from (m), since, fastest
+    aloft: tuple[float, float] = (0.0, 0.0)  # height at the last armed heartbeat (m), fastest descent since (m/s)
+    falling: tuple[float, float] | None = None  # a fall after a disarm in the air: from (m), fastest descent (m/s)
     crash: tuple[float, str] | None = None  # the last crash or fall: when (receiver clock), what
 
     @property
@@ -407,9 +409,12 @@ class Fleet:
                 self.history.event(vehicle.sysid, now, "mode", f"mode {vehicle.mode} → {mode}", 5)
             if armed != vehicle.armed:
                 self.history.event(vehicle.sysid, now, "armed", "armed" if armed else "disarmed", 5)
-            if vehicle.armed and not armed and vehicle.kind == "copter" and (vehicle.alt or 0.0) > FALL_FROM:
-                vehicle.falling = (vehicle.alt, now, 0.0)
-                self._crash(vehicle, now, f"disarmed in the air at {vehicle.alt:.1f} m above home: falling")
+            start, descent = vehicle.aloft
+            if vehicle.armed and not armed and vehicle.kind == "copter" and start > FALL_FROM:
+                vehicle.falling = (start, descent)
+                self._crash(vehicle, now, f"disarmed in the air at {start:.1f} m above home: falling")
+        if armed:
+            vehicle.aloft = (vehicle.alt or 0.0, 0.0)
         vehicle.armed = armed
         vehicle.mode = mode
         if changed:
@@ -453,16 +458,20 @@ class Fleet:
         self._extend_trail(vehicle)
 
     def _fall(self, vehicle, now: float) -> None:
-        """A copter that fell after a disarm in the air: its impact, once it is down, is an event too."""
+        """A copter that fell after a disarm in the air (heard at the next heartbeat, a second later, when it
+        may be down already): its impact, once it stops falling, is an event too."""
+        if vehicle.armed:
+            start, descent = vehicle.aloft
+            vehicle.aloft = (start, max(descent, -vehicle.climb))
         if vehicle.falling is None:
             return
-        start, when, fastest = vehicle.falling
+        start, fastest = vehicle.falling
         fastest = max(fastest, -vehicle.climb)
-        vehicle.falling = (start, when, fastest)
-        if vehicle.alt <= LANDED_BELOW:
+        vehicle.falling = (start, fastest)
+        if vehicle.climb > -STILL or vehicle.alt <= LANDED_BELOW:
             vehicle.falling = None
-            self._crash(vehicle, now, f"crashed: fell {start - vehicle.alt:.1f} m in {now - when:.1f} s, "
-                                      f"hitting the ground at {fastest:.1f} m/s")
+            self._crash(vehicle, now, f"crashed: fell {start - vehicle.alt:.1f} m, hitting the ground at "
+                                      f"{fastest:.1f} m/s")
 
     def _crash(self, vehicle, now: float, text: str) -> None:
         vehicle.crash = (now, text)
@@ -582,9 +591,11 @@ class Fleet:
                      "mavlink": v.mavlink_version, "signed": v.signed},
             "mission": {"current": v.mission_current, "total": v.mission_total, "reached": v.mission_reached},
             "status": v.status,
+            "status_age": _round(now - v.messages[-1]["time"], 1) if v.messages else None,
             "agent": None if v.agent is None else {
                 "state": v.agent.state, "phase": v.agent.phase, "paused": v.agent.paused, "outcome": v.agent.outcome,
-                "mission": v.agent.mission, "reason": v.agent.reason, "companion": v.has_companion(now)},
+                "mission": v.agent.mission, "reason": v.agent.reason, "companion": v.has_companion(now),
+                "operator": v.agent.operator},
             "home": None if v.home is None else {"x": _round(v.home[0]), "y": _round(v.home[1])},
             "time_boot_s": _round(v.time_boot_s, 3),
             "messages": list(v.messages)[-20:],

@@ -232,16 +232,22 @@ function describeResult({ status, data, error }) {
   if (status === 504) return { text: "timeout", cls: "bad" };
   if (status >= 200 && status < 300) {
     const result = data && typeof data.result === "string" ? data.result : "done";
-    return { text: result, cls: RESULT_CLASS[result] || (result === "done" ? "ok" : "bad") };
+    const cls = RESULT_CLASS[result] || (result === "done" ? "ok" : "bad");
+    const why = data && (data.reason || data.note);  // a refusal's reason, or what an accepted command did
+    return { text: why ? `${result}: ${why}` : result, cls };
   }
   const extra = data && data.detail ? `: ${detailText(data)}` : "";
   return { text: `error ${status}${extra}`, cls: "bad" };
 }
 
+const REPLY_FADES_MS = 20000;  // a reply this old is shown faded: it no longer says what the vehicle is doing
+
 export function showAck(ackEl, label, text, cls) {
   ackEl.className = `ack ${cls}`;
   const time = new Date().toLocaleTimeString([], { hour12: false });
   ackEl.textContent = cls === "pending" ? `${label}: ${text}` : `${label}: ${text} · ${time}`;
+  clearTimeout(ackEl._fade);
+  if (cls !== "pending") ackEl._fade = setTimeout(() => ackEl.classList.add("stale"), REPLY_FADES_MS);
 }
 
 /**

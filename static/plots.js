@@ -7,7 +7,8 @@
 import { $, EVENTS, REPLAY_SIGN_IN_HINT, api, el, fmt, getJson, isNum, on } from "./common.js";
 
 const POLL_MS = 2000;
-const KINDS = new Set(["mode", "armed", "command", "ack", "message", "agent"]);
+const KINDS = new Set(["mode", "armed", "command", "ack", "message", "agent", "crash"]);
+const LOG_SHOWN = 300;  // events in the log below the plot, newest first
 
 const canvas = $("#plot");
 const ctx = canvas.getContext("2d");
@@ -144,13 +145,42 @@ function draw() {
   $("#plot-value").textContent = isNum(current) ? `${fmt(current)}${unit}` : "";
 }
 
+/** The events the filters let through: at most the chosen severity (an event without one counts as info, 6), from
+ * a source that is ticked. */
+function filtered(events) {
+  const worst = Number($("#event-severity").value);
+  const sources = new Set([...document.querySelectorAll(".event-source:checked")].map((box) => box.value));
+  return events.filter((e) => e && isNum(e.t) && (isNum(e.severity) ? e.severity : 6) <= worst
+    && sources.has(e.source || "autopilot"));
+}
+
+function renderLog(events) {
+  const list = $("#event-log");
+  list.replaceChildren(...events.slice(-LOG_SHOWN).reverse().map((e) => {
+    const level = isNum(e.severity) ? (e.severity <= 3 ? "severe" : e.severity <= 4 ? "warning" : "") : "";
+    const li = el("li", level);
+    li.dataset.source = e.source || "autopilot";
+    li.append(el("time", "msg-time", `${fmt(e.t - origin)} s`), el("span", "event-source-tag", li.dataset.source),
+      el("span", "msg-text", String(e.text ?? "")));
+    return li;
+  }));
+  if (!events.length) list.append(el("li", "none", "no events match"));
+  const counted = history && Array.isArray(history.counted) ? history.counted : [];
+  $("#event-counted").textContent = counted.length ? `Counted, not listed: ${counted.map((c) =>
+    `${c.text} × ${c.count} (${c.source})`).join(", ")}` : "";
+}
+
 function renderEvents() {
   const box = $("#plot-events");
-  const events = history && Array.isArray(history.events) ? history.events : [];
-  const key = JSON.stringify([span, origin, events.length, events.length && events[events.length - 1].t]);
+  const all = history && Array.isArray(history.events) ? history.events : [];
+  const events = filtered(all);
+  const key = JSON.stringify([span, origin, all.length, all.length && all[all.length - 1].t, $("#event-severity").value,
+    [...document.querySelectorAll(".event-source:checked")].map((b) => b.value),
+    history && Array.isArray(history.counted) ? history.counted.map((c) => c.count) : []]);
   if (box.dataset.key === key) return;
   box.dataset.key = key;
-  box.replaceChildren(...events.filter((e) => e && isNum(e.t)).map((e) => {
+  renderLog(events);
+  box.replaceChildren(...events.map((e) => {
     const at = (e.t - origin - span[0]) / (span[1] - span[0]);
     const marker = el("button");
     marker.type = "button";
@@ -183,6 +213,9 @@ canvas.addEventListener("click", (event) => {
   seek(span[0] + ((event.clientX - rect.left) / rect.width) * (span[1] - span[0]));
 });
 $("#plot-field").addEventListener("change", draw);
+for (const control of [$("#event-severity"), ...document.querySelectorAll(".event-source")]) {
+  control.addEventListener("change", renderEvents);
+}
 window.addEventListener("resize", draw);
 on(EVENTS.selected, () => {
   history = null;

@@ -1,14 +1,17 @@
 // A card per vehicle: its mode, the onboard agent's state, position, speed, heading, battery, link, mission,
-// map, clock and last messages, with its commands (Abort, Return home, GUIDED, Resume, Arm, Land, Take off,
-// Kill). Cards follow the status frames ("station-status"); commands need the operator's token and live mode.
+// map, clock and last messages, with its commands (Abort, Return home, GUIDED, Resume, Pause, Continue, Take
+// control, Arm, Land, Take off, Kill). Cards follow the status frames ("station-status"); commands need the
+// operator's token and live mode. Kill is pressed and held (KILL_HOLD_MS): let go sooner and the card says it
+// was not sent. A reply fades once REPLY_FADES_MS old, and the last message line once STATUS_FADES_S old.
 
 import {
   $, EVENTS, batteryText, commandBlocker, el, fmt, isNum, on, postWithAck, setEnabled, setText, showAck, showHint,
   vehicleName,
 } from "./common.js";
 
-const KILL_CONFIRM_MS = 5000;
+const KILL_HOLD_MS = 1500;
 const MAX_MESSAGES = 5;
+const STATUS_FADES_S = 30;  // s after which the last message line is shown faded
 const BATTERY_LOW = 20;  // % left at or below which a vehicle's battery is shown as low
 
 // What each vehicle button sends. `body(card)` builds the JSON for POST .../commands.
@@ -21,13 +24,19 @@ const ACTIONS = {
             body: () => ({ action: "set_mode", mode: "GUIDED" }) },
   resume: { label: "AUTO / Resume", help: "Resume the mission",
             body: () => ({ action: "resume" }) },
+  pause: { label: "Pause", help: "Hold where it is; an onboard agent pauses its mission until Continue",
+           body: () => ({ action: "pause" }) },
+  continue: { label: "Continue", help: "Resume the paused mission (or hand control back to the agent)",
+              body: () => ({ action: "continue" }) },
+  take_control: { label: "Take control", help: "The agent holds the vehicle and commands nothing until you hand back",
+                  body: () => ({ action: "take_control" }) },
   arm: { label: "Arm", help: "Arm the motors",
          body: () => ({ action: "arm" }) },
   takeoff: { label: "Take off", help: "Take off to the altitude on the right",
              body: (card) => ({ action: "takeoff", altitude: takeoffAltitude(card) }) },
   land: { label: "Land", help: "Land where the vehicle is",
           body: () => ({ action: "land" }) },
-  kill: { label: "Kill", help: "Stop the motors at once (a flying copter falls). Click twice to confirm.",
+  kill: { label: "Kill", help: "Stop the motors at once (a flying copter falls). Press and hold 1.5 s to send.",
           body: () => ({ action: "kill", confirm: true }) },
 };
 
@@ -62,20 +71,31 @@ function takeoffAltitude(card) {
 function resetKill(button) {
   clearTimeout(button._killTimer);
   button._killTimer = null;
+  button._killStart = null;
   button.classList.remove("confirming");
   setText(button, ACTIONS.kill.label);
 }
 
-/** Kill is irreversible in the air: the first click only arms a 5 s confirmation. */
-function onKillClick(card, button) {
-  if (!button._killTimer) {
-    button.classList.add("confirming");
-    button.textContent = "Confirm kill?";
-    button._killTimer = setTimeout(() => resetKill(button), KILL_CONFIRM_MS);
-    return;
-  }
+/** Kill is irreversible in the air: it is sent only once held for KILL_HOLD_MS (pointer, Space or Enter). */
+function startKillHold(card, button) {
+  if (button.disabled || button._killTimer) return;
+  button._killStart = performance.now();
+  button.classList.add("confirming");
+  button.style.setProperty("--hold-ms", `${KILL_HOLD_MS}ms`);
+  button.textContent = "Keep holding to kill…";
+  button._killTimer = setTimeout(() => {
+    resetKill(button);
+    sendCommand(card, "kill");
+  }, KILL_HOLD_MS);
+}
+
+/** Let go before the hold is complete: nothing is sent, and the card says so. */
+function endKillHold(card, button) {
+  if (!button._killTimer) return;
+  const held = (performance.now() - button._killStart) / 1000;
   resetKill(button);
-  sendCommand(card, "kill");
+  showAck(card.querySelector(".ack"), ACTIONS.kill.label,
+    `not sent: released after ${held.toFixed(1)} s; hold ${KILL_HOLD_MS / 1000} s to kill`, "warn");
 }
 
 function sendCommand(card, action) {
@@ -97,13 +117,32 @@ function createCard(sysid) {
   commands.setAttribute("aria-label", `Commands for vehicle ${sysid}`);
   commands.addEventListener("click", (event) => {
     const button = event.target.closest("button[data-action]");
-    if (!button || button.disabled) return;
-    if (button.dataset.action === "kill") onKillClick(card, button);
-    else sendCommand(card, button.dataset.action);
+    if (!button || button.disabled || button.dataset.action === "kill") return;
+    sendCommand(card, button.dataset.action);
   });
-  // Escape backs out of a pending kill confirmation.
+  const kill = card.querySelector('[data-action="kill"]');
+  kill.addEventListener("pointerdown", (event) => {
+    if (kill.hasPointerCapture && event.pointerId !== undefined) {
+      try { kill.setPointerCapture(event.pointerId); } catch { /* a synthetic event has no pointer to capture */ }
+    }
+    startKillHold(card, kill);
+  });
+  // let go, or the button loses the pointer or the focus: the hold ends, and nothing is sent
+  for (const name of ["pointerup", "pointercancel", "lostpointercapture", "blur"]) {
+    kill.addEventListener(name, () => endKillHold(card, kill));
+  }
+  kill.addEventListener("keydown", (event) => {
+    if ((event.key === " " || event.key === "Enter") && !event.repeat) {
+      event.preventDefault();
+      startKillHold(card, kill);
+    }
+  });
+  kill.addEventListener("keyup", (event) => {
+    if (event.key === " " || event.key === "Enter") endKillHold(card, kill);
+  });
+  // Escape backs out of a kill being held.
   card.addEventListener("keydown", (event) => {
-    if (event.key === "Escape") resetKill(card.querySelector('[data-action="kill"]'));
+    if (event.key === "Escape") endKillHold(card, kill);
   });
   updateCardControls(card);
   return card;
@@ -175,6 +214,13 @@ function renderAgent(card, agent) {
   badge.title = reason ? `onboard mission ${state}: ${reason}` : `onboard mission ${state}`;
   const where = agent.companion ? "companion" : "onboard";
   setText(line, `${agent.mission ?? "?"} ${state}${reason ? ` (${reason})` : ""} · ${agent.phase ?? "?"} · ${where}`);
+  // Who commands: the card says so while the operator holds the agent, and Continue names what it does
+  const control = card.querySelector(".control-banner");
+  const held = agent.operator === "control" ? "You have control: the agent commands nothing until you hand back."
+    : agent.operator === "pause" ? "Paused by you: the vehicle holds here until Continue." : "";
+  control.hidden = !held;
+  setText(control, held);
+  setText(card.querySelector('[data-action="continue"]'), agent.operator === "control" ? "Hand back" : "Continue");
 }
 
 function renderCard(card, v) {
@@ -214,7 +260,12 @@ function renderCard(card, v) {
     `${other.last}, ${fmt(other.age)} s ago` : "");
 
   setText(card.querySelector(".progress-item"), progressText(v.mission));
-  setText(card.querySelector(".progress-status"), v.status ? String(v.status) : "");
+  const status = card.querySelector(".progress-status");
+  setText(status, v.status ? String(v.status) : "");
+  status.classList.toggle("stale", isNum(v.status_age) && v.status_age > STATUS_FADES_S);
+  const crash = card.querySelector(".crash-banner");
+  crash.hidden = !v.crash;
+  setText(crash, v.crash ? `CRASH: ${v.crash.text} (${fmt(v.crash.age)} s ago)` : "");
   setText(card.querySelector(".map"), mapText(v.map));
   setText(card.querySelector(".sim-time"), isNum(v.time_boot_s) ? `t = ${fmt(v.time_boot_s)} s` : "–");
   renderMessages(card.querySelector(".messages"), v.messages);
@@ -223,6 +274,7 @@ function renderCard(card, v) {
 function renderVehicles(vehicles) {
   const container = $("#vehicles");
   const seen = new Set();
+  let previous = null;
   for (const v of vehicles) {
     const key = String(v.sysid);
     seen.add(key);
@@ -232,7 +284,10 @@ function renderVehicles(vehicles) {
       cards.set(key, card);
     }
     renderCard(card, v);
-    container.append(card);  // append moves existing cards into sorted order (no-op if in place)
+    // into sorted order, moved only when out of place: a moved card loses the keyboard's focus (a Kill held)
+    const next = previous ? previous.nextElementSibling : container.firstElementChild;
+    if (next !== card) container.insertBefore(card, next);
+    previous = card;
   }
   for (const [key, card] of cards) {
     if (!seen.has(key)) {

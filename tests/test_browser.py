@@ -55,7 +55,7 @@ FLYER = 1  # system id of the copter that flies the search mission all along
 SIGN_IN_HINT = "Sign in with the operator token to command vehicles"
 REPLAY_HINT = "Commands are disabled in replay"
 UI_TIMEOUT = 20_000  # ms, for the page to show what the stream (4 frames/s) already carries
-ACTIONS = ["abort", "rtl", "guided", "resume", "arm", "land", "takeoff", "kill"]
+ACTIONS = ["abort", "rtl", "guided", "resume", "pause", "continue", "take_control", "arm", "land", "takeoff", "kill"]
 
 expect.set_options(timeout=UI_TIMEOUT)
 
@@ -334,7 +334,7 @@ def test_token_in_the_url_signs_in(browser_page, station, flyer):
     assert page.evaluate("localStorage.getItem('scanstation.token')") == TOKEN  # remembered for the next visit
 
 
-def test_kill_needs_a_second_click(browser_page, station, copters):
+def test_kill_is_pressed_and_held(browser_page, station, copters):
     sysid = 3
     copters(sysid)
     assert station.http.result(sysid, action="arm") == "accepted"
@@ -344,15 +344,22 @@ def test_kill_needs_a_second_click(browser_page, station, copters):
     kill = card.locator('button[data-action="kill"]')
     expect(kill).to_be_enabled()
 
-    press(kill)
-    expect(kill).to_have_text("Confirm kill?")
+    press(kill)  # a click is no kill: it must be held
+    kill.focus()
+    page = kill.page
+    page.keyboard.down(" ")
+    expect(kill).to_have_text("Keep holding to kill…")
     expect(kill).to_have_class(re.compile(r"\bconfirming\b"))
-    browser_page.settle()  # the first click's handler has run (it asked to confirm): nothing was sent
+    page.keyboard.up(" ")  # let go at once: nothing sent, and the card says so (before, a 5 s window lapsed silently)
+    expect(card.locator(".ack")).to_have_text(re.compile(r"^Kill: not sent: released after \d\.\d s"))
+    browser_page.settle()
     assert browser_page.commands == []
     assert station.http.vehicle(sysid)["armed"] is True
     expect(card.locator(".armed")).to_have_text("ARMED")
 
-    press(kill)
+    page.keyboard.down(" ")
+    page.wait_for_timeout(2000)  # held past its 1.5 s
+    page.keyboard.up(" ")
     expect(card.locator(".ack")).to_have_text(re.compile(r"^Kill: accepted"))
     assert browser_page.commands == [f"{station.base}/api/vehicles/{sysid}/commands"]
     wait_sim(station, sysid, lambda v: v["armed"] is False, 5, "disarmed by the kill")

@@ -170,7 +170,7 @@ def test_a_command_with_a_number_no_mode_has_is_shown_as_sent_and_raises_nothing
              send(mavlink.MAVLink_command_int_message(SYSID, 1, 0, command, 0, 0, custom, value, value, value,
                                                       0, 0, value)),
              send(mavlink.MAVLink_command_int_message(SYSID, 1, 0, command, 0, 0, *[value] * 4, 0, 0, value)))
-    texts = [e.text for e in fleet.history.of(SYSID).events if e.kind == "command"]
+    texts = [e["text"] for e in fleet.history.of(SYSID).as_json()["events"] if e["kind"] == "command"]
     assert texts[:2] == [f"sent DO_SET_MODE {shown}", "sent DO_SET_MODE"]
     assert texts.count(f"sent DO_SET_MODE {shown}") == 2  # by COMMAND_LONG and by COMMAND_INT
     hear(fleet, 9.0, send(mavlink.MAVLink_command_long_message(SYSID, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, custom,
@@ -183,5 +183,6 @@ def test_a_command_naming_a_mode_still_shows_and_orders_it(fleet):
     hear(fleet, 0.0, autopilot(heartbeat(mode=4)))
     hear(fleet, 1.0, station(255)(mavlink.MAVLink_command_long_message(
         SYSID, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6.0, 0, 0, 0, 0, 0)))
-    assert [e.text for e in fleet.history.of(SYSID).events if e.kind == "command"] == ["sent DO_SET_MODE RTL"]
+    events = fleet.history.of(SYSID).as_json()["events"]
+    assert [e["text"] for e in events if e["kind"] == "command"] == ["sent DO_SET_MODE RTL"]
     assert fleet.get(SYSID).ordered == (1.0, 6)

@@ -105,10 +105,17 @@ def test_a_fall_after_a_kill_in_the_air_is_a_crash():
                             int(alt * 1000), 0, 0, int(vz * 100), 0), t)
 
     position(4.0, 0.0, 100.5)
-    fleet.apply(heartbeat(4, False), 101.0)  # killed at 4 m
-    for i, alt in enumerate((3.5, 2.0, 0.1)):
-        position(alt, 3.0 + 3 * i, 101.2 + 0.2 * i)
+    fleet.apply(heartbeat(4, True), 101.0)
+    position(3.5, 3.0, 101.2)  # killed at 4 m: the heartbeat that says so comes a second later
+    position(2.0, 6.0, 101.4)
+    fleet.apply(heartbeat(4, False), 101.5)
+    position(0.4, 9.0, 101.6)
+    assert fleet.vehicles[1].falling is not None
+    position(0.35, 0.0, 101.8)  # at rest, on something a little higher than home
     crashes = [(e["text"], e["severity"]) for e in fleet.history.of(1).as_json()["events"] if e["kind"] == "crash"]
     assert crashes == [("disarmed in the air at 4.0 m above home: falling", 2),
-                       ("crashed: fell 3.9 m in 0.6 s, hitting the ground at 9.0 m/s", 2)]
-    assert fleet.describe(fleet.vehicles[1], 102.0)["crash"]["text"].startswith("crashed: fell 3.9 m")
+                       ("crashed: fell 3.6 m, hitting the ground at 9.0 m/s", 2)]
+    assert fleet.describe(fleet.vehicles[1], 102.0)["crash"]["text"].startswith("crashed: fell 3.6 m")
+    fleet.apply(heartbeat(4, True), 110.0)  # armed on the ground and disarmed there: no crash
+    fleet.apply(heartbeat(4, False), 111.0)
+    assert len([e for e in fleet.history.of(1).as_json()["events"] if e["kind"] == "crash"]) == 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import time
 from typing import TYPE_CHECKING
 
@@ -9,7 +10,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import PlainTextResponse
 
 from groundstation.api.common import log
-from groundstation.commands import Command, blocked, execute, outside_space
+from groundstation.commands import Command, blocked, execute, explain, note, outside_space, refusal
 from groundstation.link import LinkError
 from vehicle.protocol.waypoints import WaypointError, mission_text, parse_mission
 
@@ -18,6 +19,8 @@ if TYPE_CHECKING:
     from groundstation.server import GroundStation
 
 MAX_HISTORY = 3000  # samples per vehicle in a history or timeline answer
+SAID_WITHIN = 0.3  # s after a refusal its reason (a STATUSTEXT) is waited for
+SAYS_WHY = 4  # MAV_SEVERITY_WARNING: a vehicle's message this severe, or worse, after a refusal says why
 
 
 def routes(station: GroundStation, guards: Guards) -> APIRouter:
@@ -53,20 +56,33 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
                             404: {"description": "no such vehicle"},
                             409: {"description": "replaying"}, 504: {"description": "the vehicle did not answer"}})
     async def command(sysid: int, body: Command):
-        """Send a command; answers with the vehicle's COMMAND_ACK result."""
+        """Send a command; answers with the vehicle's COMMAND_ACK result, and with anything but "accepted" the
+        ``reason`` in words (what the vehicle said about it, or what its answer means); an accepted command
+        whose answer alone does not say what happened has a ``note``. A command that cannot do what its name
+        says (a resume of a mission that runs) is "refused" with the reason, and nothing is sent."""
         guards.live_only()
         v = guards.vehicle_or_404(sysid)
         if body.action == "goto":
-            refusal = (outside_space(station.fleet, v, body.x, body.y, station.scene)
+            refused = (outside_space(station.fleet, v, body.x, body.y, station.scene)
                        or blocked(station.fleet, v, body.x, body.y, station.scene))
-            if refusal:
-                raise HTTPException(422, refusal)
+            if refused:
+                raise HTTPException(422, refused)
+        sent = time.time()
+        refused = refusal(v, body, sent)
+        if refused:
+            return {"action": body.action, "result": "refused", "reason": refused}
+        before = note(v, body, sent)  # what the agent was doing when it was sent
         try:
-            result = await guards.exchange(execute, station.link, v, body, station.fleet.datum, time.time())
+            result = await guards.exchange(execute, station.link, v, body, station.fleet.datum, sent)
         except LinkError as error:
             raise HTTPException(504, str(error)) from None
         log.info("vehicle %s: %s -> %s", sysid, body.action, result)
-        return {"action": body.action, "result": result}
+        if result == "accepted":
+            return {"action": body.action, "result": result, **({"note": before} if before else {})}
+        await asyncio.sleep(SAID_WITHIN)  # a refusal's reason comes in a STATUSTEXT just after its ACK
+        with station.fleet.lock:
+            said = [m["text"] for m in v.messages if m["time"] >= sent and m["severity"] <= SAYS_WHY]
+        return {"action": body.action, "result": result, "reason": explain(result, said)}
 
     @router.get("/api/vehicles/{sysid}/mission", tags=["missions"], response_class=PlainTextResponse)
     async def get_mission(sysid: int):

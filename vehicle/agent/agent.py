@@ -69,6 +69,8 @@ class Agent:
         self.reason = ""
         self.paused = False
         self.pause_reason = ""
+        self.operator = ""  # "pause" (the operator's Pause) or "control" (the operator took control) while paused
+        self._hold_due = False  # the operator's Pause or Take control: hold at the next step
         self.mission_began = False  # the mission itself started (after the take-off), once at least
         self._until: Callable[[], str | None] | None = None  # a passing pause's end, in words once it is over
         self._paused_since: float | None = None  # when the mission's clock stopped for a pause
@@ -99,6 +101,8 @@ class Agent:
             self.outcome, self.reason, self._travel = None, "", None
         self.paused = False
         self.pause_reason = ""
+        self.operator = ""
+        self._hold_due = False
         self._until = None
         self._errand = None
         self._paused_since = None
@@ -107,10 +111,42 @@ class Agent:
         self.fc.took_over()  # what the operator did to get here (GUIDED, arm) is no takeover
         return True
 
+    def hold_for_operator(self, control: bool) -> str | None:
+        """The operator's Pause (``control`` False: hold where it is, Continue resumes) or Take control (the agent
+        holds the vehicle once, then commands nothing until handed back). Why not, or None."""
+        wanted = "control" if control else "pause"
+        if self.phase in (Phase.WAITING, Phase.DONE):
+            state = "waiting for a start" if self.phase is Phase.WAITING else f"{self.outcome or 'ended'}"
+            return f"the agent's mission is not running ({state}): nothing to {'take over' if control else 'pause'}"
+        if self.paused and self.operator == wanted:
+            return "the operator has control already" if control else "the mission is paused already"
+        if self._errand is not None:
+            self._errand = None
+            self.ctx.planned_path = []
+        self._stop_clock()
+        self.paused = True
+        self.operator = wanted
+        self._until = None
+        self._hold_due = True
+        self.pause_reason = ("the operator has control: the agent commands nothing until handed back" if control
+                             else "paused by the operator: holding here until Continue")
+        self.say(f"Agent: {self.pause_reason}", mavlink.MAV_SEVERITY_NOTICE)
+        return None
+
+    def _hold_here(self) -> None:
+        """The operator's Pause or Take control: stop where it is (an AUTO mission: in GUIDED)."""
+        self._hold_due = False
+        if self.fc.mode == "AUTO":
+            self._set_mode("GUIDED")
+        self.fc.hold()
+        self.fc.took_over()  # its own mode change is no takeover
+
     def resume(self) -> bool:
         """Hand control back to the agent (the operator's resume). False if not paused."""
         if not self.paused:
             return False
+        self.operator = ""
+        self._hold_due = False
         if self._errand is not None:  # resumed on the way to the operator's target: the mission goes first
             self._errand = None
             self.ctx.planned_path = []
@@ -122,6 +158,7 @@ class Agent:
         """Take up again whatever the pause interrupted; with ``own_mode`` in the agent's own mode (after an
         operator's resume; after a passing pause the mode is still the agent's, or someone took over)."""
         self.paused = False
+        self.operator = ""
         self.pause_reason = ""
         self._until = None
         self._restart_clock()
@@ -190,6 +227,9 @@ class Agent:
             return f"{where} is inside a known obstacle"
         if not fc.armed or (fc.kind is Kind.COPTER and not fc.flying):
             return "not flying: arm and take off first"
+        if self.operator == "control":
+            return "the operator has control: hand back to the agent first"
+        self.operator = ""
         self._errand = Travel(ctx, point, HOME_TOLERANCE)
         ctx.planned_path = []  # the way to where it was going is not the way there
         self._stop_clock()
@@ -243,6 +283,10 @@ class Agent:
         if self.phase in (Phase.WAITING, Phase.DONE):
             if fc.taking_off and fc.mode == "GUIDED":
                 self.start()  # the operator's GUIDED take-off starts the mission
+            return
+        if self._hold_due:
+            self._hold_here()
+        if self.operator:  # the operator's Pause or control: whatever the operator does next is theirs
             return
         if taken is not None:
             self.pause(taken)

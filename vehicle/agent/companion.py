@@ -5,7 +5,10 @@ flies: a HEARTBEAT (type ONBOARD_CONTROLLER), its memory map and planned path
 (the TUNNEL map stream), its state (running, paused and why; TUNNEL
 ``AGENT_STATUS``) and its messages (STATUSTEXT, chunked when long). What it
 answers: MAV_CMD_MISSION_START addressed to it starts or resumes the mission
-(a ground station's Resume), MAV_CMD_DO_REPOSITION addressed to it is the
+(a ground station's Resume), MAV_CMD_DO_PAUSE_CONTINUE addressed to it pauses
+the mission and holds (param1 0; param2 1: the operator takes control, and the
+agent commands nothing until handed back) or continues it (param1 1),
+MAV_CMD_DO_REPOSITION addressed to it is the
 operator's "Go here" (planned and flown by the agent, or denied with the
 reason in a STATUSTEXT), and the parameter protocol for the mission
 parameters (``SCN_*``). The caller sends what ``tick`` and ``handle`` return,
@@ -96,7 +99,7 @@ class Companion:
         agent = self.agent
         reason = agent.pause_reason if agent.paused else agent.reason
         return agent_status.AgentStatus(agent.phase.value, agent.paused, agent.outcome or "", agent.mission_name,
-                                        reason)
+                                        reason, agent.operator if agent.paused else "")
 
     # ---- receiving --------------------------------------------------------------------------------
     def handle(self, message) -> list | None:
@@ -106,6 +109,10 @@ class Companion:
             result = mavlink.MAV_RESULT_ACCEPTED if self.mission_start() else mavlink.MAV_RESULT_DENIED
             return [mavlink.MAVLink_command_ack_message(message.command, result, 0, 0, message.get_srcSystem(),
                                                         message.get_srcComponent())]
+        if kind in ("COMMAND_LONG", "COMMAND_INT") and message.command == mavlink.MAV_CMD_DO_PAUSE_CONTINUE:
+            result = mavlink.MAV_RESULT_ACCEPTED if self.pause_continue(message) else mavlink.MAV_RESULT_DENIED
+            return [mavlink.MAVLink_command_ack_message(message.command, result, 0, 0, message.get_srcSystem(),
+                                                        message.get_srcComponent()), *self.texts()]
         if kind in ("COMMAND_LONG", "COMMAND_INT") and message.command == mavlink.MAV_CMD_DO_REPOSITION:
             result = mavlink.MAV_RESULT_ACCEPTED if self.go_here(message) else mavlink.MAV_RESULT_DENIED
             return [mavlink.MAVLink_command_ack_message(message.command, result, 0, 0, message.get_srcSystem(),
@@ -130,6 +137,21 @@ class Companion:
         refused = self.agent.go_to(self.agent.fc.datum.to_local(lat, lon))
         if refused:
             self.agent.say(f"Go here refused: {refused}", mavlink.MAV_SEVERITY_WARNING)
+        return refused is None
+
+    def pause_continue(self, message) -> bool:
+        """DO_PAUSE_CONTINUE: param1 0 pauses (param2 1: the operator takes control), 1 continues (hands back).
+        False, and the reason said, if the agent cannot."""
+        if message.param1 == 1:
+            if self.agent.resume():
+                return True
+            self.agent.say(f"Continue refused: the mission is {self.status().state}, not paused",
+                           mavlink.MAV_SEVERITY_WARNING)
+            return False
+        refused = self.agent.hold_for_operator(control=message.param2 == 1)
+        if refused:
+            self.agent.say(f"{'Take control' if message.param2 == 1 else 'Pause'} refused: {refused}",
+                           mavlink.MAV_SEVERITY_WARNING)
         return refused is None
 
     def mission_start(self) -> bool:

@@ -4,7 +4,8 @@ A ground station shows the autopilot's mode from its HEARTBEAT; whether the
 onboard mission runs, waits, was paused by an operator or has ended, and why,
 only the agent knows. It sends it in TUNNEL (385) payload type ``AGENT_STATUS``
 (32803, after the map stream's 32800-32802), as component 191, once a second
-and on every change: ``<BBBB`` phase, flags (bit 0: paused), outcome, length
+and on every change: ``<BBBB`` phase, flags (bit 0: paused; bit 1: paused by
+the operator's Pause; bit 2: the operator has taken control), outcome, length
 of the mission name; then the mission name and the reason (UTF-8, cut to fit
 the 128-byte payload).
 """
@@ -18,6 +19,7 @@ AGENT_STATUS = 32803
 PAYLOAD = 128
 PHASES = ("waiting", "preflight", "takeoff", "mission", "homing", "landing", "done")
 OUTCOMES = ("", "finished", "stopped")
+OPERATOR = ("", "pause", "control")  # who holds the agent: nobody, the operator's Pause, the operator's control
 _HEADER = struct.Struct("<BBBB")
 
 
@@ -28,10 +30,14 @@ class AgentStatus:
     outcome: str  # "" while the mission has not ended
     mission: str
     reason: str  # why it is paused, or why the mission ended
+    operator: str = ""  # "pause": held by the operator's Pause; "control": the operator has control
 
     @property
     def state(self) -> str:
-        """One word for the page: running, paused, waiting, finished or stopped."""
+        """One word for the page: running, paused, operator (the operator has control), waiting, finished or
+        stopped."""
+        if self.paused and self.operator == "control":
+            return "operator"
         if self.paused:
             return "paused"
         if self.phase == "waiting":
@@ -41,8 +47,8 @@ class AgentStatus:
 
 def encode(status: AgentStatus) -> bytes:
     mission = status.mission.encode("utf-8")[:32]
-    head = _HEADER.pack(PHASES.index(status.phase), int(status.paused), OUTCOMES.index(status.outcome),
-                        len(mission)) + mission
+    flags = int(status.paused) | (1 << OPERATOR.index(status.operator) if status.operator else 0)
+    head = _HEADER.pack(PHASES.index(status.phase), flags, OUTCOMES.index(status.outcome), len(mission)) + mission
     reason = status.reason.encode("utf-8")[:PAYLOAD - len(head)]
     return head + reason.decode("utf-8", "ignore").encode("utf-8")  # never half a character
 
@@ -57,4 +63,5 @@ def decode(payload: bytes) -> AgentStatus | None:
     body = payload[_HEADER.size:]
     mission = body[:length].decode("utf-8", "replace")
     reason = body[length:].rstrip(b"\0").decode("utf-8", "replace")
-    return AgentStatus(PHASES[phase], bool(flags & 1), OUTCOMES[outcome], mission, reason)
+    operator = "control" if flags & 4 else "pause" if flags & 2 else ""
+    return AgentStatus(PHASES[phase], bool(flags & 1), OUTCOMES[outcome], mission, reason, operator)
