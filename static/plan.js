@@ -93,10 +93,7 @@ function renderItems() {
       select.append(option);
     }
     select.value = p.action;
-    const leg = legs[i];
-    const legCell = el("td", leg && leg.blocked ? "leg blocked" : "leg",
-      leg ? `${fmt(leg.length)} m${leg.blocked ? " ✕" : ""}` : "…");
-    if (leg && leg.blocked) legCell.title = blockedText(i, leg);
+    const legCell = el("td", "leg");
     const remove = el("button", "btn btn-small plan-delete", "✕");
     remove.type = "button";
     remove.setAttribute("aria-label", `Delete item ${i + 1}`);
@@ -112,6 +109,18 @@ function renderItems() {
   });
   $("#plan-items").replaceChildren(...rows);
   $("#plan-empty").hidden = items.length > 0;
+  renderLegs();
+}
+
+/** Each row's leg as the station checked it: only these cells change when its answer comes, so that a field
+ * the operator is typing in meanwhile keeps what was typed. */
+function renderLegs() {
+  for (const row of $("#plan-items").children) {
+    const i = Number(row.dataset.index), leg = legs[i], cell = row.querySelector("td.leg");
+    cell.classList.toggle("blocked", Boolean(leg && leg.blocked));
+    setText(cell, leg ? `${fmt(leg.length)} m${leg.blocked ? " ✕" : ""}` : "…");
+    cell.title = leg && leg.blocked ? blockedText(i, leg) : "";
+  }
 }
 
 function blockedText(i, leg) {
@@ -186,7 +195,9 @@ async function check() {
   if (seq !== checkSeq) return;
   legs = status === 200 && data && Array.isArray(data.legs) ? data.legs : [];
   if (status !== 200) showAck($("#plan-ack"), "Check", detailText(data) || `error ${status}`, "bad");
-  render();
+  renderLegs();
+  renderSummary();
+  publish();
 }
 
 function render() {

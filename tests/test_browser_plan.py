@@ -1,7 +1,7 @@
 """The plan view in a real headless Chromium, driven as a person would: waypoints clicked on the 2D map, one
 dragged, an altitude typed, a leg through a building marked before upload, the upload's progress and the
 vehicle's MISSION_ACK, files exported and imported (a hostile one refused with its reason), then Fly (AUTO), and
-the vehicle seen flying the plan: its mode AUTO and its current item past waypoint 2 in /api/vehicles. Once on our
+the vehicle seen flying the plan: its mode AUTO and waypoint 2 reached in /api/vehicles. Once on our
 simulated copter (its onboard agent waiting: AUTO flies the uploaded plan, not the agent's mission), once on
 ArduPilot's ArduCopter SITL (skipped with a reason where ../shared/sitl is absent).
 
@@ -20,6 +20,7 @@ import pytest
 from harness import CHROMIUM, RunningStation, operator_page, start_sim, wait_wall
 
 from vehicle.agent.settings import Settings
+from vehicle.protocol.mav import mavlink
 from vehicle.protocol.waypoints import parse_mission
 
 pytestmark = pytest.mark.browser
@@ -88,10 +89,13 @@ def plan_by_clicks(page, sysid: int, picture: Path | None = None) -> None:
     moved = page.evaluate("window.plan.items[2]")
     assert abs(moved["x"] - SECOND[0]) < near and abs(moved["y"] - SECOND[1]) < near, moved
     assert page.evaluate("window.plan.items.length") == 4  # a drag adds nothing
-    page.fill('#plan-items tr:nth-child(3) input[data-field="alt"]', "6")
-    page.press('#plan-items tr:nth-child(3) input[data-field="alt"]', "Enter")
-    page.locator('#plan-items tr:nth-child(3) input[data-field="alt"]').blur()
-    wait_wall(lambda: page.evaluate("window.plan.items[2].alt") == 6, 10, "the altitude typed in")
+    for field, value in (("alt", "6"), ("speed", "1.5")):  # the second waypoint a metre higher, flown slower
+        box = page.locator(f'#plan-items tr:nth-child(3) input[data-field="{field}"]')
+        box.fill(value)
+        box.press("Enter")
+        box.blur()
+    wait_wall(lambda: page.evaluate("[window.plan.items[2].alt, window.plan.items[2].speed]") == [6, 1.5], 10,
+              "the altitude and speed typed in")
 
     # a leg through a building is marked before upload, on the map and in words; deleted, the mark goes
     click_map(page, *THROUGH_WAREHOUSE)
@@ -115,17 +119,23 @@ def upload(page, station: RunningStation, sysid: int) -> list:
     expect(page.locator("#plan-fly")).to_have_attribute("title", re.compile("^The vehicle holds no mission"))
     page.click("#plan-upload")
     expect(page.locator("#plan-ack")).to_have_text(
-        re.compile(rf"^Upload to vehicle {sysid}: accepted \(MISSION_ACK, 5 items with home\) · "), timeout=60_000)
+        re.compile(rf"^Upload to vehicle {sysid}: accepted \(MISSION_ACK, 6 items with home\) · "), timeout=60_000)
     assert page.evaluate("[document.querySelector('#plan-progress').value, "
-                         "document.querySelector('#plan-progress').max]") == [5, 5]
+                         "document.querySelector('#plan-progress').max]") == [6, 6]
     expect(page.locator("#plan-fly")).to_be_enabled()
     on_board = parse_mission(station.http.get(f"/api/vehicles/{sysid}/mission").text)
-    assert len(on_board) == 5 and [round(i.alt, 3) for i in on_board[1:]] == [5, 5, 6, 5]
+    assert [i.command for i in on_board[1:]] == [mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_WAYPOINT,
+                                                 mavlink.MAV_CMD_DO_CHANGE_SPEED, mavlink.MAV_CMD_NAV_WAYPOINT,
+                                                 mavlink.MAV_CMD_NAV_WAYPOINT]
+    assert [round(i.alt, 3) for i in on_board[1:]] == [5, 5, 0, 6, 5] and on_board[3].param2 == 1.5
     return on_board
 
 
 def fly_and_watch(page, station: RunningStation, sysid: int, speedup: float, tries: int = 1) -> dict:
-    """Fly (AUTO), and see the vehicle in AUTO reach waypoint 2 (mission item 3: home 0, take-off 1)."""
+    """Fly (AUTO), and see the vehicle in AUTO reach waypoint 2 (mission item 4: home 0, take-off 1, waypoint 1 2,
+    its speed 3), and the page mark it (the plan's item 3, index 2) while it is flown."""
+    page.evaluate("""window.flown = []; window.addEventListener("plan-changed", (e) => {
+                     if (e.detail.current !== null) window.flown.push(e.detail.current); })""")
     ack = page.locator("#plan-ack")
     for attempt in range(tries):
         page.click("#plan-fly")
@@ -136,10 +146,11 @@ def fly_and_watch(page, station: RunningStation, sysid: int, speedup: float, tri
     expect(ack).to_have_text(re.compile(rf"^Fly \(AUTO\) vehicle {sysid}: accepted · "))
     station.http.wait_vehicle(sysid, lambda v: v["mode"] == "AUTO" and (v["mission"]["current"] or 0) >= 2, 60,
                               speedup, "AUTO, flying the plan")
-    expect(page.locator("#plan-items tr.current")).to_have_count(1)
-    return station.http.wait_vehicle(
-        sysid, lambda v: v["mode"] == "AUTO" and (v["mission"]["reached"] or 0) >= 3, 180, speedup,
-        "waypoint 2 (mission item 3) reached")
+    flown = station.http.wait_vehicle(
+        sysid, lambda v: v["mode"] == "AUTO" and (v["mission"]["reached"] or 0) >= 4, 180, speedup,
+        "waypoint 2 (mission item 4) reached")
+    wait_wall(lambda: 2 in page.evaluate("window.flown"), 10, "the page marked waypoint 2 as it was flown")
+    return flown
 
 
 def round_trip_files(page, tmp: Path) -> None:
@@ -160,7 +171,7 @@ def round_trip_files(page, tmp: Path) -> None:
         after = page.evaluate("window.plan.items")
         for a, b in zip(before, after, strict=True):
             assert a["action"] == b["action"] and abs(a["x"] - b["x"]) < 0.01 and abs(a["y"] - b["y"]) < 0.01
-            assert abs(a["alt"] - b["alt"]) < 0.01
+            assert abs(a["alt"] - b["alt"]) < 0.01 and a["speed"] == b["speed"]
     hostile = tmp / "hostile.plan"
     hostile.write_text(json.dumps({"fileType": "Plan", "mission": {"plannedHomePosition": [-35.36, 149.16, 584],
                                                                    "items": [{"type": "ComplexItem",
