@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
 
 from groundstation.link import Link
@@ -25,6 +24,7 @@ from vehicle.mapping.memory_map import OCCUPIED_AT
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import AUTOPILOT, COMPANION, mavlink
 from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, number_of
+from vehicle.world.solids import solid_at
 
 Action = Literal["abort", "kill", "rtl", "set_mode", "arm", "disarm", "takeoff", "land", "resume", "goto", "speed",
                  "auto", "pause", "continue", "take_control"]
@@ -38,7 +38,6 @@ WHY = {  # what a refusal means, when the vehicle said nothing more
 GOTO_REACH = 1000.0  # m from home a goto may go when neither the vehicle's map nor a scene bounds its space
 SCENE_MARGIN = 20.0  # m beyond the scene's bounds a goto may go
 PROBE_ABOVE = 0.5  # m above the vehicle's height (a rover's: its ground) where a goto's target is looked at
-EDGE_NUDGE = (1.3e-7, 0.7e-7)  # m a target is moved off the scene's triangle edges before it is looked at
 
 
 class Command(BaseModel):
@@ -116,33 +115,6 @@ def _cell_value(grid: tuple, x: float, y: float) -> int | None:
     row, col = math.floor((y - origin[1]) * resolution), math.floor((x - origin[0]) * resolution)
     inside = 0 <= row < values.shape[0] and 0 <= col < values.shape[1]
     return int(values[row, col]) if inside else None
-
-
-def solid_at(scene, x: float, y: float, z: float) -> str | None:
-    """The name of the closed solid of ``scene`` that holds (x, y, z) (its DEF name, else "shape N"), or None.
-    A vertical line through the point meets a closed solid's surface an odd number of times above the point
-    and an odd number below when the point is inside (a roof alone, or a floor, is met on one side only). The
-    point is nudged off the triangles' shared edges, which a line through them would meet twice."""
-    px, py = x + EDGE_NUDGE[0], y + EDGE_NUDGE[1]
-    corners = scene.triangles
-    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    ab, ac = b[:, :2] - a[:, :2], c[:, :2] - a[:, :2]
-    ap = np.array([px, py]) - a[:, :2]
-    area = ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):  # an upright triangle has no area seen from above
-        u = (ap[:, 0] * ac[:, 1] - ap[:, 1] * ac[:, 0]) / area
-        v = (ab[:, 0] * ap[:, 1] - ab[:, 1] * ap[:, 0]) / area
-        met = (area != 0) & (u >= 0) & (v >= 0) & (u + v <= 1)
-        height = a[:, 2] + u * (b[:, 2] - a[:, 2]) + v * (c[:, 2] - a[:, 2])
-    objects = scene.face_object
-    above = np.bincount(objects[met & (height > z)], minlength=scene.objects)
-    below = np.bincount(objects[met & (height < z)], minlength=scene.objects)
-    holding = np.flatnonzero((above % 2 == 1) & (below % 2 == 1))
-    if not len(holding):
-        return None
-    index = int(holding[0])
-    names = scene.object_names
-    return names[index] if index < len(names) and names[index] else f"shape {index}"
 
 
 def agent_of(vehicle: VehicleState, now: float):

@@ -10,9 +10,13 @@ a scene, a vehicle and its agent the one way they are wired.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
+import numpy as np
+
 from vehicle.agent.agent import Agent
+from vehicle.agent.missions.square import square_corners
 from vehicle.agent.settings import Settings
 from vehicle.mapping.sharing import Changes, apply
 from vehicle.protocol.rangefinder import Reading
@@ -20,6 +24,7 @@ from vehicle.sim.onboard import SimController
 from vehicle.sim.simulation import PlacementError, Simulation
 from vehicle.sim.team import Team
 from vehicle.world.scene import Scene
+from vehicle.world.solids import solid_at
 from vehicle.world.suites import DEFAULT_SUITE, sensor_suite
 
 
@@ -69,7 +74,35 @@ def simulate(scene: Scene, mission: str | None = None, kind: str = "copter", set
     settings = settings or Settings()
     simulation = Simulation(scene, kind, start, heading, cruise_speed=settings.speed, wp_radius=settings.closeness,
                             **options)
+    if waypoints is None and mission in CORNER_MISSIONS:
+        waypoints = corners_clear_of(scene, simulation.home, settings)
     return Stepper(simulation, mission, settings, waypoints, autostart)
+
+
+CORNER_MISSIONS = ("pathfind", "square")  # missions that fly to the corners of a square round home by default
+CORNER_CLEARANCE = 2.0  # m round a default corner that must be free of every solid
+PULL_STEP = 0.02  # share of the way home a corner inside a solid is pulled in at a time
+
+
+def corners_clear_of(scene: Scene, home: tuple[float, float, float], settings: Settings,
+                     margin: float = CORNER_CLEARANCE) -> list[tuple[float, float]] | None:
+    """Square's and Pathfind's default corners with each one inside a solid of the scene at the flight altitude
+    (or within ``margin`` of one) pulled towards home until it is clear; None when all are clear, and the
+    mission's own default stands. The agent knows no scene: in the demo scene its south-west corner lay inside
+    the Office, and Pathfind always ended "waypoints 4 unreachable"."""
+    corners = square_corners(home[:2], settings.space_size)
+    moved = [_pulled_in(scene, home, corner, settings.altitude, margin) for corner in corners]
+    return moved if moved != corners else None
+
+
+def _pulled_in(scene: Scene, home, corner: tuple[float, float], altitude: float, margin: float):
+    z = home[2] + altitude
+    ring = [(margin * math.cos(a), margin * math.sin(a)) for a in np.linspace(0, 2 * math.pi, 12, endpoint=False)]
+    for share in np.arange(1.0, 0.0, -PULL_STEP):
+        x, y = home[0] + share * (corner[0] - home[0]), home[1] + share * (corner[1] - home[1])
+        if all(solid_at(scene, x + dx, y + dy, z) is None for dx, dy in [(0.0, 0.0), *ring]):
+            return corner if share == 1.0 else (round(float(x), 1), round(float(y), 1))
+    return corner
 
 
 SHARE_PERIOD = 1.0  # s between two shares of a team's map changes
