@@ -151,6 +151,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     for process, role in zip(processes, roles, strict=True):
         threading.Thread(target=watch, args=(process, role), daemon=True).start()
+    station.expect_vehicles()
 
     def stop_vehicles() -> None:
         stopping.set()

@@ -65,6 +65,8 @@ class GroundStation:
                 ground = RayCaster(scene).ground_height
         self.datum = datum  # None (no scene, none given): the first home heard becomes the origin
         self.live = Fleet(datum, ground)
+        self.vehicles_started: float | None = None  # when this station started its own vehicles (the demo)
+        self.first_heard_after: float | None = None  # s from then until the first of them was heard
         self.record_dir = Path(record_dir) if record_dir else None
         self.recorder = Recorder(record_dir, note_text(scene_file) if scene_file else None, record_limits or Limits(),
                                  known=lambda sysid: sysid in self.live.vehicles) if record_dir and urls else None
@@ -172,7 +174,24 @@ class GroundStation:
     def status(self) -> dict:
         replay = self.replay
         return {"type": "vehicles", "mode": self.mode, "time": self.now(), "vehicles": self.vehicles(),
-                "replay": replay.status() if replay is not None else None, "recordings": self.recordings.latest()}
+                "replay": replay.status() if replay is not None else None, "recordings": self.recordings.latest(),
+                "starting": self.starting()}
+
+    def expect_vehicles(self) -> None:
+        """This station started its vehicles (the demo): the page says they are starting until the first is
+        heard, and then how long it took. The first start after an install compiles the simulator's loops for
+        some 15 s, and the page said only "No vehicles yet"."""
+        self.vehicles_started = time.time()
+
+    def starting(self) -> dict | None:
+        """``since``: s since the vehicles were started; ``took``: s until the first was heard (None before)."""
+        if self.vehicles_started is None:
+            return None
+        now = time.time()
+        if self.first_heard_after is None and self.live.vehicles:
+            self.first_heard_after = now - self.vehicles_started
+        took = self.first_heard_after
+        return {"since": round(now - self.vehicles_started, 1), "took": None if took is None else round(took, 1)}
 
     def map_picture(self, vehicle: VehicleState, grid: tuple) -> bytes:
         """A PNG of the vehicle's memory map ``grid`` (values, resolution, origin) for people, with its trail,

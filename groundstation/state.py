@@ -67,6 +67,8 @@ OWN_SYSID = 255  # this station's system id (the link's)
 FALL_FROM = 1.0  # m above home: a copter disarmed higher falls (a kill's fall is a crash)
 LANDED_BELOW = 0.3  # m above home: a falling copter is down
 STILL = 0.2  # m/s of descent: a falling copter slower than this has come to rest
+DRAIN_WINDOW = 120.0  # s of history over which the battery's drain is measured
+DRAIN_AT_LEAST = 20.0  # s of history the drain needs before a flight time is estimated from it
 ORDERED_WITHIN = 5.0  # s after this station's order (or the companion's) a mode change is taken as its doing
 # (a mode other than the one it named is not)
 MAX_STATIONS = 16  # other ground stations remembered
@@ -586,7 +588,8 @@ class Fleet:
                          "yaw": _round(math.degrees(v.yaw))},
             "heading": _round(math.degrees(v.yaw) % 360), "speed": _round(v.speed), "climb": _round(v.climb),
             "battery": None if v.voltage is None else {"voltage": _round(v.voltage), "remaining": v.remaining,
-                                                       "current": _round(v.current)},
+                                                       "current": _round(v.current),
+                                                       "flight_left_s": _round(self.flight_left(v), 0)},
             "link": {"state": v.link_state(now), "heartbeat_age": age, "messages": v.messages_received,
                      "mavlink": v.mavlink_version, "signed": v.signed},
             "mission": {"current": v.mission_current, "total": v.mission_total, "reached": v.mission_reached},
@@ -610,6 +613,23 @@ class Fleet:
             "other_gcs": None if v.other_gcs is None else {"sysid": v.other_gcs[0], "last": v.other_gcs[1],
                                                            "age": _round(now - v.other_gcs[2], 1)},
         }
+
+    def flight_left(self, v: VehicleState) -> float | None:
+        """About how long the battery lasts at the rate it drained over the last DRAIN_WINDOW s of its history
+        (s of the station's clock); None until it has drained for DRAIN_AT_LEAST s, or while it does not."""
+        history = self.history.vehicles.get(v.sysid)
+        if history is None or v.remaining is None:
+            return None
+        times, values = history.ordered()
+        column = values[:, history.columns["battery remaining"]]
+        known = (times >= history.last - DRAIN_WINDOW) & ~np.isnan(column)
+        if np.count_nonzero(known) < 2:
+            return None
+        times, column = times[known], column[known]
+        span, drop = times[-1] - times[0], float(column[0] - column[-1])
+        if span < DRAIN_AT_LEAST or drop <= 0:
+            return None
+        return v.remaining / (drop / span)
 
     @staticmethod
     def map_version(v: VehicleState) -> tuple:

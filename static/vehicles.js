@@ -13,6 +13,12 @@ const KILL_HOLD_MS = 1500;
 const MAX_MESSAGES = 5;
 const STATUS_FADES_S = 30;  // s after which the last message line is shown faded
 const BATTERY_LOW = 20;  // % left at or below which a vehicle's battery is shown as low
+const FAILSAFE_LEVELS = `Marked low at ${BATTERY_LOW} %: our simulator warns there and, at 10 %, lands a copter `
+  + "(holds a rover); an ArduPilot's levels are its BATT_LOW_* and BATT_CRT_* parameters.";
+
+function minutes(seconds) {
+  return seconds >= 90 ? `${Math.round(seconds / 60)} min` : `${Math.round(seconds)} s`;
+}
 
 // What each vehicle button sends. `body(card)` builds the JSON for POST .../commands.
 const ACTIONS = {
@@ -235,8 +241,11 @@ function renderCard(card, v) {
   setText(card.querySelector(".speed"), isNum(v.speed) ? `${fmt(v.speed)} m/s` : "–");
   setText(card.querySelector(".heading"), headingText(v.heading));
   const battery = card.querySelector(".battery");
-  setText(battery, batteryText(v.battery));
-  battery.title = v.battery && isNum(v.battery.current) ? `current ${fmt(v.battery.current)} A` : "";
+  const left = v.battery && isNum(v.battery.flight_left_s) ? ` · about ${minutes(v.battery.flight_left_s)} of flight left`
+    : "";
+  setText(battery, `${batteryText(v.battery)}${left}`);
+  battery.title = `${v.battery && isNum(v.battery.current) ? `current ${fmt(v.battery.current)} A. ` : ""}${
+    left ? "Flight left: at the rate it drained over the last two minutes. " : ""}${FAILSAFE_LEVELS}`;
   // ArduPilot warns at its low level, and our simulator at 20 %: the card says so before the failsafe acts
   battery.classList.toggle("low", !!v.battery && isNum(v.battery.remaining) && v.battery.remaining >= 0
     && v.battery.remaining <= BATTERY_LOW);
@@ -302,9 +311,22 @@ on(EVENTS.auth, (detail) => {
   auth = detail.auth;
   updateControls();
 });
+/** The demo's own vehicles starting: said while the first start compiles the simulator, and how long it took. */
+function renderStarting(starting, count) {
+  const empty = $("#no-vehicles");
+  const note = $("#start-note");
+  const waiting = starting && !isNum(starting.took) && !count;
+  setText(empty, waiting ? `Starting the vehicles: ${fmt(starting.since)} s so far. The first start after an install `
+    + "compiles the simulator's loops (about 15 s); later starts take a second or two."
+    : "No vehicles yet — waiting for MAVLink heartbeats");
+  note.hidden = !(starting && isNum(starting.took));
+  setText(note, note.hidden ? "" : `The vehicles started in ${fmt(starting.took)} s.`);
+}
+
 on(EVENTS.status, (msg) => {
   mode = msg.mode;
   renderVehicles(msg.vehicles);
+  renderStarting(msg.starting, msg.vehicles.length);
   updateControls();
 });
 window.addEventListener("DOMContentLoaded", () => renderVehicles([]));

@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import math
 
+import pytest
+
 from groundstation.history import EVENTS_KEPT, History
 from groundstation.state import Fleet
 from vehicle.protocol.mav import COMPANION, mavlink
@@ -119,3 +121,17 @@ def test_a_fall_after_a_kill_in_the_air_is_a_crash():
     fleet.apply(heartbeat(4, True), 110.0)  # armed on the ground and disarmed there: no crash
     fleet.apply(heartbeat(4, False), 111.0)
     assert len([e for e in fleet.history.of(1).as_json()["events"] if e["kind"] == "crash"]) == 2
+
+
+def test_the_battery_s_flight_time_left_comes_from_its_drain():
+    fleet = Fleet()
+    for t in range(0, 200, 1):  # 1 % every 10 s: from 80 % at t = 80 s on, 8 % more an 80 s
+        fleet.apply(heartbeat(4, True), float(t))
+        fleet.apply(message(mavlink.MAVLink_sys_status_message, 0, 0, 0, 500, 16000, 1000, 100 - t // 10,
+                            0, 0, 0, 0, 0, 0), float(t) + 0.5)
+    battery = fleet.describe(fleet.vehicles[1], 200.0)["battery"]
+    assert battery["remaining"] == 81 and battery["flight_left_s"] == pytest.approx(810, rel=0.05)
+    idle = Fleet()  # no drain seen yet: no guess
+    idle.apply(heartbeat(4, True), 0.0)
+    idle.apply(message(mavlink.MAVLink_sys_status_message, 0, 0, 0, 500, 16000, 1000, 90, 0, 0, 0, 0, 0, 0), 1.0)
+    assert idle.describe(idle.vehicles[1], 2.0)["battery"]["flight_left_s"] is None
