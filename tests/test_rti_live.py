@@ -1,0 +1,113 @@
+"""The station's live radio tomography: frames from link records find the target, a slow solve skips windows
+instead of queueing them and never blocks a reader, and a replay's rebuilt log gives the frame the live station
+showed."""
+
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from groundstation.rti_live import LiveImager, boundary, frame_at, picture
+from vehicle.protocol.radiostream import LinkLog, LinkRecord
+from vehicle.tomography import synthetic
+
+TARGET = (2.0, 4.0)
+
+
+def sweep_rows(start: float, stop: float, seed: int = 3, person_from: float = 20.0) -> list[LinkRecord]:
+    """A 16-radio square of 6.4 m measuring every 0.5 s; a person stands at TARGET from ``person_from``."""
+    net = synthetic.Network(synthetic.square(16, 6.4), channels=1, seed=seed)
+    recs = net.sweeps(np.arange(start, stop, 0.5), people=lambda t: [TARGET] if t >= person_from else [])
+    return [LinkRecord(float(recs.t[i]), 1, 2, *recs.tx[i], *recs.rx[i], float(recs.rssi[i]), int(recs.channel[i]))
+            for i in range(len(recs))]
+
+
+@pytest.fixture(scope="module")
+def rows():
+    return sweep_rows(0.0, 30.0)
+
+
+def test_a_frame_from_synthetic_records_finds_the_target(rows):
+    log = LinkLog()
+    log.append(rows)
+    frame = frame_at(log.records(), 30.0, window=1.0, history=60.0)
+    best = frame.peaks[0]
+    assert math.dist((best["x"], best["y"]), TARGET) < 0.5, frame.peaks
+    assert frame.t == 30.0 and frame.bounds == (0.0, 0.0, 6.4, 6.4)
+    assert frame.links_per_s == pytest.approx(sum(r.t >= 29.0 for r in rows), rel=0.01)
+    assert 0.9 < frame.coverage <= 1.0  # 16 radios round the square cross nearly every pixel
+    assert len(frame.links) == 120  # the last window's distinct paths: 16 * 15 / 2
+    drawn = picture(frame)
+    assert drawn["image"].startswith("data:image/png;base64,") and drawn["scale"]["max"] > 0
+
+
+def test_frames_are_the_window_boundaries_of_the_records_clock(rows):
+    assert boundary(29.99, 1.0) == 29.0 and boundary(30.0, 1.0) == 30.0
+    log = LinkLog()
+    imager = LiveImager(lambda: log, window=1.0)
+    assert not imager.step() and imager.latest() is None  # nothing heard: no frame, no error
+    log.append([r for r in rows if r.t < 25.2])
+    assert imager.step()
+    assert imager.latest().t == 25.0 and imager.latest().records == sum(r.t < 25.0 for r in rows)
+    log.append([r for r in rows if 25.2 <= r.t < 25.7])  # still inside the window 25..26: nothing new to image
+    assert not imager.step() and imager.latest().t == 25.0
+
+
+def test_a_slow_solve_skips_windows_and_blocks_no_reader(rows):
+    log = LinkLog()
+    log.append([r for r in rows if r.t < 10.2])
+    entered, release, seen = threading.Event(), threading.Event(), []
+
+    def slow(records, end, **options):
+        seen.append(end)
+        entered.set()
+        assert release.wait(30)
+        return frame_at(records, end, **options)
+
+    imager = LiveImager(lambda: log, window=1.0, solve=slow)
+    imager.start()
+    try:
+        assert entered.wait(30)
+        log.append([r for r in rows if 10.2 <= r.t < 15.2])  # five windows close while the first solve runs
+        assert imager.latest() is None  # a reader is answered at once, mid-solve
+        entered.clear()
+        release.set()
+        assert entered.wait(30)
+        for _ in range(1500):
+            if imager.latest() is not None and imager.latest().t == 15.0:
+                break
+            threading.Event().wait(0.02)
+    finally:
+        imager.stop()
+    assert seen == [10.0, 15.0]  # 11 .. 14 were never queued
+    assert imager.skipped == 4 and imager.latest().t == 15.0
+
+
+def test_replay_seek_gives_the_frame_the_live_station_showed(rows):
+    live_log, shown = LinkLog(), {}
+    live = LiveImager(lambda: live_log, window=1.0)
+    for start in np.arange(0.0, 30.0, 0.5):  # records arrive in batches, a frame per window
+        live_log.append([r for r in rows if start <= r.t < start + 0.5])
+        if live.step() and live.latest() is not None:
+            shown[live.latest().t] = live.latest()
+    replay_log = LinkLog()
+    replay = LiveImager(lambda: replay_log, window=1.0)
+    for seek in (27.3, 21.6, 29.9):  # a seek rebuilds the log from the records up to then
+        replay_log.clear()
+        replay_log.append([r for r in rows if r.t <= seek])
+        replay.step()
+        frame, then = replay.latest(), shown[boundary(seek, 1.0)]
+        assert frame.t == then.t
+        np.testing.assert_array_equal(frame.image, then.image)
+        assert frame.peaks == then.peaks and frame.links == then.links
+
+
+def test_switching_logs_forgets_the_other_frame(rows):
+    logs = {"which": LinkLog()}
+    logs["which"].append(rows)
+    imager = LiveImager(lambda: logs["which"], window=1.0)
+    assert imager.step() and imager.latest() is not None
+    logs["which"] = LinkLog()  # a replay with no radio records
+    imager.step()
+    assert imager.latest() is None
