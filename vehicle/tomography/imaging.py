@@ -108,9 +108,20 @@ class Imager:
         return x.reshape(self.grid.shape), alpha, rms
 
 
+def subpixel_offset(before: np.ndarray, at: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """Where the parabola through three neighbouring pixels' values peaks, in pixels from the middle one (the
+    three-point estimator of a sampled maximum), within half a pixel; 0 where the values do not bend down or a
+    neighbour is NaN (outside the image)."""
+    bend = before - 2 * at + after
+    down = bend < 0  # False where a neighbour is NaN (outside the image): no shift
+    offset = np.where(down, 0.5 * (before - after) / np.where(down, bend, -1.0), 0.0)
+    return np.clip(offset, -0.5, 0.5)
+
+
 def find_peaks(image: np.ndarray, grid: Grid, count: int, separation: float) -> list[dict]:
     """The image's own local maxima above zero, at least ``separation`` apart, strongest first, at most
-    ``count``."""
+    ``count``; each placed where the parabola through its pixel and the two neighbours along each axis peaks
+    (a pixel centre would be up to half a cell off), within the bounds; ``value`` is the pixel's own."""
     if count <= 0:
         return []
     radius = max(1, int(round(separation / grid.cell)))
@@ -119,9 +130,16 @@ def find_peaks(image: np.ndarray, grid: Grid, count: int, separation: float) -> 
     local = (image == maximum_filter(image, footprint=footprint, mode="constant", cval=-np.inf)) & (image > 0)
     iy, ix = np.nonzero(local)
     order = np.argsort(-image[iy, ix], kind="stable")[:count]
-    x0, y0 = grid.bounds[:2]
-    return [{"x": round(x0 + (ix[i] + 0.5) * grid.cell, 3), "y": round(y0 + (iy[i] + 0.5) * grid.cell, 3),
-             "value": round(float(image[iy[i], ix[i]]), 4)} for i in order]
+    iy, ix = iy[order], ix[order]
+    padded = np.pad(image.astype(float), 1, constant_values=np.nan)
+    py, px = iy + 1, ix + 1
+    dx = subpixel_offset(padded[py, px - 1], padded[py, px], padded[py, px + 1])
+    dy = subpixel_offset(padded[py - 1, px], padded[py, px], padded[py + 1, px])
+    x0, y0, x1, y1 = grid.bounds
+    xs = np.clip(x0 + (ix + 0.5 + dx) * grid.cell, x0, x1)
+    ys = np.clip(y0 + (iy + 0.5 + dy) * grid.cell, y0, y1)
+    return [{"x": round(float(x), 3), "y": round(float(y), 3), "value": round(float(image[j, i]), 4)}
+            for x, y, j, i in zip(xs, ys, iy, ix, strict=True)]
 
 
 @dataclass
