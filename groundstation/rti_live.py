@@ -142,6 +142,7 @@ class LiveImager:
                  solve: Callable[..., Frame | None] = frame_at):
         self.source, self.window, self.history, self.bounds, self.cell = source, window, history, bounds, cell
         self.solve = solve
+        self.targets: list[list[float]] | None = None  # the simulation's targets (x, y), ground truth for the page
         self.frames = 0  # frames made
         self.skipped = 0  # windows that closed while a solve ran, never imaged
         self.error: str | None = None

@@ -6,6 +6,6 @@ the operator check, the vehicle look-up, the live-only rule and the pool the
 vehicle exchanges wait on.
 """
 
-from groundstation.api import maps, plan, recordings, session, streams, vehicles
+from groundstation.api import maps, plan, recordings, rti, session, streams, vehicles
 
-AREAS = (session, vehicles, plan, maps, recordings, streams)  # in the order their routes are matched and documented
+AREAS = (session, vehicles, plan, maps, rti, recordings, streams)  # the order routes are matched and documented in
