@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vehicle.tomography.imaging import find_peaks, subpixel_offset
-from vehicle.tomography.weights import Grid
+from vehicle.tomography.weights import LAMBDA, Grid, default_cell
 
 GRID = Grid((0.0, 0.0, 6.4, 6.4), 0.2)
 
@@ -51,3 +51,11 @@ def test_several_peaks_keep_their_order_and_each_its_own_position():
     assert [p["value"] for p in peaks] == sorted((p["value"] for p in peaks), reverse=True)
     for peak, centre in zip(peaks, [(1.33, 1.27), (4.46, 4.58)], strict=True):
         assert np.hypot(peak["x"] - centre[0], peak["y"] - centre[1]) < 0.03
+
+
+def test_the_default_cell_is_a_tidy_number_fine_enough_for_a_person_and_the_ellipses():
+    assert repr(default_cell((0.0, 0.0, 8.128, 7.8232))) == "0.15"  # the JSON's "cell", not 0.15000000000000002
+    half_width = np.sqrt(1.0 * LAMBDA / 2 + LAMBDA ** 2 / 4)  # the ellipse of a 1 m link, at its middle
+    for side in (2.0, 6.4, 8.128, 10.0):
+        cell = default_cell((0.0, 0.0, side, side))
+        assert 0.1 <= cell <= min(0.2, half_width) and cell == round(cell, 2)

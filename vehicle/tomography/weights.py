@@ -63,9 +63,12 @@ class Grid:
 
 def default_cell(bounds: tuple[float, float, float, float]) -> float:
     """About 50 pixels along the longer side, at least 0.1 m (finer than a person is wide, coarse enough that
-    the prior's covariance stays small), rounded to a tidy 0.05 m step."""
+    the prior's covariance stays small), rounded to a tidy 0.05 m step (0.15, not 0.15000000000000002).
+    Up to a 10 m area that is at most 0.2 m: at least two pixel centres across the ellipse of any link over 1 m
+    (its half-width at the middle is sqrt(d lam / 2 + lam^2 / 4), 0.23 m for d = 1 m at lam = 0.1 m) and
+    across a person (0.3 to 0.5 m)."""
     side = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
-    return max(0.1, round(side / 50 / 0.05) * 0.05)
+    return max(0.1, round(round(side / 50 / 0.05) * 0.05, 2))
 
 
 def weight_rows(grid: Grid, paths: np.ndarray, model: str = "ellipse", lam: float = LAMBDA) -> sp.csr_matrix:
