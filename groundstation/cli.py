@@ -113,6 +113,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     vehicle = [sys.executable, "-m", "vehicle.cli"]
     datum = [f"--datum={args.datum.lat},{args.datum.lon},{args.datum.alt}"] if args.datum is not None else []
     common = [*datum, *_key_for_children(args.signing_key)]  # what both vehicle processes are told
+    nodes = [f"--radio-nodes={';'.join(','.join(f'{v:g}' for v in p) for p in args.radio_nodes)}"] \
+        if args.radio_nodes else []
+    radio = [*nodes, *(f"--radio={text}" for text in args.radio_settings)]  # the world's radios
+    if args.targets:
+        radio.append(f"--targets={';'.join(f'{x:g},{y:g}' for x, y in args.targets)}")
+    if args.mission == "rti" and not radio:  # the flight controllers' world carries radios when told of any
+        radio.append("--radio=channel=11")
     output = subprocess.DEVNULL if args.quiet else None
     processes, roles = [], []
     if args.vehicles == 1 and args.vehicle != "mixed":  # a lone vehicle: its own flight controller process
@@ -121,7 +128,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         processes.append(_child([*vehicle, "sim", "--role", "autopilot", "--scene", args.scene, "--vehicle",
                                  args.vehicle, f"--start={x},{y}", "--sysid", "1", "--speedup", str(args.speedup),
                                  "--mavlink", f"udpout:127.0.0.1:{port}", "--mavlink",
-                                 f"udpout:127.0.0.1:{agent_port}", *common], output))
+                                 f"udpout:127.0.0.1:{agent_port}", *common, *radio], output))
         agent_ports, roles = [agent_port], ["vehicle 1's flight controller"]
     else:  # a team: one world serving every flight controller, vehicle k's agent on the base port + 10 k
         agent_base = _free_udp_ports_apart(args.vehicles)
@@ -129,13 +136,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
         processes.append(_child([*vehicle, "sim", "--role", "autopilot", "--scene", args.scene, "--vehicle",
                                  args.vehicle, "--vehicles", str(args.vehicles), *starts, "--speedup",
                                  str(args.speedup), "--team-link", f"udpout:127.0.0.1:{port}", "--mavlink",
-                                 f"udpout:127.0.0.1:{agent_base}", *common], output))
+                                 f"udpout:127.0.0.1:{agent_base}", *common, *radio], output))
         agent_ports = [agent_base + TEAM_PORT_STEP * k for k in range(args.vehicles)]
         roles = ["the team's world (every vehicle's flight controller)"]
     for index, agent_port in enumerate(agent_ports):
         processes.append(_child([*vehicle, "agent", "--connect", f"udpin:127.0.0.1:{agent_port}", "--mission",
                                  args.mission, "--vehicle", team_kind(args.vehicle, index), "--scene", args.scene,
-                                 "--stay", *common], output))
+                                 "--stay", *common, *nodes], output))
         roles.append(f"vehicle {index + 1}'s onboard agent")
     stopping = threading.Event()
     died: list[str] = []
@@ -304,6 +311,21 @@ def cmd_rti_reconstruct(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_rti_export(args: argparse.Namespace) -> int:
+    """A recording's link records as LINKS.csv, read as the station reads them."""
+    from groundstation.links_export import export_links
+    from groundstation.replay import index_tlog
+    from vehicle.world.scene import load_scene
+
+    index = index_tlog(args.file)  # a clear error now if it is no log
+    if index.warning:
+        print(f"warning: {index.warning}", file=sys.stderr)
+    scene = load_scene(args.scene) if args.scene else None
+    count, frame = export_links(args.file, args.csv, scene, args.datum)
+    print(f"rti: {count} link records -> {args.csv} (positions in metres, frame: {frame})", flush=True)
+    return 0 if count else 1
+
+
 def _rti_commands(commands) -> None:
     rti = commands.add_parser("rti", help="radio tomographic imaging from link signal strengths")
     actions = rti.add_subparsers(dest="action", required=True)
@@ -349,6 +371,16 @@ def _rti_commands(commands) -> None:
     rec.add_argument("--images", action="store_true", help="put each frame's image (rows of values) in the JSON")
     rec.add_argument("--png", metavar="OUT.png", help="draw the image (the mean of the frames) with the radios")
     rec.set_defaults(run=cmd_rti_reconstruct)
+    export = actions.add_parser("export", help="a recording's radio link records as LINKS.csv",
+                                description="The link records the vehicles' agents sent (TUNNEL RADIO_LINKS) in a "
+                                            "recording, as LINKS.csv for rti reconstruct; see docs/rti.md.")
+    export.add_argument("file", metavar="FILE.tlog", help="a recording (the station's, or a vehicle's --log)")
+    export.add_argument("--csv", required=True, metavar="LINKS.csv", help="where the records go")
+    export.add_argument("--scene", help="the scene whose frame the positions are in (default: the one the "
+                                        "recording names, if found among the bundled scenes)")
+    export.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
+                        help="where the scene origin lies on Earth (default: the scene's)")
+    export.set_defaults(run=cmd_rti_export)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -376,6 +408,7 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--mavlink-port", type=options.port,
                       help="UDP port the vehicles send to (default 14550, or a free one if that is taken)")
     demo.add_argument("--quiet", action="store_true", help="hide the vehicles' own output")
+    options.add_radio_options(demo)
     _server_options(demo)
     _signing_options(demo)
     demo.set_defaults(run=cmd_demo)

@@ -37,6 +37,7 @@ from groundstation.state import Fleet, makes_a_vehicle
 from vehicle.protocol.agent_status import AGENT_STATUS
 from vehicle.protocol.mapstream import MAP_SNAPSHOT, PATH, PATH_CHUNK, SNAPSHOT_CHUNK
 from vehicle.protocol.mav import AUTOPILOT, mavlink
+from vehicle.protocol.radiostream import RADIO_LINKS
 
 log = logging.getLogger("groundstation.replay")
 
@@ -318,7 +319,9 @@ class Replay:
         and its planned path from the last whole one on, then the rest in time
         order: each sonar reading after the latest attitude and the latest pose
         (of each kind) before it, so that its hit lands where it did (a pose
-        there only for that stays off the trail, which is an even sample).
+        there only for that stays off the trail, which is an even sample), and
+        last every batch of the agent's radio link records (``fleet.radio``
+        holds them all, as when playing; by then the vehicle's home is known).
         Status messages count per component: a vehicle's autopilot and its
         companion computer each have a latest one; of the agent's statuses the
         last few are applied, so that a damaged latest one leaves the one before
@@ -332,6 +335,7 @@ class Replay:
         rest: list[np.ndarray] = []
         latest: dict[int, int] = {}
         placing: list[np.ndarray] = []
+        radio: list[np.ndarray] = []  # every link record batch, applied last (its vehicle's home known by then)
         made = self._vehicles_made()
         for sysid in np.unique(sysids):
             mine = sysids == sysid
@@ -350,7 +354,9 @@ class Replay:
             if len(poses):
                 rest.append(poses[np.linspace(0, len(poses) - 1, min(len(poses), TRAIL_SAMPLES)).astype(int)])
             rest.append(np.flatnonzero(mine & (msgids == STATUSTEXT))[-RECENT_TEXTS:])
-            tunnels = np.flatnonzero(mine & (msgids == TUNNEL) & (index.tunnel_types[:end] != AGENT_STATUS))
+            tunnels = np.flatnonzero(mine & (msgids == TUNNEL) & (index.tunnel_types[:end] != AGENT_STATUS)
+                                     & (index.tunnel_types[:end] != RADIO_LINKS))
+            radio.append(np.flatnonzero(mine & (msgids == TUNNEL) & (index.tunnel_types[:end] == RADIO_LINKS)))
             snapshot_chunks = tunnels[index.tunnel_types[tunnels] == MAP_SNAPSHOT]
             path_chunks = tunnels[index.tunnel_types[tunnels] == PATH]
             readings = np.flatnonzero(mine & (msgids == DISTANCE_SENSOR))
@@ -373,7 +379,8 @@ class Replay:
         first = np.unique(np.concatenate(firsts))
         off_trail = np.setdiff1d(np.concatenate(placing + [none]), np.concatenate(rest))
         return np.concatenate([first, np.unique(np.concatenate(maps + [none])),
-                               np.setdiff1d(np.concatenate(rest + [off_trail]), first)]), latest, off_trail
+                               np.setdiff1d(np.concatenate(rest + [off_trail]), first),
+                               np.sort(np.concatenate(radio + [none]))]), latest, off_trail
 
     def _vehicles_made(self) -> dict[int, int]:
         """Per system id, the record of the heartbeat that makes it a vehicle in the fleet (the first that says

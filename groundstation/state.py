@@ -45,6 +45,7 @@ from vehicle.protocol.geodesy import Datum, on_earth
 from vehicle.protocol.mapstream import MapReceiver
 from vehicle.protocol.mav import AUTOPILOT, COMPANION, RESULT_WORDS, mavlink
 from vehicle.protocol.modes import FORCE_DISARM, commanded_mode, heartbeat_mode, name_of
+from vehicle.protocol.radiostream import RADIO_LINKS, LinkLog, LinkReceiver, LinkRecord
 from vehicle.protocol.rangefinder import reading_from
 from vehicle.protocol.statustext import Reassembler
 
@@ -66,6 +67,7 @@ SEVERE = mavlink.MAV_SEVERITY_WARNING  # this severity or worse is shown as a ba
 OWN_SYSID = 255  # this station's system id (the link's)
 FALL_FROM = 1.0  # m above home: a copter disarmed higher falls (a kill's fall is a crash)
 LANDED_BELOW = 0.3  # m above home: a falling copter is down
+MAX_UNPLACED = 10_000  # link records a vehicle whose home is not known yet may hold
 STILL = 0.2  # m/s of descent: a falling copter slower than this has come to rest
 DRAIN_WINDOW = 120.0  # s of history over which the battery's drain is measured
 DRAIN_AT_LEAST = 20.0  # s of history the drain needs before a flight time is estimated from it
@@ -161,6 +163,8 @@ class VehicleState:
     sonar: dict[int, Sonar] = field(default_factory=dict)
     hits: deque = field(default_factory=lambda: deque(maxlen=HITS_KEPT))
     map_stream: MapReceiver = field(default_factory=MapReceiver)
+    radio_stream: LinkReceiver = field(default_factory=LinkReceiver)  # its agent's TUNNEL RADIO_LINKS
+    radio_unplaced: list = field(default_factory=list)  # link records heard before its home was known
     companion_heartbeat: float | None = None  # when its onboard agent (component 191) was last heard
     agent: agent_status.AgentStatus | None = None  # the onboard agent's own state
     own_map: MemoryMap | None = None  # built here when the vehicle streams none
@@ -232,6 +236,7 @@ class Fleet:
         self.version = 0
         self.texts = Reassembler()
         self.history = history or History()
+        self.radio = LinkLog()  # every vehicle's link records, positions in the scene frame
         self._occupied: dict[int, tuple[tuple, int]] = {}  # sysid -> (map version, occupied cells)
         self.forget_after = forget_after  # None: never (a replayed log)
         self.max_vehicles = max_vehicles
@@ -250,6 +255,7 @@ class Fleet:
             self.texts = Reassembler()
             self.history.clear()
             self._occupied.clear()
+            self.radio.clear()
             self.version += 1
 
     def take_moved(self) -> set[int]:
@@ -546,8 +552,22 @@ class Fleet:
                 worry = status.paused or status.outcome == "stopped"
                 self.history.event(vehicle.sysid, now, "agent", _agent_text(status), 4 if worry else 6, "agent")
             vehicle.agent = status or vehicle.agent
+        elif m.payload_type == RADIO_LINKS:  # the agent's (a simulator's autopilot forwards them to it)
+            if m.get_srcComponent() == COMPANION:
+                self._radio_links(vehicle, vehicle.radio_stream.feed(payload, vehicle.sysid))
         else:
             vehicle.map_stream.feed(m.payload_type, payload)
+
+    def _radio_links(self, vehicle, records: list[LinkRecord]) -> None:
+        """Link records (relative to the vehicle's home) into the fleet's log, in the scene frame; those heard
+        before the home is known wait for it."""
+        if vehicle.home is None:
+            vehicle.radio_unplaced = (vehicle.radio_unplaced + records)[-MAX_UNPLACED:]
+            return
+        records, vehicle.radio_unplaced = vehicle.radio_unplaced + records, []
+        hx, hy = vehicle.home
+        self.radio.append(LinkRecord(r.t, r.tx, r.rx, r.tx_x + hx, r.tx_y + hy, r.rx_x + hx, r.rx_y + hy, r.rssi,
+                                     r.channel) for r in records)
 
     def _distance_sensor(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)

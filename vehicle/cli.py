@@ -67,6 +67,7 @@ def add_run_options(parser: argparse.ArgumentParser, mission_required: bool = Tr
     parser.add_argument("--datum", type=datum_option, metavar="LAT,LON[,ALT]",
                         help="where the scene origin lies on Earth, degrees and metres above sea level (default: "
                              "the scene's datum hint, else ArduPilot's simulator home -35.363261,149.165230,584)")
+    options.add_radio_options(parser)
 
 
 def _one_start(args: argparse.Namespace) -> tuple[float, ...] | None:
@@ -137,7 +138,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     settings = settings_from(args, scene, time_limit=args.time_limit)
     datum = Datum.of_scene(scene.hints, args.datum)
     waypoints = load_positions(args.waypoints, datum) if args.waypoints else None
-    if args.vehicles is not None or args.sysids is not None:
+    if args.vehicles is not None or args.sysids is not None or _with_radios(args):
         return _team_experiment(args, scene, settings, datum, waypoints)
     experiment = Experiment(args.scene, args.mission, args.vehicle, _one_start(args), args.heading, settings,
                             args.seed, waypoints, args.sensors, datum)
@@ -178,19 +179,27 @@ def _team_experiment(args: argparse.Namespace, scene, settings, datum, waypoints
     from vehicle.lab.experiment import Experiment, run_team
     from vehicle.lab.stepper import simulate_team
 
-    count = args.vehicles if args.vehicles is not None else len(args.sysids)
+    count = args.vehicles if args.vehicles is not None else len(args.sysids) if args.sysids is not None else 1
     if args.sysids is not None and len(args.sysids) != count:
         raise ValueError(f"--sysids names {len(args.sysids)} vehicles, --vehicles {count}")
     if args.start and len(args.start) != count:
         raise ValueError(f"--start given {len(args.start)} times for a team of {count}: once per vehicle, or not")
     if args.log or args.map_out:
         raise ValueError("--log and --map-out are for one vehicle; a team's run reports in its JSON")
-    stepper = simulate_team(scene, args.mission, count, args.vehicle, settings, args.start, args.sysids,
-                            [waypoints] * count if waypoints else None, seed=args.seed, suite=args.sensors,
-                            datum=datum)
     experiment = Experiment(args.scene, args.mission, args.vehicle, None, args.heading, settings, args.seed,
                             waypoints, args.sensors, datum)
-    result = run_team(experiment, stepper)
+    if _with_radios(args):  # the team's radios measured beside the flight, the targets imaged
+        from vehicle.lab.tomograph import run_team_experiment
+        from vehicle.world.radio import RadioModel
+
+        model = RadioModel.from_options(args.radio_settings)
+        result = run_team_experiment(experiment, scene, count, args.targets or [], args.start, args.sysids,
+                                     args.radio_nodes, waypoints, model)
+    else:
+        stepper = simulate_team(scene, args.mission, count, args.vehicle, settings, args.start, args.sysids,
+                                [waypoints] * count if waypoints else None, seed=args.seed, suite=args.sensors,
+                                datum=datum)
+        result = run_team(experiment, stepper)
     if args.json:
         print(json.dumps(result))
     else:
@@ -200,6 +209,11 @@ def _team_experiment(args: argparse.Namespace, scene, settings, datum, waypoints
             print(f"  vehicle {v['sysid']}: {v['outcome']} - {v['reason']}; {v['detections']} occupied cells, "
                   f"{v['distance_m']:.1f} m flown, gave way {v['gave_way']} times, closest to the scene "
                   f"{_metres(v['closest_scene_m'])}")
+        if "rti" in result:
+            rti = result["rti"]
+            print(f"radio tomography: {rti['links_heard']} link records heard, {rti['links_imaged']} imaged; "
+                  f"targets {'all found' if rti['found'] else 'not all found'} within {rti['found_within_m']} m "
+                  f"(distance to the nearest peak: {', '.join(_metres(d) for d in rti['distances_m']) or '-'})")
         shared = "shared" if result["share_maps"] else "not shared"
         print(f"team: {result['detections']} occupied cells together (maps {shared}); "
               f"closest approach between vehicles {_metres(result['closest_vehicles_m'])}; "
@@ -209,6 +223,23 @@ def _team_experiment(args: argparse.Namespace, scene, settings, datum, waypoints
 
 def _metres(value: float | None) -> str:
     return "-" if value is None else f"{value:.2f} m"
+
+
+def _with_radios(args: argparse.Namespace) -> bool:
+    """The vehicles carry radios: there are targets, fixed nodes or radio settings, or the mission is rti."""
+    return bool(args.targets or args.radio_nodes or args.radio_settings or args.mission == "rti")
+
+
+def _radios(args: argparse.Namespace, scene, ids: list[int], homes: list[tuple[float, ...]]):
+    """The world's radios when the run has any (targets, fixed nodes or the rti mission), else None."""
+    from vehicle.sim.radios import Radios
+    from vehicle.world.radio import RadioModel
+
+    model = RadioModel.from_options(args.radio_settings)  # a bad setting is refused even without radios
+    if not _with_radios(args):
+        return None
+    return Radios(scene, ids, args.radio_nodes, args.targets, model, args.seed,
+                  {sysid: (home[0], home[1]) for sysid, home in zip(ids, homes, strict=True)})
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
@@ -247,8 +278,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
         world.autopilot.set_mission(items)
     sim_options = SimOptions(args.mavlink or [DEFAULT_SIM_LINK], args.sysid, args.speedup,
                              args.failsafe_timeout, args.log, sim_clock=autopilot, signing_key=args.signing_key)
+    radios = _radios(args, scene, [args.sysid], [world.home])
+    if radios is not None:
+        stepper.controller.radio_nodes = [p[:2] for p in args.radio_nodes or []]
     sim = SimVehicle(stepper, sim_options, say=lambda text: print(f"vehicle {args.sysid}: {text}", file=sys.stderr,
-                                                                   flush=True))
+                                                                   flush=True), radios=radios)
     if autopilot:
         start = "a plain autopilot: an onboard agent flies it over MAVLink"
     else:
@@ -330,7 +364,11 @@ def _sim_team(args: argparse.Namespace, scene, settings) -> int:
     per_vehicle = [SimOptions(own, sysid, args.speedup, args.failsafe_timeout, args.log if k == 0 else None,
                               sim_clock=autopilot, signing_key=args.signing_key)
                    for k, (own, sysid) in enumerate(zip(links, ids, strict=True))]
-    sim = SimTeam(stepper, per_vehicle, say=lambda text: print(f"vehicle team: {text}", file=sys.stderr, flush=True))
+    radios = _radios(args, scene, ids, [world.home for world in simulations])
+    for controller in getattr(stepper, "controllers", []) if radios is not None else []:
+        controller.radio_nodes = [p[:2] for p in args.radio_nodes or []]
+    sim = SimTeam(stepper, per_vehicle, say=lambda text: print(f"vehicle team: {text}", file=sys.stderr, flush=True),
+                  radios=radios)
     what = "plain autopilots: an onboard agent flies each over MAVLink" if autopilot else f"mission {args.mission}"
     print(f"vehicle team: {count} vehicles ({args.vehicle}) in {Path(args.scene).name}, one world, "
           f"x{args.speedup:g}; {what}", flush=True)
@@ -369,7 +407,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
         parse_points(hints["waypoints"]) if "waypoints" in hints else None)
     agent_options = AgentOptions(args.connect, args.mission, args.vehicle, settings, waypoints, scene, args.sensors,
                                  args.suite, args.gcs, datum, args.log, args.wait, args.stay, args.connect_timeout,
-                                 args.signing_key)
+                                 args.signing_key, radio_nodes=args.radio_nodes or [])
     result = run_agent(agent_options, args.duration, say=lambda text: print(text, file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps(result))
@@ -495,6 +533,9 @@ def main(argv: list[str] | None = None) -> int:
     agent.add_argument("--duration", type=options.positive, help="stop after this many wall seconds")
     agent.add_argument("--json", action="store_true", help="print the result as one JSON object")
     agent.add_argument("--signing-key", type=_signing_key, metavar="FILE|PASSPHRASE", help=SIGNING_HELP)
+    agent.add_argument("--radio-nodes", type=options.radio_nodes_option, metavar="X,Y[,Z][;...]|@FILE",
+                       help="fixed radio nodes in scene metres, as the vehicle's simulator was given them (the rti "
+                            "mission measures links to them)")
     agent.set_defaults(run=cmd_agent)
 
     from vehicle.lab.presets import PRESETS

@@ -72,7 +72,7 @@ def link_url(text: str) -> str:
 
 
 # their values are comma-separated numbers (X,Y[,Z], LAT,LON[,ALT], X0,Y0,X1,Y1, X,Y[;X,Y...])
-POINT_OPTIONS = ("--start", "--datum", "--bounds", "--targets")
+POINT_OPTIONS = ("--start", "--datum", "--bounds", "--targets", "--radio-nodes")
 _NEGATIVE = re.compile(r"-\.?\d")
 
 
@@ -96,3 +96,38 @@ def glue_negative_points(argv: Sequence[str]) -> list[str]:
 def _names_a_point_option(arg: str) -> bool:
     """``--start`` or ``--datum``, or an abbreviation of one (argparse says which when it is ambiguous)."""
     return arg.startswith("--") and len(arg) > 2 and "=" not in arg and any(o.startswith(arg) for o in POINT_OPTIONS)
+
+
+def targets_option(text: str) -> list[tuple[float, float]]:
+    """``X,Y[;X,Y...]``: radio tomography targets (people) in scene metres."""
+    from vehicle.world.radio import parse_targets
+
+    try:
+        return parse_targets(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def radio_nodes_option(text: str) -> list[tuple[float, float, float]]:
+    """``X,Y[,Z][;...]`` or ``@FILE``: fixed radio nodes in scene metres."""
+    from vehicle.world.radio import parse_nodes
+
+    try:
+        return parse_nodes(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_radio_options(parser: argparse.ArgumentParser) -> None:
+    """The simulated radios' options (``vehicle sim``, ``vehicle experiment``, ``groundstation demo``): one
+    definition, so the three take the same text."""
+    parser.add_argument("--targets", type=targets_option, metavar="X,Y[;X,Y...]",
+                        help="radio tomography targets (people, cylinders the radios' links pass through) in scene "
+                             "metres; a simulated vehicle then carries a radio")
+    parser.add_argument("--radio-nodes", type=radio_nodes_option, metavar="X,Y[,Z][;...]|@FILE",
+                        help="fixed radio nodes in scene metres (Z: height, default 1 m), or a file of one X,Y[,Z] "
+                             "a line; fixed node k has the radio id 200 + k")
+    parser.add_argument("--radio", dest="radio_settings", action="append", default=[], metavar="NAME=VALUE",
+                        help="a radio model setting (vehicle.world.radio.RadioModel: power_dbm, path_loss_exponent, "
+                             "wall_loss_db, target_loss_db, noise_sigma_db, packet_loss, ...; repeatable); the "
+                             "vehicles carry radios when any radio option is given, or the mission is rti")

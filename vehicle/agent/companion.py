@@ -2,7 +2,8 @@
 
 What a ground station hears from the agent, whichever flight controller it
 flies: a HEARTBEAT (type ONBOARD_CONTROLLER), its memory map and planned path
-(the TUNNEL map stream), its state (running, paused and why; TUNNEL
+(the TUNNEL map stream), what its radio heard (TUNNEL ``RADIO_LINKS``, given by
+``hear``; a simulated vehicle's radio, ``vehicle.sim.radios``), its state (running, paused and why; TUNNEL
 ``AGENT_STATUS``) and its messages (STATUSTEXT, chunked when long). What it
 answers: MAV_CMD_MISSION_START addressed to it starts or resumes the mission
 (a ground station's Resume), MAV_CMD_DO_PAUSE_CONTINUE addressed to it pauses
@@ -17,6 +18,8 @@ packed as component 191; the clock is the caller's (the wall clock live).
 
 from __future__ import annotations
 
+from collections import deque
+
 from vehicle.agent.agent import Agent
 from vehicle.agent.params import Parameters
 from vehicle.protocol import agent_status
@@ -24,11 +27,14 @@ from vehicle.protocol.geodesy import on_earth
 from vehicle.protocol.mapstream import PAYLOAD, MapStreamer
 from vehicle.protocol.mav import COMPANION as COMPONENT
 from vehicle.protocol.mav import mavlink
+from vehicle.protocol.radiostream import PER_PAYLOAD, RADIO_LINKS, LinkRecord, LinkSender
 from vehicle.protocol.statustext import statustexts
 
 HEARTBEAT_PERIOD = 1.0  # s
 PATH_PERIOD = 0.5  # s between checks of the planned path
 STATUS_PERIOD = 1.0  # s between repeats of an unchanged status
+RADIO_PERIOD = 0.5  # s between batches of link records (sooner when a payload is full)
+RADIO_BACKLOG = 10_000  # link records kept unsent at most (the oldest go first)
 PARAM_MESSAGES = ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET")
 
 
@@ -47,6 +53,13 @@ class Companion:
         self._next_heartbeat = self._next_path = self._next_status = start
         self._status: agent_status.AgentStatus | None = None
         self._texts = 0
+        self.radio = LinkSender()
+        self.heard: deque[LinkRecord] = deque(maxlen=RADIO_BACKLOG)
+        self._next_radio = start
+
+    def hear(self, records: list[LinkRecord]) -> None:
+        """Link records the vehicle's radio measured (positions relative to home), to send in batches."""
+        self.heard.extend(records)
 
     # ---- sending ----------------------------------------------------------------------------------
     def tick(self, now: float) -> list:
@@ -60,6 +73,10 @@ class Companion:
         if now >= self._next_path:
             self._next_path = now + PATH_PERIOD
             out += [self.tunnel(kind, payload) for kind, payload in self.streamer.path(self.agent.ctx.planned_path)]
+        if self.heard and (now >= self._next_radio or len(self.heard) >= PER_PAYLOAD):
+            self._next_radio = now + RADIO_PERIOD
+            out += [self.tunnel(RADIO_LINKS, payload) for payload in self.radio.payloads(self.heard)]
+            self.heard.clear()
         status = self.status()
         if status != self._status or now >= self._next_status:
             self._status, self._next_status = status, now + STATUS_PERIOD
@@ -77,8 +94,10 @@ class Companion:
 
     def final(self) -> list:
         """A heartbeat, the messages not sent yet, the status and a full map snapshot: the last word of a log."""
+        radio = [tunnel(RADIO_LINKS, payload) for payload in self.radio.payloads(self.heard)]
+        self.heard.clear()
         return [self.heartbeat(), *self.texts(), tunnel(agent_status.AGENT_STATUS, agent_status.encode(self.status())),
-                *[tunnel(kind, payload) for kind, payload in self.streamer.snapshot()]]
+                *[tunnel(kind, payload) for kind, payload in self.streamer.snapshot()], *radio]
 
     def heartbeat(self):
         agent = self.agent

@@ -50,6 +50,7 @@ from vehicle.protocol.mav import ACCEPTED, AUTOPILOT, COMMAND_NAMES, RESULT_WORD
 from vehicle.protocol.mav import COMPANION as COMPONENT
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import DISARMED, Kind, name_of, number_of
+from vehicle.protocol.radiostream import RADIO_LINKS, LinkReceiver, LinkRecord
 from vehicle.protocol.rangefinder import Reading, Servo, reading_from, readings_from_obstacles
 from vehicle.protocol.traffic import Traffic
 
@@ -62,6 +63,7 @@ NEWS_EVERY = 5.0  # wall s at least between two lines about what was dropped (a 
 FROM_ELSEWHERE = "messages in the autopilot's name from elsewhere"  # why a message was dropped (``dropped``)
 TOO_MANY = f"requests beyond the {REQUESTS_HELD} it holds at once"
 FAILED = "messages it failed to handle"
+RADIO_HELD = 10_000  # link records kept for the agent to send at most
 TRAFFIC_STALE = 3.0  # s of the autopilot's clock after which a team-mate's ADSB_VEHICLE is forgotten
 TRAFFIC_HELD = 64  # team-mates remembered at once (more reports are dropped)
 STREAMS = {  # message -> rate (Hz of the autopilot's clock) the agent asks for
@@ -147,6 +149,8 @@ class MavlinkController:
         self._speed_news = False  # the operator set a speed that the next pump sends
         self._reposition_ok = True
         self._traffic: dict[int, Traffic] = {}  # ICAO address (a team-mate's system id) -> its last report
+        self.radio = LinkReceiver()  # the vehicle's radio, as its flight controller forwards it (TUNNEL RADIO_LINKS)
+        self._radio_heard: deque[LinkRecord] = deque(maxlen=RADIO_HELD)
 
     # ---- connecting ---------------------------------------------------------------------------------
     def connect(self, timeout: float = 30.0) -> None:
@@ -394,6 +398,18 @@ class MavlinkController:
         self._traffic[m.ICAO_address] = Traffic(m.ICAO_address, x, y, m.altitude / 1000.0 - self.datum.alt,
                                                 speed * math.sin(track), speed * math.cos(track), self.radius,
                                                 self._time - m.tslc)
+
+    def _on_tunnel(self, m) -> None:
+        """Link records the vehicle's radio measured, forwarded by the flight controller (the simulator's radio
+        does so; the agent sends them on to the ground station, ``Companion.hear``)."""
+        if m.payload_type == RADIO_LINKS:
+            self._radio_heard.extend(self.radio.feed(bytes(m.payload[:m.payload_length]), self.sysid))
+
+    def take_radio(self) -> list[LinkRecord]:
+        """The link records heard since the last call."""
+        records = list(self._radio_heard)
+        self._radio_heard.clear()
+        return records
 
     def _on_distance_sensor(self, m) -> None:
         self._clock(m)

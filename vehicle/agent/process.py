@@ -78,6 +78,7 @@ class AgentOptions:
     signing_key: bytes | None = None  # MAVLink 2 signing on every link: sign everything, refuse what is not signed
     start_timeout: float | None = None  # wall s from its start (with ``wait``, the operator's) to the mission's;
     # None: START_TIMEOUT
+    radio_nodes: list[tuple[float, ...]] = field(default_factory=list)  # fixed radio nodes, scene metres (rti)
 
 
 class OnboardAgent:
@@ -105,6 +106,7 @@ class OnboardAgent:
             self.collider = Collider(options.scene, RADIUS, ignore_walkable=options.kind == "rover")
         self.fc = MavlinkController(self.conn, options.kind, options.datum, ground, radius=RADIUS, servo=servo,
                                     use_fc_sensors=options.sensors == "fc", extra_links=tuple(self.gcs))
+        self.fc.radio_nodes = [tuple(p[:2]) for p in options.radio_nodes]
         self.agent: Agent | None = None
         self.companion: Companion | None = None
         self.collision = None
@@ -135,6 +137,7 @@ class OnboardAgent:
         while outcome is None:
             now = time.time()
             came = fc.pump()
+            self.companion.hear(fc.take_radio())
             for line in watch.changes():
                 say(f"agent: {line}")
             self._record(came, now)

@@ -36,8 +36,10 @@ from vehicle.lab.experiment import warm_up
 from vehicle.lab.stepper import Stepper, TeamStepper
 from vehicle.protocol.links import LinkWatch
 from vehicle.protocol.mav import mavlink
+from vehicle.protocol.radiostream import PAYLOAD, RADIO_LINKS, LinkSender
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.sim.endpoint import Endpoint
+from vehicle.sim.radios import Radios
 from vehicle.sim.team import Team
 from vehicle.sim.telemetry import Telemetry, adsb_vehicle
 
@@ -61,9 +63,12 @@ def _to_stderr(text: str) -> None:
 
 
 class SimVehicle:
-    def __init__(self, stepper: Stepper, options: SimOptions, say: Callable[[str], None] = _to_stderr):
-        """``say`` tells the user what goes wrong on the way (a link down)."""
+    def __init__(self, stepper: Stepper, options: SimOptions, say: Callable[[str], None] = _to_stderr,
+                 radios: Radios | None = None):
+        """``say`` tells the user what goes wrong on the way (a link down); ``radios``: the world's radios, whose
+        records each agent sends."""
         self.stepper = stepper
+        self.radios = radios
         self.world = stepper.simulation
         self.agent = stepper.agent
         self.options = options
@@ -124,6 +129,8 @@ class SimVehicle:
                 if self.options.sim_clock:
                     out += wire.telemetry.tick(world.time)
                 wire.say_crash()
+            if self.radios is not None:
+                self._radio(messages)
             if self.options.sim_clock:
                 self._add_traffic(messages, world.time)
         return messages
@@ -131,6 +138,22 @@ class SimVehicle:
     def _step(self) -> list[list]:
         """One step of the world: each vehicle's readings."""
         return [self.stepper.step()]
+
+    def _radio(self, messages: list[list]) -> None:
+        """Each agent gets what its vehicle's radio heard in the step: in this process, or, for an agent in
+        another, forwarded by the flight controller in TUNNEL RADIO_LINKS addressed to it."""
+        positions = {wire.telemetry.sysid: tuple(wire.world.body.pose.xyz()) for wire in self.wires}
+        heard = self.radios.step(self.world.time, positions)
+        for wire, out in zip(self.wires, messages, strict=True):
+            records = heard.get(wire.telemetry.sysid)
+            if not records:
+                continue
+            if wire.companion is not None:
+                wire.companion.hear(records)
+            else:
+                out += [mavlink.MAVLink_tunnel_message(wire.telemetry.sysid, COMPONENT, RADIO_LINKS, len(payload),
+                                                       list(payload.ljust(PAYLOAD, b"\0")))
+                        for payload in wire.radio.payloads(records)]
 
     def _add_traffic(self, messages: list[list], now: float) -> None:
         """A lone vehicle has no team-mates to report."""
@@ -152,6 +175,7 @@ class _Wire:
                                  log, onboard=self.companion, signing_key=options.signing_key)
         self.links = LinkWatch(self.endpoint.links)
         self._crash_reported = False
+        self.radio = LinkSender()  # the vehicle's radio, forwarded to an agent in another process
 
     def say_crash(self) -> None:
         """The autopilot says once that the vehicle crashed, and into what."""
@@ -182,9 +206,10 @@ class SimTeam(SimVehicle):
     that is how an agent in another process learns where the others are (``MavlinkController.traffic``)."""
 
     def __init__(self, stepper: Autopilots | TeamStepper, options: list[SimOptions],
-                 say: Callable[[str], None] = _to_stderr):
+                 say: Callable[[str], None] = _to_stderr, radios: Radios | None = None):
         """``options``: one per vehicle, in the team's order (the first's speed-up, clock and log serve all)."""
         self.stepper = stepper
+        self.radios = radios
         self.team = stepper.team
         self.world = self.team.simulations[0]
         self.agent = None

@@ -6,7 +6,7 @@ vehicle's clock in seconds, the sender's and receiver's ids (system ids, or a fi
 metres east and north of home, the RSS in dBm, the radio channel, 0 when unknown). The agent sends them in
 batches, one TUNNEL payload type of ours beside the map stream's (``mapstream``; all integers little-endian):
 
-* ``RADIO_LINKS`` (32803): ``<BIdB`` = format version (1), batch sequence number, base time (s), record count n
+* ``RADIO_LINKS`` (32805): ``<BIdB`` = format version (1), batch sequence number, base time (s), record count n
   (at most 4), then n records ``<HHHffffhB``: sender id, receiver id, time after the base time in ms, sender x,
   y, receiver x, y (float32 metres), RSS in hundredths of a dBm, channel.
 
@@ -31,7 +31,7 @@ import numpy as np
 
 from vehicle.protocol.map_bounds import MAX_REACH
 
-RADIO_LINKS = 32803
+RADIO_LINKS = 32805  # 32803 and 32804 are the agent's status and progress (agent_status)
 PAYLOAD = 128
 FORMAT_VERSION = 1
 HEADER = struct.Struct("<BIdB")

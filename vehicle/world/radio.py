@@ -36,6 +36,7 @@ from vehicle.world.raycast import RayCaster
 
 MAX_HITS = 64  # surfaces counted along one line at most (a line through a dense mesh stops counting there)
 CACHE = 100_000  # lines whose wall count is kept (radios that hold a spot ask the same line again)
+NODE_IDS = 200  # fixed radio node k has the id NODE_IDS + k (vehicles keep their system ids)
 
 
 class RadioModel(BaseModel):
@@ -46,7 +47,7 @@ class RadioModel(BaseModel):
     power_dbm: float = Field(-40.0, ge=-150, le=30, description="dBm received at 1 m in the open")
     path_loss_exponent: float = Field(2.0, ge=1, le=6, description="log-distance path-loss exponent")
     wall_loss_db: float = Field(5.0, ge=0, le=60, description="dB lost per wall the line A-B crosses")
-    wall_thickness_m: float = Field(0.5, gt=0, le=10, description="m: surfaces closer than this along the line "
+    wall_thickness_m: float = Field(1.0, gt=0, le=10, description="m: surfaces closer than this along the line "
                                     "are one wall")
     target_radius_m: float = Field(0.3, ge=0, le=5, description="m: a target's (person's) radius")
     target_loss_db: float = Field(4.0, ge=0, le=40, description="dB lost by a link passing within the radius")
@@ -95,7 +96,7 @@ def parse_nodes(text: str) -> list[tuple[float, float, float]]:
             with open(path, encoding="utf-8") as file:
                 lines = [line.split("#", 1)[0].strip() for line in file]
         except (OSError, UnicodeDecodeError) as error:
-            raise ValueError(f"radio nodes file {path}: {error}") from None
+            raise ValueError(f"radio nodes file {path}: {getattr(error, 'strerror', None) or error}") from None
         text = ";".join(line for line in lines if line)
         if not text:
             raise ValueError(f"radio nodes file {path} names no node")
