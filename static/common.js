@@ -15,6 +15,7 @@
 //   map2d.js       the 2D map;  plots.js  the selected vehicle's telemetry against time
 //   view3d.js      this page's own 3D view: camera modes, keys, layers
 //   plan.js        the plan view: a mission clicked on the 2D map, checked, uploaded, imported, exported, flown
+//   rti.js         the radio tomography panel: links per second, coverage, the peaks
 //
 // The contract: every event is a CustomEvent on `window`, its payload in `event.detail`. Each script adds its
 // listeners when it runs and starts talking on DOMContentLoaded, so no script misses another's first word.
@@ -40,6 +41,9 @@
 //   plan-changed     plan.js, the plan to draw: {editing, items: [{action, x, y, alt, ...}], home: [x, y]|null,
 //                    legs: [{blocked}], selected: index|null, current: index|null} -> map2d
 //   plan-move        map2d.js, a plan item dragged on the map: {index, x, y, done} (done when let go) -> plan
+//   rti-frame        rti.js, the station's latest radio tomography frame: {frame: /api/rti's frame|null,
+//                    picture: {bounds, img (a loaded Image), scale: {max, unit, colours}}|null, targets: [[x, y]]}
+//                    -> map2d (the image layer, its colour bar, peaks, links, targets)
 
 export const EVENTS = Object.freeze({
   status: "station-status",
@@ -54,6 +58,7 @@ export const EVENTS = Object.freeze({
   mapClick: "map2d-click",
   plan: "plan-changed",
   planMove: "plan-move",
+  rti: "rti-frame",
 });
 
 /** Send one of EVENTS with its payload. */

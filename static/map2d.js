@@ -4,7 +4,9 @@
 // Drag to pan, wheel to zoom towards the cursor. Scene metres: x east, y north. Pictures come as PNG data
 // URLs from /api/map2d/*; vehicles from the status frames ("station-status", see common.js). While the plan view
 // edits (plan.js), a click is a new waypoint ("map2d-click") and a waypoint dragged moves it ("plan-move"); the
-// plan is drawn with its legs, a leg the scene blocks in red.
+// plan is drawn with its legs, a leg the scene blocks in red. The radio tomography's image (rti.js, "rti-frame")
+// is a layer over the maps with its colour bar, the last window's links as faint lines, its peaks as crosses with
+// their value and the simulated targets (ground truth) as rings.
 
 import { $, EVENTS, emit, fmt, getJson, isNum, on } from "./common.js";
 
@@ -16,6 +18,7 @@ const ctx = canvas.getContext("2d");
 const view = { cx: 0, cy: 0, scale: 4, fitted: false };  // centre (m) and pixels per metre
 let scene = null;      // {bounds, img}
 let overlay = null;    // {bounds, img}
+let rti = { frame: null, picture: null, targets: [] };  // "rti-frame"
 let trails = {};
 let vehicles = [];
 let mode = null;
@@ -256,6 +259,7 @@ function draw() {
   ctx.fillRect(0, 0, w, h);
   drawImage(scene);
   drawImage(overlay);
+  drawRti(w);
   for (const v of vehicles) {
     polyline(trails[String(v.sysid)], colourOf(v), 1.5);
     polyline(v.waypoints, "rgba(255, 255, 255, 0.7)", 1, [4, 4]);
@@ -272,6 +276,67 @@ function draw() {
   drawMeasure();
   drawScale(w, h);
   drawNorth(w);
+}
+
+/** The radio tomography layer: the image, the last window's links, the targets, the peaks, the colour bar. */
+function drawRti(w) {
+  const { frame, picture, targets } = rti;
+  canvas.dataset.rti = frame ? String(frame.t) : "";
+  if (!frame) return;
+  ctx.globalAlpha = 0.85;
+  drawImage(picture);
+  ctx.globalAlpha = 1;
+  for (const link of Array.isArray(frame.links) ? frame.links : []) {
+    if (Array.isArray(link) && link.length === 4 && link.every(isNum)) {
+      polyline([[link[0], link[1]], [link[2], link[3]]], "rgba(255, 255, 255, 0.18)", 1);
+    }
+  }
+  ctx.lineWidth = 2;
+  for (const [x, y] of targets) {
+    const [sx, sy] = toScreen(x, y);
+    ctx.strokeStyle = "#39c5ff";
+    ctx.beginPath();
+    ctx.arc(sx, sy, 9, 0, Math.PI * 2);
+    ctx.stroke();
+  }
+  ctx.font = "bold 11px system-ui, sans-serif";
+  frame.peaks.forEach((p, i) => {
+    const [sx, sy] = toScreen(p.x, p.y);
+    ctx.strokeStyle = "#ff4d4f";
+    ctx.lineWidth = 3;
+    ctx.beginPath();
+    ctx.moveTo(sx - 6, sy - 6); ctx.lineTo(sx + 6, sy + 6);
+    ctx.moveTo(sx - 6, sy + 6); ctx.lineTo(sx + 6, sy - 6);
+    ctx.stroke();
+    ctx.fillStyle = "#ffffff";
+    ctx.fillText(`${i + 1}: ${fmt(p.value, 3)}`, sx + 9, sy - 7);
+  });
+  canvas.dataset.rtiPeaks = String(frame.peaks.length);
+  if (picture && picture.scale) drawColourBar(w, picture.scale, targets.length > 0);
+}
+
+/** The image's colour bar (0 at the bottom, the image's maximum at the top, in its unit) and the legend. */
+function drawColourBar(w, scale, truth) {
+  const colours = Array.isArray(scale.colours) ? scale.colours.filter((c) => colourRe.test(c)) : [];
+  if (colours.length < 2 || !isNum(scale.max)) return;
+  const x = w - 34, top = 62, height = 110;
+  const ramp = ctx.createLinearGradient(0, top + height, 0, top);
+  colours.forEach((c, i) => ramp.addColorStop(i / (colours.length - 1), c));
+  ctx.fillStyle = ramp;
+  ctx.fillRect(x, top, 12, height);
+  ctx.strokeStyle = "#ffffff";
+  ctx.lineWidth = 1;
+  ctx.strokeRect(x, top, 12, height);
+  ctx.fillStyle = "#ffffff";
+  ctx.font = "10px system-ui, sans-serif";
+  ctx.textAlign = "right";
+  ctx.fillText(fmt(scale.max, 3), x - 3, top + 8);
+  ctx.fillText("0", x - 3, top + height);
+  ctx.fillText(String(scale.unit || ""), x + 12, top - 6);
+  const legend = ["× peak", "— link", ...(truth ? ["○ target"] : [])];
+  legend.forEach((text, i) => ctx.fillText(text, x + 12, top + height + 14 + i * 12));
+  ctx.textAlign = "start";
+  canvas.dataset.rtiBar = fmt(scale.max, 3);
 }
 
 const PLAN_LABELS = { takeoff: "T", land: "L", rtl: "R", loiter: "O" };
@@ -416,6 +481,11 @@ on(EVENTS.plan, (detail) => {
   draw();
 });
 on(EVENTS.selected, () => { loadOverlay(); draw(); });
+on(EVENTS.rti, (detail) => {
+  rti = { frame: detail.frame || null, picture: detail.picture || null,
+          targets: Array.isArray(detail.targets) ? detail.targets : [] };
+  draw();
+});
 on(EVENTS.status, (msg) => {
   const held = mapsHeld().join();
   vehicles = msg.vehicles.filter((v) => Number.isInteger(v.sysid));
