@@ -21,7 +21,8 @@ from vehicle.tomography.imaging import reconstruct
 from vehicle.tomography.links import Records
 
 FOUND_M = 0.5  # m: a target this close to a peak is found
-EVERY = 5.0  # s of simulated time between two images
+EVERY = 10.0  # s of simulated time between two images
+CELL = 0.25  # m: the image's pixel, half the distance a target must be found within (finer costs more per image)
 
 
 def as_records(rows: list, name: str) -> Records:
@@ -64,7 +65,7 @@ class Tomograph:
         if len(self.records) < 2:
             return None
         result = reconstruct(as_records(self.records, "run"), calibration=as_records(self.empty, "empty"),
-                             bounds=self.bounds, peaks=len(self.targets))
+                             bounds=self.bounds, cell=CELL, peaks=len(self.targets))
         peaks = result.frames[0]["peaks"]
         distances = [min((math.dist(target, (p["x"], p["y"])) for p in peaks), default=math.inf)
                      for target in self.targets]
