@@ -110,6 +110,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     port = args.mavlink_port or _demo_port()
     station = _station(args, [f"udpin:127.0.0.1:{port}"], args.scene)
+    if args.targets:  # the simulation's targets, ground truth on the page's radio tomography layer
+        from groundstation.api.rti import imager_for
+
+        imager_for(station).targets = [[x, y] for x, y in args.targets]
     vehicle = [sys.executable, "-m", "vehicle.cli"]
     datum = [f"--datum={args.datum.lat},{args.datum.lon},{args.datum.alt}"] if args.datum is not None else []
     common = [*datum, *_key_for_children(args.signing_key)]  # what both vehicle processes are told

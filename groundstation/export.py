@@ -9,7 +9,9 @@ The serializer keeps the 3D scene only (viser leaves its GUI panels out of
 the file), so the telemetry panel goes into the scene: a label above each
 vehicle, rewritten every frame, says what the page's panel says as of that
 moment of the log (mode, armed, altitude, speed, battery, the onboard agent's
-state and the latest message), with the log's clock.
+state and the latest message), with the log's clock. The radio tomography's
+image lies on the ground as the live station showed it (``rti_live``: the
+frame of the records up to then), imaged at most every RTI_EVERY s of the log.
 """
 
 from __future__ import annotations
@@ -19,7 +21,9 @@ import time
 from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
+from groundstation import rti_view
 from groundstation.replay import Replay
+from groundstation.rti_live import LiveImager
 from groundstation.state import Fleet
 from groundstation.viz import SceneView
 from vehicle.protocol.geodesy import Datum
@@ -27,6 +31,7 @@ from vehicle.world.scene import Scene
 
 MAX_FRAMES = 600
 MIN_FRAME = 0.25  # s of log time between frames
+RTI_EVERY = 5.0  # s of log time between two radio tomography frames in the file (each costs a solve)
 LABEL_HEIGHT = 1.4  # m above the vehicle
 MESSAGE_CHARS = 60  # of the latest message shown
 
@@ -44,12 +49,18 @@ def export_html(path: str | Path, scene: Scene | None, datum: Datum | None, grou
         view.server.scene.add_light_ambient("/export/ambient", intensity=0.9)
         frame = max(MIN_FRAME, replay.duration / MAX_FRAMES)
         telemetry = TelemetryLabels(view, replay)
+        imager = LiveImager(lambda: getattr(fleet, "radio", None))
+        imager.listeners.append(lambda shown: rti_view.draw(view.server.scene, shown))
         view.draw()
         telemetry.draw()
+        imaged = -math.inf
         while replay.clock < replay.duration:
             replay.advance(frame)
             view.draw()
             telemetry.draw()
+            if replay.clock - imaged >= RTI_EVERY:
+                imaged = replay.clock
+                imager.step()
             serializer.insert_sleep(frame)
         return serializer.as_html(dark_mode=True)
     finally:

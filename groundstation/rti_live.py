@@ -117,14 +117,18 @@ def coverage(records: Records, bounds, cell: float, shape: tuple[int, int]) -> f
     return float(hit.mean())
 
 
+def rgba(image: np.ndarray) -> np.ndarray:
+    """An image's pixels, north up, viridis from 0 to its maximum, more transparent the less attenuated."""
+    scaled = np.clip(image, 0, None) / max(float(image.max()), 1e-9)
+    return np.dstack([colours(scaled), (np.clip(scaled * 2, 0, 1) * 200).astype(np.uint8)])[::-1].copy()
+
+
 def picture(frame: Frame) -> dict:
     """The frame's image as a PNG data URL (north up, viridis from 0 to the image's maximum, transparent where
     nothing is attenuated) with its bounds and the colour scale."""
     top = max(float(frame.image.max()), 1e-9)
-    scaled = np.clip(frame.image, 0, None) / top
-    rgba = np.dstack([colours(scaled), (np.clip(scaled * 2, 0, 1) * 200).astype(np.uint8)])[::-1]
     out = io.BytesIO()
-    Image.fromarray(rgba, "RGBA").save(out, format="PNG")
+    Image.fromarray(rgba(frame.image), "RGBA").save(out, format="PNG")
     return {"image": "data:image/png;base64," + base64.b64encode(out.getvalue()).decode("ascii"),
             "bounds": list(frame.bounds), "t": frame.t,
             "scale": {"min": 0.0, "max": round(top, 4), "unit": UNITS.get(frame.info.get("measure"), "per pixel"),
@@ -142,6 +146,7 @@ class LiveImager:
                  solve: Callable[..., Frame | None] = frame_at):
         self.source, self.window, self.history, self.bounds, self.cell = source, window, history, bounds, cell
         self.solve = solve
+        self.listeners: list[Callable[[Frame | None], None]] = []  # told of every new frame (the 3D view)
         self.targets: list[list[float]] | None = None  # the simulation's targets (x, y), ground truth for the page
         self.frames = 0  # frames made
         self.skipped = 0  # windows that closed while a solve ran, never imaged
@@ -180,7 +185,7 @@ class LiveImager:
         log = self.source()
         if log is not self._log:  # live <-> replay
             self._log, self._version, self._end, self._arrivals = log, None, None, []
-            self._frame = None
+            self._show(None)
         if log is None:
             return False
         version, size, now = getattr(log, "version", len(log)), len(log), time.monotonic()
@@ -193,7 +198,8 @@ class LiveImager:
             self._arrivals = [*self._arrivals[-ARRIVALS + 1:], (size, now)]
         rows = log.snapshot()
         if not rows:
-            changed, self._frame, self._end = self._frame is not None, None, None
+            changed, self._end = self._frame is not None, None
+            self._show(None)
             return changed
         newest = max(r.t for r in rows)
         end = boundary(newest, self.window)
@@ -211,6 +217,17 @@ class LiveImager:
             arrived = next((w for n, w in self._arrivals if n > last), None) if last is not None else None
             frame.latency_s = None if arrived is None else time.monotonic() - arrived
             self.frames += 1
-        self._frame = frame
         self.error = None
+        self._show(frame)
         return True
+
+    def _show(self, frame: Frame | None) -> None:
+        """Tell the listeners, then answer readers with ``frame`` (a listener's failure is said, not fatal)."""
+        if frame is None and self._frame is None:
+            return
+        for listener in self.listeners:
+            try:
+                listener(frame)
+            except Exception as error:  # noqa: BLE001 - the 3D view must not stop the imaging
+                self.error = f"showing the frame: {type(error).__name__}: {error}"
+        self._frame = frame

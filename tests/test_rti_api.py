@@ -58,5 +58,7 @@ def test_records_give_a_frame_its_image_and_the_targets(station):
     assert drawn["scale"]["max"] == pytest.approx(frame["max"]) and len(drawn["scale"]["colours"]) == 5
     png = Image.open(io.BytesIO(base64.b64decode(drawn["image"].split(",", 1)[1])))
     assert png.size == (26, 26) and png.mode == "RGBA"  # 6.4 m in 0.25 m pixels
+    nodes = station.station.view.server.scene._handle_from_node_name  # the 3D view's ground shows it too
+    assert {"/layers/rti/image", "/layers/rti/peaks", "/layers/rti/peak0"} <= set(nodes)
     raw = station.http.get("/api/rti/image?format=png")
     assert raw.headers["content-type"] == "image/png" and Image.open(io.BytesIO(raw.content)).size == (26, 26)

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import functools
 from typing import TYPE_CHECKING
 
 from fastapi import APIRouter, Query, Response
 
+from groundstation import rti_view
 from groundstation.rti_live import LiveImager, picture
 
 if TYPE_CHECKING:
@@ -24,6 +26,7 @@ def imager_for(station: GroundStation) -> LiveImager:
     imager = getattr(station, "rti", None)
     if imager is None:
         imager = station.rti = LiveImager(lambda: getattr(station.fleet, "radio", None))
+        imager.listeners.append(functools.partial(rti_view.draw, station.view.server.scene))  # the 3D view's ground
     return imager
 
 
