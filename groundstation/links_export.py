@@ -36,6 +36,6 @@ def export_links(tlog: str | Path, out: str | Path, scene=None, datum: Datum | N
         writer = csv.writer(file)
         writer.writerow(COLUMNS)
         for r in records:
-            writer.writerow([f"{r.t:.3f}", r.tx, r.rx, f"{r.tx_x:.3f}", f"{r.tx_y:.3f}", f"{r.rx_x:.3f}",
+            writer.writerow([f"{r.t:.6f}", r.tx, r.rx, f"{r.tx_x:.3f}", f"{r.tx_y:.3f}", f"{r.rx_x:.3f}",
                              f"{r.rx_y:.3f}", f"{r.rssi:g}", r.channel])
     return len(records), frame

@@ -10,10 +10,10 @@ batches, one TUNNEL payload type of ours beside the map stream's (``mapstream``;
   (at most 4), then n records ``<HHHffffhB``: sender id, receiver id, time after the base time in ms, sender x,
   y, receiver x, y (float32 metres), RSS in hundredths of a dBm, channel.
 
-Every payload stands alone, so a lost one loses only its records. The receiver keeps the sequence numbers it has
-seen lately: a duplicate (a payload sent twice, or recorded twice) adds nothing, and a late one (reordered)
-still counts. A sequence number far below the ones seen means the sender started again: its numbers are taken
-afresh. A payload that is not one (too short, an unknown version, a count its length does not hold) is dropped
+Every payload stands alone, so a lost one loses only its records. The receiver remembers the last ``REMEMBER``
+batches it took (their bytes, sequence number included): a duplicate (a payload sent twice, or recorded twice)
+adds nothing, a late one (reordered) still counts, and a sender that starts again from 1 is heard again (its
+batches differ). A payload that is not one (too short, an unknown version, a count its length does not hold) is dropped
 and counted in ``damaged``; a record with a non-finite or absurd value (a position over ``MAX_REACH`` from home,
 an RSS outside -150..30 dBm, a radio heard by itself) is dropped and counted in ``dropped``.
 """
@@ -39,7 +39,7 @@ RECORD = struct.Struct("<HHHffffhB")
 PER_PAYLOAD = (PAYLOAD - HEADER.size) // RECORD.size
 MAX_SPAN = 65.535  # s: a batch's records lie within this of its base time (ms in a uint16)
 RSS_RANGE = (-150.0, 30.0)  # dBm a record may claim
-REMEMBER = 4096  # sequence numbers a receiver remembers (duplicates older than this count again)
+REMEMBER = 4096  # batches a receiver remembers (a duplicate older than this counts again)
 
 
 @dataclass(frozen=True)
@@ -104,7 +104,6 @@ class LinkReceiver:
     records: int = 0  # new records returned
     _seen: set[int] = field(default_factory=set)
     _order: deque = field(default_factory=deque)
-    _newest: int = -1
 
     def feed(self, payload: bytes, sysid: int = 0) -> list[LinkRecord]:
         """The records in ``payload`` not seen before; [] for a duplicate or a damaged payload (counted). With
@@ -119,14 +118,11 @@ class LinkReceiver:
                 or not math.isfinite(base):
             self.damaged += 1
             return []
-        if self._newest - seq > REMEMBER:  # far below what was seen: the sender started again
-            self._seen.clear()
-            self._order.clear()
-            self._newest = -1
-        if seq in self._seen:
+        key = hash(payload[:HEADER.size + count * RECORD.size])  # the batch itself: a restarted sender's differ
+        if key in self._seen:
             self.duplicates += 1
             return []
-        self._remember(seq)
+        self._remember(key)
         out = []
         for index in range(count):
             tx, rx, ms, tx_x, tx_y, rx_x, rx_y, centi, channel = RECORD.unpack_from(
@@ -139,10 +135,9 @@ class LinkReceiver:
         self.records += len(out)
         return out
 
-    def _remember(self, seq: int) -> None:
-        self._seen.add(seq)
-        self._order.append(seq)
-        self._newest = max(self._newest, seq)
+    def _remember(self, key: int) -> None:
+        self._seen.add(key)
+        self._order.append(key)
         while len(self._order) > REMEMBER:
             self._seen.discard(self._order.popleft())
 
