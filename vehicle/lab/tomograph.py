@@ -90,7 +90,6 @@ class Tomograph:
 
 
 RADIO_PERIOD = 0.1  # s of simulated time measured at once (a round of the radios' slots is shorter)
-NODE_IDS = 200  # fixed radio node k has the id NODE_IDS + k (vehicles keep their system ids)
 
 
 class RadioRun:
@@ -100,7 +99,7 @@ class RadioRun:
 
     def __init__(self, scene, targets: list[tuple[float, float]], bounds, seed: int = 0,
                  nodes: list[tuple[float, ...]] | None = None, model=None):
-        from vehicle.world.radio import RadioChannel, RadioModel
+        from vehicle.world.radio import NODE_IDS, RadioChannel, RadioModel
 
         model = model or RadioModel()
         self.channel = RadioChannel(scene, model, seed)
