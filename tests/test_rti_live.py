@@ -16,10 +16,11 @@ TARGET = (2.0, 4.0)
 
 
 def sweep_rows(start: float, stop: float, seed: int = 3, person_from: float = 20.0) -> list[LinkRecord]:
-    """A 16-radio square of 6.4 m measuring every 0.5 s; a person stands at TARGET from ``person_from``."""
+    """A 16-radio square of 6.4 m measuring every 0.5 s; a person stands at TARGET from ``person_from``. Every
+    record is vehicle 1 hearing radio 2 (a vehicle reports what its own radio heard)."""
     net = synthetic.Network(synthetic.square(16, 6.4), channels=1, seed=seed)
     recs = net.sweeps(np.arange(start, stop, 0.5), people=lambda t: [TARGET] if t >= person_from else [])
-    return [LinkRecord(float(recs.t[i]), 1, 2, *recs.tx[i], *recs.rx[i], float(recs.rssi[i]), int(recs.channel[i]))
+    return [LinkRecord(float(recs.t[i]), 2, 1, *recs.tx[i], *recs.rx[i], float(recs.rssi[i]), int(recs.channel[i]))
             for i in range(len(recs))]
 
 
