@@ -199,25 +199,49 @@ class SceneView:
         and their trails, sonar, maps and labels), then, on a ``frame``, each client's view (called by the
         loop; callable directly in tests)."""
         with self._draw_lock:
-            with self.fleet.lock:
-                moved = self.fleet.take_moved()
-                vehicles = [v for v in self.fleet.vehicles.values() if v.x is not None]
-                gone = set(self._drawn) - {v.sysid for v in vehicles}
-                if slow:
-                    self._note_levels()
-                with self.server.atomic():
-                    for sysid in gone:
-                        self._remove_vehicle(sysid)
-                    for vehicle in vehicles:
-                        if slow or vehicle.sysid in moved or vehicle.sysid not in self._drawn:
-                            self._draw_vehicle(vehicle, colour(vehicle.sysid), slow)
-                seen = [Vehicle(v.sysid, np.array(self._drawn[v.sysid]["body"].position), v.yaw, v.pitch,
-                                colour(v.sysid)) for v in vehicles] if frame else []
+            vehicles = self._draw_poses(everyone=slow)
+            if slow:
+                self._draw_layers()
             if frame:
+                seen = [Vehicle(v.sysid, np.array(self._drawn[v.sysid]["body"].position), v.yaw, v.pitch,
+                                colour(v.sysid)) for v in vehicles if v.sysid in self._drawn]
                 now = time.monotonic()
                 dt, self._last_frame = min(now - self._last_frame, 0.5), now
                 self._draw_viewports(seen, dt)
         self.server.flush()
+
+    def _draw_poses(self, everyone: bool = False) -> list[VehicleState]:
+        """The poses of the vehicles that moved (or of all), in one atomic update; returns the vehicles shown."""
+        with self.fleet.lock:
+            moved = self.fleet.take_moved()
+            vehicles = [v for v in self.fleet.vehicles.values() if v.x is not None]
+            gone = set(self._drawn) - {v.sysid for v in vehicles}
+            with self.server.atomic():
+                for sysid in gone:
+                    self._remove_vehicle(sysid)
+                for vehicle in vehicles:
+                    if everyone or vehicle.sysid in moved or vehicle.sysid not in self._drawn:
+                        self._draw_vehicle(vehicle, colour(vehicle.sysid), False)
+        return vehicles
+
+    def _draw_layers(self) -> None:
+        """Each vehicle's slow layers in a hold of the fleet's lock of their own, its map picture made after
+        the hold, and the poses that came meanwhile sent between two vehicles: a pose waits for one vehicle's
+        layers at most, where it waited for the whole fleet's (and the fleet's messages with it)."""
+        self._note_levels()
+        for sysid in list(self._drawn):
+            with self.fleet.lock:
+                vehicle = self.fleet.vehicles.get(sysid)
+                if vehicle is None or vehicle.x is None or sysid not in self._drawn:
+                    continue
+                with self.server.atomic():
+                    self._draw_vehicle(vehicle, colour(sysid), True)
+                new_map = self._drawn[sysid].pop("new_map", None)
+            if new_map is not None:
+                self._draw_map_picture(sysid, *new_map)
+            if self.fleet.pose_news.is_set():
+                self._draw_poses()
+                self.server.flush()
 
     def _draw_viewports(self, vehicles: list[Vehicle], dt: float) -> None:
         bounds = self.scene.bounds if self.scene is not None and len(self.scene.faces) \
@@ -345,6 +369,7 @@ class SceneView:
             scene.add_point_cloud(f"{root}/points", points, colors=(80, 200, 255), point_size=0.6)
 
     def _draw_map(self, v: VehicleState, drawn: dict, height: float) -> None:
+        """Takes a copy of a changed map (under the fleet's lock); ``_draw_map_picture`` draws it after."""
         stream_version = (v.map_stream.version, v.own_map.version if v.own_map is not None else 0)
         if drawn["map"] == stream_version:
             return
@@ -352,17 +377,21 @@ class SceneView:
         if grid is None:
             return
         drawn["map"] = stream_version
+        drawn["new_map"] = ((grid[0].copy(), *grid[1:]), height)
+
+    def _draw_map_picture(self, sysid: int, grid: tuple, height: float) -> None:
         found = picture.overlay(*grid, MAP_PIXELS)
         if found is None:
             return
         image, (west, south, east, north) = found.image, found.window
         width, depth = east - west, north - south
         centre = ((west + east) / 2, (south + north) / 2, height - 0.05)
-        for level in self._levels:  # one picture per opacity some viewer uses (viser's images have none)
-            faded = image.copy()
-            faded[..., 3] = (faded[..., 3] * level).astype(np.uint8)
-            self.server.scene.add_image(f"{opacity_root(level)}/{v.sysid}", faded, render_width=width,
-                                        render_height=depth, format="png", position=centre)
+        with self.server.atomic():
+            for level in self._levels:  # one picture per opacity some viewer uses (viser's images have none)
+                faded = image.copy()
+                faded[..., 3] = (faded[..., 3] * level).astype(np.uint8)
+                self.server.scene.add_image(f"{opacity_root(level)}/{sysid}", faded, render_width=width,
+                                            render_height=depth, format="png", position=centre)
 
 
 def _refuse_share(*args, **kwargs) -> None:
