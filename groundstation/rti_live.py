@@ -26,7 +26,7 @@ from PIL import Image
 
 from vehicle.protocol.radiostream import as_records
 from vehicle.tomography.imaging import reconstruct
-from vehicle.tomography.links import KEY_STEP, Records, link_keys
+from vehicle.tomography.links import KEY_STEP, Records, factorize, link_keys
 from vehicle.tomography.picture import STOPS, colours
 
 WINDOW = 1.0  # s of the records' clock per frame
@@ -78,8 +78,8 @@ def frame_at(records: Records, end: float, window: float = WINDOW, history: floa
     None when no link was heard often enough to image."""
     used = records.select((records.t >= end - history) & (records.t < end))
     if len(used):
-        _, row_key, heard = np.unique(pair_keys(used), axis=0, return_inverse=True, return_counts=True)
-        used = used.select(heard[row_key.ravel()] >= MIN_HEARD)
+        _, link = factorize(pair_keys(used))
+        used = used.select(np.bincount(link)[link] >= MIN_HEARD)
     if len(used) < 2:
         return None
     result = reconstruct(used, bounds=bounds, cell=cell, peaks=peaks, measure=MEASURE)
@@ -87,11 +87,12 @@ def frame_at(records: Records, end: float, window: float = WINDOW, history: floa
     if "image" not in first:
         return None
     last = used.select(used.t >= end - window)
-    links = np.unique(pair_keys(last)[:, :4], axis=0) * KEY_STEP  # each path once, whichever way it was heard
+    links = factorize(pair_keys(last)[:, :4])[0] * KEY_STEP  # each path once, whichever way it was heard
     info = {key: result.info[key] for key in ("measure", "solver", "alpha") if key in result.info}
     return Frame(t=round(end, 6), bounds=tuple(round(v, 4) for v in grid.bounds), image=first["image"],
                  peaks=first["peaks"], links=np.round(links, 3).tolist(), links_per_s=len(last) / window,
-                 coverage=coverage(used, grid.bounds, grid.cell, first["image"].shape), paths=first["paths"],
+                 coverage=coverage(factorize(pair_keys(used)[:, :4])[0] * KEY_STEP, grid.bounds, grid.cell,
+                                   first["image"].shape), paths=first["paths"],
                  records=len(used), info={**info, "cell": grid.cell, "window": window, "history": history})
 
 
@@ -103,11 +104,10 @@ def pair_keys(records: Records) -> np.ndarray:
     return keys
 
 
-def coverage(records: Records, bounds, cell: float, shape: tuple[int, int]) -> float:
+def coverage(paths: np.ndarray, bounds, cell: float, shape: tuple[int, int]) -> float:
     """Share of the image's pixels that some path's straight line crosses (sampled every quarter pixel)."""
-    ends = np.unique(np.column_stack([records.tx, records.rx]), axis=0)
     hit = np.zeros(shape, bool)
-    for x0, y0, x1, y1 in ends:
+    for x0, y0, x1, y1 in paths:
         steps = max(2, int(math.hypot(x1 - x0, y1 - y0) / cell * 4) + 1)
         s = np.linspace(0, 1, steps)
         ix = np.floor((x0 + (x1 - x0) * s - bounds[0]) / cell).astype(int)
