@@ -44,8 +44,7 @@ from harness import (
     wait_mode,
     wait_wall,
 )
-from mavlink_gcs import Gcs
-from mavlink_peer import Peer, acked, command, gcs_heartbeat, non_finite_messages, position, vehicle_heartbeat
+from mavlink_peer import Gcs, Peer, acked, command, gcs_heartbeat, non_finite_messages, position, vehicle_heartbeat
 
 from groundstation.link import Link
 from groundstation.replay import Replay
@@ -679,7 +678,7 @@ def test_the_station_shows_when_another_ground_station_commands_its_vehicle(scen
         assert api.vehicle(1)["other_gcs"]["last"] == "COMMAND_ACK MAV_CMD_DO_SET_MODE accepted"
 
         other.heartbeat()
-        other.conn.mav.set_mode_send(1, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 17)  # BRAKE, unacknowledged
+        other.mav.set_mode_send(1, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 17)  # BRAKE, unacknowledged
         other.wait_mode(17)
         shown = api.wait_vehicle(1, lambda v: v["mode"] == "BRAKE", sim_timeout=HEARTBEAT_WAIT, what="BRAKE")
         assert shown["other_gcs"] == {"sysid": 254, "last": "mode BRAKE, not ordered by this station",
@@ -693,8 +692,7 @@ def test_the_page_shows_another_ground_station_and_a_signed_link(scene, tmp_path
     from playwright.sync_api import expect, sync_playwright
 
     other_port = free_udp_port()
-    other = Gcs(f"udpin:127.0.0.1:{other_port}", sysid=254, speedup=SPEEDUP)
-    other.conn.setup_signing(KEY, sign_outgoing=True)  # the other station has the key too
+    other = Gcs(f"udpin:127.0.0.1:{other_port}", sysid=254, speedup=SPEEDUP, key=KEY)  # it has the key too
     with RunningStation(scene, tmp_path, signing_key=KEY) as station, \
             RunningSim(make_vehicle(scene), [station.vehicle_url(), f"udpout:127.0.0.1:{other_port}"],
                        signing_key=KEY), sync_playwright() as playwright:

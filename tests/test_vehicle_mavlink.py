@@ -15,7 +15,7 @@ from contextlib import contextmanager
 import numpy as np
 import pytest
 from harness import RunningSim, free_tcp_port, free_udp_port, wait_wall
-from mavlink_gcs import Gcs
+from mavlink_peer import Gcs
 
 from vehicle.agent.settings import Settings
 from vehicle.lab.stepper import simulate
@@ -161,7 +161,7 @@ def test_mode_changes_are_acknowledged_and_reported(fly):
         assert gcs.set_mode(number) == mavlink.MAV_RESULT_ACCEPTED
         gcs.wait_mode(number)
     assert gcs.set_mode(99) == mavlink.MAV_RESULT_UNSUPPORTED
-    gcs.conn.mav.set_mode_send(1, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 5)  # legacy SET_MODE
+    gcs.mav.set_mode_send(1, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 5)  # legacy SET_MODE
     gcs.wait_mode(5)
 
 
@@ -174,7 +174,7 @@ def test_a_command_the_onboard_agent_does_not_take_is_unsupported_not_silent(fly
     gcs, _ = fly()
     for command in (mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 31010):
         gcs.heartbeat()
-        gcs.conn.mav.command_long_send(1, 191, command, 0, 1, 0, 0, 0, 0, 0, 0)
+        gcs.mav.command_long_send(1, 191, command, 0, 1, 0, 0, 0, 0, 0, 0)
         ack = gcs.wait("COMMAND_ACK", lambda m, c=command: m.command == c, component=191)
         assert ack.result == mavlink.MAV_RESULT_UNSUPPORTED
 
@@ -182,7 +182,7 @@ def test_a_command_the_onboard_agent_does_not_take_is_unsupported_not_silent(fly
 def test_take_off_then_rtl_lands_at_home_and_disarms(fly):
     gcs, _ = fly()
     take_off(gcs)
-    gcs.conn.mav.set_position_target_local_ned_send(
+    gcs.mav.set_position_target_local_ned_send(
         0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b110111111000, 4.0, -5.0, -4.0, 0, 0, 0, 0, 0, 0, 0, 0
     )
     gcs.wait("LOCAL_POSITION_NED", lambda m: abs(m.x - 4) < 0.3 and abs(m.y + 5) < 0.3, sim_timeout=30)
@@ -206,7 +206,7 @@ def test_reposition_in_guided(fly):
     gcs, sim = fly()
     take_off(gcs)
     lat, lon = sim.world.datum.to_global(-6.0, 3.0)
-    gcs.conn.mav.command_int_send(
+    gcs.mav.command_int_send(
         1,
         1,
         mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
@@ -232,7 +232,7 @@ def test_rover_abort_is_hold(fly):
     gcs, _ = fly("rover")
     assert gcs.set_mode(15) == mavlink.MAV_RESULT_ACCEPTED  # GUIDED
     assert gcs.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mavlink.MAV_RESULT_ACCEPTED
-    gcs.conn.mav.set_position_target_local_ned_send(
+    gcs.mav.set_position_target_local_ned_send(
         0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b110111111000, -10.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0, 0
     )
     gcs.wait("VFR_HUD", lambda m: m.groundspeed > 1.0, sim_timeout=20)
@@ -306,25 +306,25 @@ def test_gcs_failsafe_holds_a_rover(fly):
 # ---- parameters and missions ---------------------------------------------------------------------
 def test_parameters_list_read_and_set(fly):
     gcs, sim = fly()
-    gcs.conn.mav.param_request_list_send(1, 1)
+    gcs.mav.param_request_list_send(1, 1)
     names = set()
     while len(names) < 10:
         names.add(gcs.wait("PARAM_VALUE").param_id)
     assert {"SCN_SPEED", "SCN_ALTITUDE", "SCN_RESOLUTION", "SCN_MON_PERIOD"} <= names
-    gcs.conn.mav.param_set_send(1, 1, b"SCN_SPEED", 3.5, mavlink.MAV_PARAM_TYPE_REAL32)
+    gcs.mav.param_set_send(1, 1, b"SCN_SPEED", 3.5, mavlink.MAV_PARAM_TYPE_REAL32)
     assert gcs.wait("PARAM_VALUE", lambda m: m.param_id == "SCN_SPEED").param_value == pytest.approx(3.5)
     assert sim.agent.settings.speed == 3.5
-    gcs.conn.mav.param_set_send(1, 1, b"SCN_SPEED", -1.0, mavlink.MAV_PARAM_TYPE_REAL32)
+    gcs.mav.param_set_send(1, 1, b"SCN_SPEED", -1.0, mavlink.MAV_PARAM_TYPE_REAL32)
     assert gcs.wait("PARAM_VALUE", lambda m: m.param_id == "SCN_SPEED").param_value == pytest.approx(3.5)
     gcs.wait_text("SCN_SPEED")
-    gcs.conn.mav.param_request_read_send(1, 1, b"SCN_ALTITUDE", -1)
+    gcs.mav.param_request_read_send(1, 1, b"SCN_ALTITUDE", -1)
     assert gcs.wait("PARAM_VALUE", lambda m: m.param_id == "SCN_ALTITUDE").param_value == pytest.approx(4.0)
 
 
 def upload(gcs, items):
     """Upload (lat, lon, alt) waypoints with the mission protocol; returns the final MISSION_ACK type."""
     gcs.heartbeat()
-    gcs.conn.mav.mission_count_send(1, 1, len(items) + 1, 0)
+    gcs.mav.mission_count_send(1, 1, len(items) + 1, 0)
     while True:
         message = gcs.wait(None, lambda m: m.get_type() in ("MISSION_REQUEST_INT", "MISSION_ACK"))
         if message.get_type() == "MISSION_ACK":
@@ -332,7 +332,7 @@ def upload(gcs, items):
         seq = message.seq
         lat, lon, alt = items[seq - 1] if seq else items[0]
         command = mavlink.MAV_CMD_NAV_WAYPOINT
-        gcs.conn.mav.mission_item_int_send(
+        gcs.mav.mission_item_int_send(
             1,
             1,
             seq,
@@ -352,13 +352,13 @@ def upload(gcs, items):
 
 
 def download(gcs):
-    gcs.conn.mav.mission_request_list_send(1, 1)
+    gcs.mav.mission_request_list_send(1, 1)
     count = gcs.wait("MISSION_COUNT").count
     items = []
     for seq in range(count):
-        gcs.conn.mav.mission_request_int_send(1, 1, seq, 0)
+        gcs.mav.mission_request_int_send(1, 1, seq, 0)
         items.append(gcs.wait("MISSION_ITEM_INT", lambda m, s=seq: m.seq == s))
-    gcs.conn.mav.mission_ack_send(1, 1, mavlink.MAV_MISSION_ACCEPTED, 0)
+    gcs.mav.mission_ack_send(1, 1, mavlink.MAV_MISSION_ACCEPTED, 0)
     return items
 
 
@@ -408,7 +408,7 @@ def test_a_global_position_target_is_flown_in_its_frame(fly):
 
     def target(frame, alt):
         gcs.heartbeat()
-        gcs.conn.mav.set_position_target_global_int_send(0, 1, 1, frame, 0x0DF8, int(lat * 1e7), int(lon * 1e7), alt,
+        gcs.mav.set_position_target_global_int_send(0, 1, 1, frame, 0x0DF8, int(lat * 1e7), int(lon * 1e7), alt,
                                                          0, 0, 0, 0, 0, 0, 0, 0)
 
     target(99, 30.0)
@@ -452,7 +452,7 @@ def test_mission_clear_all(fly):
     gcs, _ = fly()
     point = [(-35.3632, 149.1652, 4.0)]
     assert upload(gcs, point) == mavlink.MAV_MISSION_ACCEPTED
-    gcs.conn.mav.mission_clear_all_send(1, 1, 0)
+    gcs.mav.mission_clear_all_send(1, 1, 0)
     assert gcs.wait("MISSION_ACK").type == mavlink.MAV_MISSION_ACCEPTED
     assert len(download(gcs)) == 1  # home only
 
@@ -665,7 +665,7 @@ def test_the_gcs_failsafe_needs_a_station_once_heard_and_fires_once_per_silence(
 def command_acked_at(endpoint, gcs, now: float, command: int, *params: float) -> int:
     """A ground station's COMMAND_LONG, without a heartbeat before it, taken in at wall time ``now``: its ACK's
     result."""
-    gcs.conn.mav.command_long_send(1, 1, command, 0, *(list(params) + [0.0] * 7)[:7])
+    gcs.mav.command_long_send(1, 1, command, 0, *(list(params) + [0.0] * 7)[:7])
     return wait_wall(lambda: endpoint.poll(now) or (m := gcs.recv(0.05)) is not None and m.get_type() ==
                      "COMMAND_ACK" and m.command == command and m, 5, "the COMMAND_ACK").result
 
