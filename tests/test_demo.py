@@ -14,12 +14,11 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 import urllib.request
 from pathlib import Path
 
 import pytest
-from harness import free_port
+from harness import free_port, wait_wall
 
 WAIT = 120.0  # s: generous, the demo's vehicles start as separate processes on a busy machine
 
@@ -41,6 +40,21 @@ def vehicles(port: int) -> list[dict]:
         return json.load(response)
 
 
+def demo_vehicles(process: subprocess.Popen, port: int) -> list[dict]:
+    """The demo's vehicles as its station lists them (none while it starts up); fails at once if it exited."""
+    assert process.poll() is None, f"the demo exited: {process.stdout.read()}"
+    try:
+        return vehicles(port)
+    except OSError:
+        return []
+
+
+def wait_vehicles_gone(mavlink_port: int) -> None:
+    wait_wall(lambda: processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"), 10,
+              "every vehicle process of the demo gone (a vehicle outlived the demo)", period=0.2,
+              done=lambda pids: not pids)
+
+
 @pytest.fixture
 def demo(tmp_path):
     port, mavlink_port = free_port(socket.SOCK_STREAM), free_port(socket.SOCK_DGRAM)
@@ -58,19 +72,12 @@ def demo(tmp_path):
 @pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to find the vehicle processes")
 def test_the_demo_flies_a_vehicle_and_stops_with_it_on_sigterm(demo):
     process, port, mavlink_port, record_dir = demo
-    deadline = time.monotonic() + WAIT
-    flying = None
-    while time.monotonic() < deadline and process.poll() is None:
-        try:
-            flying = next((v for v in vehicles(port) if v["armed"] and v["position"]
-                           and v["position"]["z"] > 1.0), None)
-        except OSError:
-            flying = None
-        if flying is not None:
-            break
-        time.sleep(0.5)
-    assert process.poll() is None, process.stdout.read()
-    assert flying is not None, "no simulated vehicle took off in the demo"
+    def airborne(vehicle: dict) -> bool:
+        return vehicle["armed"] and vehicle["position"] and vehicle["position"]["z"] > 1.0
+
+    seen = wait_wall(lambda: demo_vehicles(process, port), WAIT, "a vehicle of the demo's in the air", period=0.5,
+                     done=lambda listed: any(airborne(v) for v in listed))
+    flying = next(v for v in seen if airborne(v))
     assert flying["type"] == "copter" and flying["mode"] == "GUIDED"
     assert processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"), "the vehicle runs as its own process"
     assert list(record_dir.glob("session-*.tlog")), "the demo records its session"
@@ -80,10 +87,7 @@ def test_the_demo_flies_a_vehicle_and_stops_with_it_on_sigterm(demo):
     output = process.stdout.read()
     assert "ground station: http://127.0.0.1:" in output and "#token=demo-token" in output
     assert "viser" not in output.lower(), "no banner naming the 3D view's internal port"
-    deadline = time.monotonic() + 10
-    while processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}") and time.monotonic() < deadline:
-        time.sleep(0.2)
-    assert not processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"), "a vehicle outlived the demo"
+    wait_vehicles_gone(mavlink_port)
 
 
 def test_the_demo_sends_to_a_free_port_when_another_ground_station_holds_14550(capsys):
@@ -130,23 +134,14 @@ def test_ctrl_c_stops_the_demo_and_its_vehicles_quietly(tmp_path):
                                 "--mavlink-port", str(mavlink_port), "--record-dir", "", "--speedup", "4"],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:
-        deadline = time.monotonic() + WAIT
-        while time.monotonic() < deadline and process.poll() is None:
-            try:
-                if any(v["agent"] for v in vehicles(port)):
-                    break
-            except OSError:
-                pass
-            time.sleep(0.5)
-        assert process.poll() is None and processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}")
+        wait_wall(lambda: demo_vehicles(process, port), WAIT, "a vehicle's onboard agent heard", period=0.5,
+                  done=lambda listed: any(v["agent"] for v in listed))
+        assert processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}")
         os.killpg(process.pid, signal.SIGINT)
         assert process.wait(timeout=30) == 0
         output = process.stdout.read()
         assert "Traceback" not in output and "exited with code" not in output, output
-        deadline = time.monotonic() + 10
-        while processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}") and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert not processes_mentioning(f"udpout:127.0.0.1:{mavlink_port}"), "a vehicle outlived the demo"
+        wait_vehicles_gone(mavlink_port)
     finally:
         if process.poll() is None:
             process.kill()

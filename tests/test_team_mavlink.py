@@ -127,16 +127,15 @@ def test_the_demo_flies_a_mixed_team_in_one_world_with_an_agent_each(tmp_path):
                                 "--vehicles", "2", "--vehicle", "mixed", "--quiet"],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        deadline, seen = time.monotonic() + WAIT, []
-        while time.monotonic() < deadline and process.poll() is None:
+        def listed() -> list[dict]:
+            assert process.poll() is None, f"the demo exited: {process.stdout.read()}"
             try:
-                seen = vehicles(port)
-            except OSError:
-                seen = []
-            if len(seen) == 2 and all(v["agent"] and v["position"] for v in seen):
-                break
-            time.sleep(0.5)
-        assert process.poll() is None, process.stdout.read()
+                return vehicles(port)
+            except OSError:  # not serving yet
+                return []
+
+        seen = wait_wall(listed, WAIT, "two vehicles placed, each with its onboard agent", period=0.5,
+                         done=lambda seen: len(seen) == 2 and all(v["agent"] and v["position"] for v in seen))
         assert sorted((v["sysid"], v["type"]) for v in seen) == [(1, "copter"), (2, "rover")], seen
         assert all(v["agent"]["companion"] for v in seen), "each vehicle has its onboard agent"
         worlds = processes_mentioning(f"--team-link udpout:127.0.0.1:{mavlink_port}")
