@@ -167,6 +167,7 @@ class VehicleState:
     radio_unplaced: list = field(default_factory=list)  # link records heard before its home was known
     companion_heartbeat: float | None = None  # when its onboard agent (component 191) was last heard
     agent: agent_status.AgentStatus | None = None  # the onboard agent's own state
+    agent_progress: agent_status.AgentProgress | None = None  # its waypoints done and time left
     own_map: MemoryMap | None = None  # built here when the vehicle streams none
     unmapped: deque = field(default_factory=lambda: deque(maxlen=HITS_KEPT))  # readings waiting for own_map
     first_heard: float = 0.0  # receiver clock
@@ -552,6 +553,8 @@ class Fleet:
                 worry = status.paused or status.outcome == "stopped"
                 self.history.event(vehicle.sysid, now, "agent", _agent_text(status), 4 if worry else 6, "agent")
             vehicle.agent = status or vehicle.agent
+        elif m.payload_type == agent_status.AGENT_PROGRESS:
+            vehicle.agent_progress = agent_status.decode_progress(payload) or vehicle.agent_progress
         elif m.payload_type == RADIO_LINKS:  # the agent's (a simulator's autopilot forwards them to it)
             if m.get_srcComponent() == COMPANION:
                 self._radio_links(vehicle, vehicle.radio_stream.feed(payload, vehicle.sysid))
@@ -618,7 +621,7 @@ class Fleet:
             "agent": None if v.agent is None else {
                 "state": v.agent.state, "phase": v.agent.phase, "paused": v.agent.paused, "outcome": v.agent.outcome,
                 "mission": v.agent.mission, "reason": v.agent.reason, "companion": v.has_companion(now),
-                "operator": v.agent.operator},
+                "operator": v.agent.operator, "progress": _progress(v.agent_progress)},
             "home": None if v.home is None else {"x": _round(v.home[0]), "y": _round(v.home[1])},
             "time_boot_s": _round(v.time_boot_s, 3),
             "messages": list(v.messages)[-20:],
@@ -695,6 +698,12 @@ def _command_text(vehicle: VehicleState, m) -> str:
         return "arm" if m.param1 == 1 else "kill" if m.param2 == FORCE_DISARM else "disarm"
     to = " to the onboard agent" if m.target_component == COMPANION else ""
     return _command_name(m.command) + to
+
+
+def _progress(progress: agent_status.AgentProgress | None) -> dict | None:
+    if progress is None:
+        return None
+    return {"done": progress.done, "total": progress.total, "time_left": _round(progress.time_left, 0)}
 
 
 def _agent_text(status: agent_status.AgentStatus) -> str:

@@ -203,6 +203,15 @@ function renderMessages(ul, messages) {
   }
 }
 
+/** How far the agent's mission is: its waypoints done, and the time left of its time budget. */
+function progressOf(p) {
+  if (!p) return "";
+  const parts = [];
+  if (isNum(p.total) && p.total > 0) parts.push(`waypoint ${Math.min(p.done + 1, p.total)} of ${p.total}`);
+  if (isNum(p.time_left)) parts.push(`${minutes(Math.max(0, p.time_left))} left of its time budget`);
+  return parts.length ? ` · ${parts.join(", ")}` : "";
+}
+
 /** The onboard agent's own state beside the autopilot's mode: a mission running, paused (and why), ended. */
 function renderAgent(card, agent) {
   const badge = card.querySelector(".agent-state");
@@ -219,7 +228,8 @@ function renderAgent(card, agent) {
   badge.className = `agent-state ${state}`;
   badge.title = reason ? `onboard mission ${state}: ${reason}` : `onboard mission ${state}`;
   const where = agent.companion ? "companion" : "onboard";
-  setText(line, `${agent.mission ?? "?"} ${state}${reason ? ` (${reason})` : ""} · ${agent.phase ?? "?"} · ${where}`);
+  setText(line, `${agent.mission ?? "?"} ${state}${reason ? ` (${reason})` : ""} · ${agent.phase ?? "?"} · ${where}`
+    + progressOf(agent.progress));
   // Who commands: the card says so while the operator holds the agent, and Continue names what it does
   const control = card.querySelector(".control-banner");
   const held = agent.operator === "control" ? "You have control: the agent commands nothing until you hand back."

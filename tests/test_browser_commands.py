@@ -75,6 +75,7 @@ def test_pause_continue_take_control_guided_and_a_refused_resume(page, station):
                               and v["position"]["alt"] > 1.0, 90, SPEEDUP, "the search under way")
     card = page.locator(f'.vehicle-card[data-sysid="{COPTER}"]')
     ack, badge, banner = card.locator(".ack"), card.locator(".agent-state"), card.locator(".control-banner")
+    expect(card.locator(".agent")).to_contain_text(re.compile(r"search running .* · \d+ min left of its time budget"))
 
     card.locator('[data-action="pause"]').click()
     expect(ack).to_contain_text("Pause: accepted: the vehicle holds where it is")

@@ -81,6 +81,7 @@ class Companion:
         if status != self._status or now >= self._next_status:
             self._status, self._next_status = status, now + STATUS_PERIOD
             out.append(self.tunnel(agent_status.AGENT_STATUS, agent_status.encode(status)))
+            out.append(self.tunnel(agent_status.AGENT_PROGRESS, agent_status.encode_progress(self.progress())))
         return out
 
     def tunnel(self, kind: int, payload: bytes):
@@ -119,6 +120,12 @@ class Companion:
         reason = agent.pause_reason if agent.paused else agent.reason
         return agent_status.AgentStatus(agent.phase.value, agent.paused, agent.outcome or "", agent.mission_name,
                                         reason, agent.operator if agent.paused else "")
+
+    def progress(self) -> agent_status.AgentProgress:
+        agent = self.agent
+        flying = agent.phase.value == "mission"
+        done, total = (agent.mission.progress() or (0, 0)) if flying else (0, 0)
+        return agent_status.AgentProgress(done, total, agent.ctx.time_left if flying else float("nan"))
 
     # ---- receiving --------------------------------------------------------------------------------
     def handle(self, message) -> list | None:

@@ -8,6 +8,10 @@ and on every change: ``<BBBB`` phase, flags (bit 0: paused; bit 1: paused by
 the operator's Pause; bit 2: the operator has taken control), outcome, length
 of the mission name; then the mission name and the reason (UTF-8, cut to fit
 the 128-byte payload).
+
+Its progress goes in payload type ``AGENT_PROGRESS`` (32804) beside it: ``<HHf``
+waypoints done and in all (0, 0: the mission has none of its own) and the
+seconds left of the mission's time budget (NaN while no mission runs).
 """
 
 from __future__ import annotations
@@ -16,6 +20,8 @@ import struct
 from dataclasses import dataclass
 
 AGENT_STATUS = 32803
+AGENT_PROGRESS = 32804
+_PROGRESS = struct.Struct("<HHf")
 PAYLOAD = 128
 PHASES = ("waiting", "preflight", "takeoff", "mission", "homing", "landing", "done")
 OUTCOMES = ("", "finished", "stopped")
@@ -51,6 +57,25 @@ def encode(status: AgentStatus) -> bytes:
     head = _HEADER.pack(PHASES.index(status.phase), flags, OUTCOMES.index(status.outcome), len(mission)) + mission
     reason = status.reason.encode("utf-8")[:PAYLOAD - len(head)]
     return head + reason.decode("utf-8", "ignore").encode("utf-8")  # never half a character
+
+
+@dataclass(frozen=True)
+class AgentProgress:
+    done: int
+    total: int
+    time_left: float  # s of the mission's time budget; NaN while no mission runs
+
+
+def encode_progress(progress: AgentProgress) -> bytes:
+    return _PROGRESS.pack(min(progress.done, 65535), min(progress.total, 65535), progress.time_left)
+
+
+def decode_progress(payload: bytes) -> AgentProgress | None:
+    """The progress in a payload; None if it is malformed."""
+    if len(payload) < _PROGRESS.size:
+        return None
+    done, total, left = _PROGRESS.unpack_from(payload)
+    return AgentProgress(done, total, left) if done <= total else None
 
 
 def decode(payload: bytes) -> AgentStatus | None:

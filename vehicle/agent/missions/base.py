@@ -125,6 +125,10 @@ class Mission:
     def begin(self) -> None:
         """Called once when the vehicle is ready (armed, airborne for a copter)."""
 
+    def progress(self) -> tuple[int, int] | None:
+        """Waypoints done and in all, for the operator (None: the mission has no waypoints of its own)."""
+        return None
+
     def step(self) -> Status:
         raise NotImplementedError
 

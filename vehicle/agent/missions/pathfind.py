@@ -25,6 +25,9 @@ class Pathfind(Mission):
     def step(self) -> Status:
         return self._next(self.travel.step())
 
+    def progress(self) -> tuple[int, int] | None:
+        return (self.index, len(self.waypoints)) if hasattr(self, "waypoints") else None
+
     def _next(self, status: Status) -> Status:
         """After the Travel to the current waypoint reports: go on to the next one when it is over."""
         if status is Status.RUNNING:
