@@ -182,7 +182,8 @@ def run_team(experiment: Experiment, stepper: TeamStepper,
     """Fly a team (``simulate_team``, made and checked by the caller before anything starts) to its outcome:
     every vehicle done or wrecked, or the time limit. A vehicle that crashes is reported as such and the rest
     fly on. The result has what a lone run reports, per vehicle, and the team's figures. ``on_step(stepper)``
-    after every step (the radios of a tomography run, ``vehicle.lab.tomograph``)."""
+    after every step (the radios of a tomography run, ``vehicle.lab.tomograph``); True from it ends the run
+    there (what has not ended reports ``timeout``)."""
     started = time.perf_counter()
     settings = experiment.settings
     team = stepper.team
@@ -194,8 +195,8 @@ def run_team(experiment: Experiment, stepper: TeamStepper,
     try:
         while team.time < limit:
             stepper.step()
-            if on_step is not None:
-                on_step(stepper)
+            if on_step is not None and on_step(stepper):
+                break  # the caller has what it wanted (a benchmark: the mission's end)
             if stepper.monitor_due and all(agent.done or sim.collision is not None
                                            for agent, sim in zip(stepper.agents, team.simulations, strict=True)):
                 break

@@ -107,12 +107,14 @@ class RadioRun:
         self.targets = [tuple(t) for t in targets]
         self.nodes = {NODE_IDS + k: (*p[:2], p[2] if len(p) > 2 else 1.0) for k, p in enumerate(nodes or [])}
         self.tomograph = Tomograph(self.targets, tuple(bounds))
+        self.until_mission_end = False  # end the run when every mission has (a benchmark needs no landing)
         self._since = 0.0
 
-    def __call__(self, stepper) -> None:
+    def __call__(self, stepper) -> bool:
+        """Measure (every RADIO_PERIOD); True when the run may end: ``until_mission_end`` and every mission over."""
         now = stepper.team.time
         if now - self._since < RADIO_PERIOD - 1e-9:
-            return
+            return False
         radios = {sysid: tuple(sim.body.pose.xyz()) for sysid, sim in zip(stepper.team.ids, stepper.team.simulations,
                                                                            strict=True)}
         radios.update(self.nodes)
@@ -120,6 +122,9 @@ class RadioRun:
         empty = self.empty.measure(self._since, now, radios, [])
         self._since = now
         self.tomograph.note(now, received, empty, all(dwelling(agent) for agent in stepper.agents))
+        return self.until_mission_end and all(agent.mission_began and agent.phase not in ("preflight", "takeoff",
+                                                                                          "mission")
+                                              for agent in stepper.agents)
 
 
 def dwelling(agent) -> bool:
@@ -131,9 +136,12 @@ def dwelling(agent) -> bool:
 
 def run_team_experiment(experiment, scene, count: int, targets: list[tuple[float, float]],
                         starts: list[tuple[float, ...]] | None = None, ids: list[int] | None = None,
-                        nodes: list[tuple[float, ...]] | None = None, waypoints=None, model=None) -> dict:
+                        nodes: list[tuple[float, ...]] | None = None, waypoints=None, model=None,
+                        until_mission_end: bool = False) -> dict:
     """A team run (``run_team``), with radios measuring when the mission is rti or targets are given: the
-    result then has ``rti`` (``Tomograph.result``). Raises PlacementError (and ValueError) before anything flies."""
+    result then has ``rti`` (``Tomograph.result``). ``until_mission_end``: the run ends when every mission has
+    (the vehicles then report ``timeout`` on their way home). Raises PlacementError (and ValueError) before
+    anything flies."""
     from vehicle.agent.missions.rti import region
     from vehicle.lab.experiment import run_team
     from vehicle.lab.stepper import simulate_team
@@ -146,6 +154,7 @@ def run_team_experiment(experiment, scene, count: int, targets: list[tuple[float
     if experiment.mission == "rti" or targets:
         home = stepper.team.simulations[0].home
         radios = RadioRun(scene, targets, region(settings, scene, (home[0], home[1])), experiment.seed, nodes, model)
+        radios.until_mission_end = until_mission_end
         for controller in stepper.controllers:
             controller.radio_nodes = [p[:2] for p in (nodes or [])]
     result = run_team(experiment, stepper, radios)
