@@ -92,6 +92,21 @@ export function fmt(v, digits = 1) {
   return Number(s) === 0 ? (0).toFixed(digits) : s;
 }
 
+/** An image from a URL (a PNG data URL from the station), or null when it does not load. */
+export function loadImage(url) {
+  return new Promise((resolve) => {
+    const img = new Image();
+    img.onload = () => resolve(img);
+    img.onerror = () => resolve(null);
+    img.src = url;
+  });
+}
+
+/** Map bounds [west, south, east, north] (m) that enclose some area. */
+export function validBounds(b) {
+  return Array.isArray(b) && b.length === 4 && b.every(isNum) && b[2] > b[0] && b[3] > b[1];
+}
+
 /** Build a plain element with text; never parses HTML. */
 export function el(tag, className, text) {
   const node = document.createElement(tag);

@@ -8,7 +8,7 @@
 // is a layer over the maps with its colour bar, the last window's links as faint lines, its peaks as crosses with
 // their value and the simulated targets (ground truth) as rings.
 
-import { $, EVENTS, emit, fmt, getJson, isNum, on } from "./common.js";
+import { $, EVENTS, emit, fmt, getJson, isNum, loadImage, on, validBounds } from "./common.js";
 
 const POLL_MS = 2000;  // memory maps and trails
 const colourRe = /^#[0-9a-f]{6}$/i;
@@ -31,23 +31,10 @@ const GRAB_PX = 10;  // a plan item this close to the pointer is dragged, not th
 const map2d = { view, measure, get distance() { return distance(); }, toScreen: (x, y) => toScreen(x, y) };
 window.map2d = map2d;  // what the map shows, for tests and the page's other scripts
 
-function image(url) {
-  return new Promise((resolve) => {
-    const img = new Image();
-    img.onload = () => resolve(img);
-    img.onerror = () => resolve(null);
-    img.src = url;
-  });
-}
-
-function validBounds(b) {
-  return Array.isArray(b) && b.length === 4 && b.every(isNum) && b[2] > b[0] && b[3] > b[1];
-}
-
 async function loadScene() {
   const found = await getJson("/api/map2d/scene");
   scene = found && validBounds(found.bounds) && typeof found.image === "string"
-    ? { bounds: found.bounds, img: await image(found.image) } : null;
+    ? { bounds: found.bounds, img: await loadImage(found.image) } : null;
   if (!view.fitted) fit();
   draw();
 }
@@ -67,7 +54,7 @@ async function loadOverlay() {
     lastOverlayUrl = "";
   } else if (found.image !== lastOverlayUrl) {
     lastOverlayUrl = found.image;
-    overlay = { bounds: found.bounds, img: await image(found.image), which };
+    overlay = { bounds: found.bounds, img: await loadImage(found.image), which };
   }
   canvas.dataset.overlay = overlay ? overlay.which : "";
   draw();

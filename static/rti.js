@@ -4,7 +4,7 @@
 // the simulated targets are drawn by map2d.js, told by "rti-frame" (see common.js). Hidden while the station
 // has imaged nothing (no radio records): an empty answer, not an error.
 
-import { $, EVENTS, emit, fmt, getJson, isNum, on } from "./common.js";
+import { $, EVENTS, emit, fmt, getJson, isNum, loadImage, on, validBounds } from "./common.js";
 
 const ASK_MS = 500;
 
@@ -13,19 +13,6 @@ let askedAt = 0;
 let shownT = null;     // the frame whose image is loaded
 let picture = null;    // {bounds, img, scale}
 let mode = null;
-
-function loadImage(url) {
-  return new Promise((resolve) => {
-    const img = new Image();
-    img.onload = () => resolve(img);
-    img.onerror = () => resolve(null);
-    img.src = url;
-  });
-}
-
-function validBounds(b) {
-  return Array.isArray(b) && b.length === 4 && b.every(isNum) && b[2] > b[0] && b[3] > b[1];
-}
 
 function points(list) {
   return Array.isArray(list) ? list.filter((p) => p && isNum(p.x) && isNum(p.y)) : [];

@@ -9,22 +9,10 @@ import io
 import math
 
 import numpy as np
-import pytest
-from harness import RunningStation, operator_page
+from harness import operator_page
 from PIL import Image
+from test_rti_api import TOKEN, station  # noqa: F401 - the module's station, a fixture
 from test_rti_live import TARGET, sweep_rows
-
-from vehicle.protocol.radiostream import LinkLog
-
-TOKEN = "rti-browser-token"
-
-
-@pytest.fixture(scope="module")
-def station(tmp_path_factory):
-    with RunningStation(None, tmp_path_factory.mktemp("recordings"), TOKEN) as running:
-        if getattr(running.station.live, "radio", None) is None:  # the fleet's log (vehicle.protocol.radiostream)
-            running.station.live.radio = LinkLog()
-        yield running
 
 
 def pixel(page, x: float, y: float) -> tuple[int, int, int]:
@@ -36,7 +24,7 @@ def pixel(page, x: float, y: float) -> tuple[int, int, int]:
     return tuple(int(c) for c in image[int(sy * ratio), int(sx * ratio)])
 
 
-def test_the_layer_colour_bar_and_peaks_appear_when_records_arrive(browser, station):
+def test_the_layer_colour_bar_and_peaks_appear_when_records_arrive(browser, station):  # noqa: F811
     from playwright.sync_api import expect
 
     failed: list[str] = []

@@ -12,16 +12,13 @@ from harness import RunningStation, wait_wall
 from PIL import Image
 from test_rti_live import TARGET, sweep_rows
 
-from vehicle.protocol.radiostream import LinkLog
-
 TOKEN = "rti-api-token"
 
 
 @pytest.fixture(scope="module")
 def station(tmp_path_factory):
+    """A station with no scene and no vehicle: the tests put link records in its fleet's log themselves."""
     with RunningStation(None, tmp_path_factory.mktemp("recordings"), TOKEN) as running:
-        if getattr(running.station.live, "radio", None) is None:  # the fleet's log (vehicle.protocol.radiostream)
-            running.station.live.radio = LinkLog()
         yield running
 
 
