@@ -16,12 +16,11 @@ import math
 import os
 import subprocess
 import sys
-import time
 from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from harness import RunningStation, command_ok, load_default_scene
+from harness import RunningStation, command_ok, during, load_default_scene, wait_wall
 
 from vehicle.agent.mavlink_controller import MavlinkController
 from vehicle.protocol import links
@@ -80,14 +79,20 @@ def sitl(kind: str, instance: int, tmp_path: Path, proximity: bool = False):
                                stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, start_new_session=True)
     ports = (5760 + 10 * instance, 5762 + 10 * instance)
     try:
-        deadline = time.monotonic() + 30
-        while not listening(ports[0]):
-            assert process.poll() is None and time.monotonic() < deadline, "SITL did not start"
-            time.sleep(0.05)
+        wait_wall(lambda: listening(ports[0]) or process.poll() is not None, 30, f"SITL listening on {ports[0]}")
+        assert process.poll() is None, f"SITL exited with code {process.returncode} before it listened"
         yield ports
     finally:
         process.terminate()
         process.wait(timeout=10)
+
+
+def pump_until(pilot: MavlinkController, state, done, what: str, timeout: float = 60.0):
+    """Pump the pilot's links until ``done(state())`` (in wall time: SITL runs at SPEEDUP of it)."""
+    def pumped():
+        pilot.pump()
+        return state()
+    return wait_wall(pumped, timeout, what, period=0.0, done=done)
 
 
 def distance_from_home(v: dict) -> float:
@@ -106,20 +111,17 @@ def test_the_station_alone_shows_ardupilot_as_it_reports_itself_and_brings_it_ho
             pilot.connect(60)
             api.wait_vehicle(1, lambda v: v["position"] is not None, 60, SPEEDUP, "the station sees the position")
             assert pilot.set_mode("GUIDED") == 0
-            deadline = time.monotonic() + 60
-            while not pilot.ready() and time.monotonic() < deadline:
-                pilot.pump()
+            pump_until(pilot, pilot.ready, bool, "the autopilot's pre-arm checks passing")
             assert pilot.arm() == 0
             if kind == "copter":
                 assert pilot.takeoff(5.0) == 0
-                while pilot.taking_off and time.monotonic() < deadline:
-                    pilot.pump()
+                pump_until(pilot, lambda: pilot.taking_off, lambda taking_off: not taking_off, "the take-off done")
             assert pilot.goto(12.0, 9.0, 5.0 if kind == "copter" else None) == 0
-            while (pilot.navigation.reach > 0.8 or pilot.speed > 0.2) and time.monotonic() < deadline:
-                pilot.pump()
+            pump_until(pilot, lambda: (round(pilot.navigation.reach, 2), round(pilot.speed, 2)),
+                       lambda state: state[0] <= 0.8 and state[1] <= 0.2,
+                       "(distance, speed) to (12, 9) within 0.8 m and 0.2 m/s")
             pilot.hold()
-            settled = time.monotonic() + 2.0
-            while time.monotonic() < settled:
+            for _ in during(2.0):  # settling
                 pilot.pump()
             shown = api.wait_vehicle(1, lambda v: distance_from_home(v) > 10, 30, SPEEDUP, "out there")
             pilot.pump()
