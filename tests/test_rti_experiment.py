@@ -82,3 +82,18 @@ def test_the_sweep_sweeps_targets_and_the_planner(tmp_path):
 def test_bad_targets_are_refused_before_any_run():
     with pytest.raises(ValueError, match="target 'x,1' is not X,Y"):
         SweepSpec(["rti"], ["a.wrl"], {}, targets=["x,1"])
+
+
+def test_a_run_may_end_with_the_missions(flat_scene):
+    from vehicle.agent.settings import Settings
+    from vehicle.lab.experiment import Experiment
+    from vehicle.lab.tomograph import run_team_experiment
+
+    settings = Settings().updated({**REGION, "rti_rounds": 3})
+    whole = run_team_experiment(Experiment("flat.wrl", "rti", settings=settings), flat_scene, 2, [(7.0, 7.0)])
+    short = run_team_experiment(Experiment("flat.wrl", "rti", settings=settings), flat_scene, 2, [(7.0, 7.0)],
+                                until_mission_end=True)
+    assert whole["outcome"] == "finished" and short["outcome"] == "timeout"
+    assert all("Mission rti: finished" in v["messages"][-1] for v in short["vehicles"])
+    assert short["sim_time_s"] < whole["sim_time_s"]
+    assert short["rti"]["links_imaged"] == whole["rti"]["links_imaged"] > 0
