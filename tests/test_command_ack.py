@@ -35,10 +35,6 @@ class ScriptedVehicle(FakeVehicle):
         self.answers: dict[int, list] = {}
         super().__init__(("127.0.0.1", port), sysid, beat=0.2, pose=False)
 
-    @property
-    def mav(self):
-        return self.packer
-
     def ack(self, command: int, result: int) -> None:
         self.send(self.mav.command_ack_encode(command, result, 0, 0, 255, 0))
 
