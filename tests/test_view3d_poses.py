@@ -76,3 +76,26 @@ def test_a_burst_of_poses_is_one_update_for_each_vehicle_that_moved(view):
     wait_wall(lambda: abs(body_x(scene_view) - 5.0) < 0.05 and 2 in scene_view._drawn, 10, "the burst drawn")
     assert sorted(scene_view.drawn[drawn_before:]) == [1, 2]  # one update each, not fifty; none for 3
     assert fleet.moved == set()
+
+
+def test_a_pose_that_comes_while_the_slow_layers_are_drawn_waits_for_one_vehicles_layers_only(view):
+    """The slow beat draws one vehicle's trails, sonar and map at a time, and sends the poses that came meanwhile
+    before the next vehicle's: a pose waited for the whole fleet's layers (and the fleet's lock with them)."""
+    scene_view, fleet, one = view
+    two = Vehicle(2)
+    fleet.apply(two.heartbeat(), 1.0)
+    fleet.apply(two.at(0.0, 5.0), 1.0)
+    wait_wall(lambda: 2 in scene_view._drawn, 10, "vehicle 2 drawn")
+    one_when_two_drawn = []
+    draw_vehicle = scene_view._draw_vehicle
+
+    def layers(v, colour, slow):
+        if slow and v.sysid == 2:
+            one_when_two_drawn.append(body_x(scene_view))
+        draw_vehicle(v, colour, slow)
+        if slow and v.sysid == 1:
+            fleet.apply(one.at(7.0), 2.0)  # comes while vehicle 1's layers are drawn
+
+    scene_view._draw_vehicle = layers
+    scene_view.draw(slow=True, frame=False)
+    assert one_when_two_drawn == [pytest.approx(7.0, abs=0.05)]
