@@ -29,8 +29,9 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from groundstation import rti_view  # noqa: E402
 from groundstation.rti_live import frame_at  # noqa: E402
-from vehicle.protocol.radiostream import LinkRecord, as_records  # noqa: E402
+from vehicle.protocol.radiostream import LinkRecord  # noqa: E402
 from vehicle.tomography import synthetic  # noqa: E402
+from vehicle.tomography.links import records_of  # noqa: E402
 
 TARGET = (2.0, 4.0)
 BATCH = 0.25  # s between two arrivals in the end-to-end run
@@ -51,7 +52,7 @@ def solve_speed() -> list[list[object]]:
     out = []
     try:
         for radios, channels in ((8, 1), (16, 1), (16, 4), (28, 4)):
-            records = as_records(rows(radios, channels, 60.0))
+            records = records_of(rows(radios, channels, 60.0))
             times, draws = [], []
             for end in (58.0, 59.0, 60.0):
                 started = time.perf_counter()

@@ -24,9 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from PIL import Image
 
-from vehicle.protocol.radiostream import as_records
 from vehicle.tomography.imaging import reconstruct
-from vehicle.tomography.links import KEY_STEP, Records, factorize, link_keys
+from vehicle.tomography.links import KEY_STEP, Records, factorize, link_keys, records_of
 from vehicle.tomography.picture import STOPS, colours
 
 WINDOW = 1.0  # s of the records' clock per frame
@@ -209,7 +208,7 @@ class LiveImager:
             self.skipped += round((end - self._end) / self.window) - 1
         self._end = end
         started = time.perf_counter()
-        frame = self.solve(as_records(rows, "radio"), end, window=self.window, history=self.history,
+        frame = self.solve(records_of(rows), end, window=self.window, history=self.history,
                            bounds=self.bounds, cell=self.cell)
         if frame is not None:
             frame.solve_s = time.perf_counter() - started

@@ -6,7 +6,8 @@ read from the source; each package may import only the packages below it:
 - ``vehicle.protocol`` (what both ends of a link share) imports nothing above it;
 - ``vehicle.mapping`` and ``vehicle.world`` build on the protocol (and the world on mapping, to draw maps);
 - the simulator (``vehicle.sim``) never imports the agent, and the agent never the simulator: it reaches
-  its vehicle only through its flight-controller interface;
+  its vehicle only through its flight-controller interface; the agent plans radio tomography missions
+  with ``vehicle.tomography``, which imports only the protocol (numpy and scipy);
 - ``groundstation`` imports only what both ends share (protocol, mapping, world), never the simulator,
   the agent or the lab; nothing in ``vehicle`` imports ``groundstation``.
 
@@ -28,7 +29,7 @@ ALLOWED = {  # package -> what it may import from the project (itself always)
     "vehicle.mapping": {"vehicle", "vehicle.protocol"},
     "vehicle.world": {"vehicle", "vehicle.protocol", "vehicle.mapping"},
     "vehicle.sim": {"vehicle", "vehicle.protocol", "vehicle.mapping", "vehicle.world"},
-    "vehicle.agent": {"vehicle", "vehicle.protocol", "vehicle.mapping", "vehicle.world"},
+    "vehicle.agent": {"vehicle", "vehicle.protocol", "vehicle.mapping", "vehicle.world", "vehicle.tomography"},
     "vehicle.tomography": {"vehicle", "vehicle.protocol"},
     "vehicle.lab": {"vehicle", "vehicle.protocol", "vehicle.mapping", "vehicle.world", "vehicle.sim",
                     "vehicle.agent", "vehicle.tomography"},

@@ -30,6 +30,7 @@ from vehicle.protocol.radiostream import (
     LinkSender,
 )
 from vehicle.sim.radios import Radios
+from vehicle.tomography.links import records_of
 
 
 def records(count: int, rx: int = 1, start: float = 10.0) -> list[LinkRecord]:
@@ -130,10 +131,10 @@ def test_the_link_log_is_bounded_answers_by_time_and_takes_appends_from_threads(
     for thread in threads:
         thread.join()
     assert len(log) == 3000  # 4000 appended, the oldest gone
-    columns = log.records(since=5000, until=5050)
+    columns = records_of(log.snapshot(since=5000, until=5050))
     assert len(columns) == 250 and np.all(np.diff(columns.t) >= 0) and columns.tx.shape == (250, 2)
     assert columns.rssi[0] == -50.0 and columns.channel.dtype == np.int64
-    assert len(log.records(since=1e9)) == 0
+    assert len(records_of(log.snapshot(since=1e9))) == 0
 
 
 def tunnel(payload: bytes):

@@ -11,6 +11,7 @@ import pytest
 from groundstation.rti_live import LiveImager, boundary, frame_at, picture
 from vehicle.protocol.radiostream import LinkLog, LinkRecord
 from vehicle.tomography import synthetic
+from vehicle.tomography.links import records_of
 
 TARGET = (2.0, 4.0)
 
@@ -32,7 +33,7 @@ def rows():
 def test_a_frame_from_synthetic_records_finds_the_target(rows):
     log = LinkLog()
     log.append(rows)
-    frame = frame_at(log.records(), 30.0, window=1.0, history=60.0)
+    frame = frame_at(records_of(log.snapshot()), 30.0, window=1.0, history=60.0)
     best = frame.peaks[0]
     assert math.dist((best["x"], best["y"]), TARGET) < 0.5, frame.peaks
     assert frame.t == 30.0 and frame.bounds == (0.0, 0.0, 6.4, 6.4)

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from conftest import GROUND
 
-from vehicle.tomography.planning import Planner, clear_spots, nearest_object, ring
+from vehicle.agent.missions.rti import clear_spots
+from vehicle.tomography.planning import Planner, nearest_object, ring
 
 REGION = (0.0, 0.0, 6.0, 6.0)
 BOX = """Transform { translation 8.5 3 2 children Shape { geometry Box { size 1 1 4 } } }"""

@@ -51,8 +51,9 @@ class Phase(StrEnum):
 class Agent:
     def __init__(self, fc: FlightController, mission: str, settings: Settings,
                  waypoints: list[tuple[float, float]] | None = None, autostart: bool = True,
-                 log: Callable[[str], None] | None = None):
-        """``log``: where the agent's messages are also written (a companion's standard error)."""
+                 log: Callable[[str], None] | None = None, scene=None):
+        """``log``: where the agent's messages are also written (a companion's standard error); ``scene``: the
+        world it was given, if any (a MAVLink agent's ``--scene``)."""
         self.fc = fc
         self.log = log
         self.settings = settings
@@ -61,7 +62,7 @@ class Agent:
         self.monitor = Monitor(settings, self.map, home, fc.radius, brake=fc.brake)
         self.messages: deque[str] = deque(maxlen=MESSAGES_KEPT)
         self.outbox: deque[tuple[int, str]] = deque(maxlen=MESSAGES_KEPT)  # (severity, text) for the wire
-        self.ctx = Context(fc, self.map, self.monitor, settings, waypoints, say=self.say)
+        self.ctx = Context(fc, self.map, self.monitor, settings, waypoints, say=self.say, scene=scene)
         self.mission_name = mission
         self.mission = mission_class(mission)(self.ctx)
         self.phase = Phase.PREFLIGHT if autostart else Phase.WAITING

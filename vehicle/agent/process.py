@@ -122,7 +122,7 @@ class OnboardAgent:
         say(f"agent: {options.kind} {fc.sysid} at home {fc.home[0]:.1f}, {fc.home[1]:.1f}; mission "
             f"{options.mission}; readings from {'the scene' if self.sonars else 'the flight controller'}")
         self.agent = Agent(fc, options.mission, options.settings, options.waypoints, autostart=False,
-                           log=lambda text: say(f"agent: {text.removeprefix('Agent: ')}"))
+                           log=lambda text: say(f"agent: {text.removeprefix('Agent: ')}"), scene=options.scene)
         self.companion = Companion(self.agent, fc.sysid, start=time.time())
         fc.handler = self.companion.handle
         fc.avoid_margin = self._avoid_margin()

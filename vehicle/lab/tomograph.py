@@ -15,24 +15,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from vehicle.tomography.imaging import reconstruct
-from vehicle.tomography.links import Records
+from vehicle.tomography.links import records_of
 
 FOUND_M = 0.5  # m: a target this close to a peak is found
 EVERY = 10.0  # s of simulated time between two images
 CELL = 0.25  # m: the image's pixel, half the distance a target must be found within (finer costs more per image)
-
-
-def as_records(rows: list, name: str) -> Records:
-    """LinkRecords (t, tx, rx, tx_x, tx_y, rx_x, rx_y, rssi, channel) as the reconstruction's columns."""
-    if not rows:
-        return Records(name, np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64))
-    t, tx_x, tx_y, rx_x, rx_y, rssi, channel = (np.array([getattr(r, k) for r in rows], float) for k in
-                                                ("t", "tx_x", "tx_y", "rx_x", "rx_y", "rssi", "channel"))
-    return Records(name, t, np.column_stack([tx_x, tx_y]), np.column_stack([rx_x, rx_y]), rssi,
-                   channel.astype(np.int64))
 
 
 @dataclass
@@ -64,7 +52,7 @@ class Tomograph:
         self._last, self._new = t, False
         if len(self.records) < 2:
             return None
-        result = reconstruct(as_records(self.records, "run"), calibration=as_records(self.empty, "empty"),
+        result = reconstruct(records_of(self.records, "run"), calibration=records_of(self.empty, "empty"),
                              bounds=self.bounds, cell=CELL, peaks=len(self.targets))
         peaks = result.frames[0]["peaks"]
         distances = [min((math.dist(target, (p["x"], p["y"])) for p in peaks), default=math.inf)

@@ -27,8 +27,6 @@ from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from vehicle.protocol.map_bounds import MAX_REACH
 
 RADIO_LINKS = 32805  # 32803 and 32804 are the agent's status and progress (agent_status)
@@ -171,19 +169,3 @@ class LinkLog:
         with self._lock:
             records = list(self._records)
         return [r for r in records if (since is None or r.t >= since) and (until is None or r.t < until)]
-
-    def records(self, since: float | None = None, until: float | None = None, name: str = "radio"):
-        """The records with ``since <= t < until`` as the reconstruction's columns (``tomography.links.Records``),
-        in time order."""
-        return as_records(self.snapshot(since, until), name)
-
-
-def as_records(rows: list[LinkRecord], name: str = "radio"):
-    """Link records as ``vehicle.tomography.links.Records``, sorted by time."""
-    from vehicle.tomography.links import Records
-
-    rows = sorted(rows, key=lambda r: r.t)
-    if not rows:
-        return Records(name, np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64))
-    data = np.array([(r.t, r.tx_x, r.tx_y, r.rx_x, r.rx_y, r.rssi, r.channel) for r in rows], float)
-    return Records(name, data[:, 0], data[:, 1:3], data[:, 3:5], data[:, 5], data[:, 6].astype(np.int64))

@@ -218,3 +218,13 @@ def match_keys(keys: np.ndarray, table_keys: np.ndarray) -> np.ndarray:
     """For each row of ``keys``, its index in ``table_keys`` (both (n, 5) ints), or -1 when absent."""
     lookup = {tuple(k): i for i, k in enumerate(table_keys.tolist())}
     return np.array([lookup.get(tuple(k), -1) for k in keys.tolist()], dtype=np.int64)
+
+
+def records_of(rows, name: str = "radio") -> Records:
+    """Link records (anything with ``t, tx_x, tx_y, rx_x, rx_y, rssi, channel``: the radio stream's
+    ``LinkRecord``) as the reconstruction's columns, sorted by time."""
+    rows = sorted(rows, key=lambda r: r.t)
+    if not rows:
+        return Records(name, np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64))
+    data = np.array([(r.t, r.tx_x, r.tx_y, r.rx_x, r.rx_y, r.rssi, r.channel) for r in rows], float)
+    return Records(name, data[:, 0], data[:, 1:3], data[:, 3:5], data[:, 5], data[:, 6].astype(np.int64))

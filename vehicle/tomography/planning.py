@@ -71,15 +71,6 @@ def nearest_object(scene, start: Point, margin: float = 0.5) -> tuple[float, flo
     return tuple(round(float(v), 3) for v in footprint)
 
 
-def clear_spots(spots: np.ndarray, scene, radius: float, altitude: float, padding: float) -> np.ndarray:
-    """The spots where a body of ``radius`` at ``altitude`` above the ground keeps ``padding`` from the scene."""
-    from vehicle.world.collision import Collider
-
-    collider = Collider(scene, radius, search=radius + padding + 1.0)
-    keep = [collider.clearance(np.array([x, y, altitude])) > radius + padding for x, y in spots]
-    return spots[np.array(keep, bool)] if len(spots) else spots
-
-
 class Planner:
     """The plan of one team round a region; every agent holds its own and, given the same history, computes
     the same next spots (see the module's docstring)."""

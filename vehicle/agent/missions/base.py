@@ -12,12 +12,15 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from vehicle.agent.controller import FlightController
 from vehicle.agent.monitor import Monitor, Observation
 from vehicle.agent.settings import Settings
 from vehicle.mapping.memory_map import MemoryMap
+
+if TYPE_CHECKING:
+    from vehicle.world.scene import Scene
 from vehicle.mapping.planner import MapPlanner
 from vehicle.protocol.modes import Kind
 from vehicle.protocol.rangefinder import Servo
@@ -41,6 +44,7 @@ class Context:
     observation: Observation | None = None
     say: Callable[[str], None] = print
     planned_path: list[tuple[float, float]] = field(default_factory=list)  # for display
+    scene: Scene | None = None  # the world the agent was given (--scene), for missions that plan round its objects
     planner: MapPlanner = field(init=False)
 
     def __post_init__(self):

@@ -15,10 +15,13 @@ from __future__ import annotations
 import math
 from enum import StrEnum
 
+import numpy as np
+
 from vehicle.agent.missions.base import Mission, Status
 from vehicle.agent.missions.routines import Travel
 from vehicle.agent.traffic import team_mates
-from vehicle.tomography.planning import PLANNERS, Planner, clear_spots, nearest_object, ring
+from vehicle.tomography.planning import PLANNERS, Planner, nearest_object, ring
+from vehicle.world.collision import Collider
 
 ARRIVED = 0.4  # m from its spot at which a vehicle counts as there (itself: the autopilot then settles on it)
 THERE = 0.5  # m: a vehicle this close to its spot (a partner: as its traffic tells), and settled, is there
@@ -31,6 +34,13 @@ class Phase(StrEnum):
     TRAVEL = "travel"
     WAIT = "wait"
     DWELL = "dwell"
+
+
+def clear_spots(spots: np.ndarray, scene, radius: float, altitude: float, padding: float) -> np.ndarray:
+    """The spots where a body of ``radius`` at ``altitude`` above the ground keeps ``padding`` from the scene."""
+    collider = Collider(scene, radius, search=radius + padding + 1.0)
+    keep = [collider.clearance(np.array([x, y, altitude])) > radius + padding for x, y in spots]
+    return spots[np.array(keep, bool)] if len(spots) else spots
 
 
 def region(settings, scene, home: tuple[float, float]) -> tuple[float, float, float, float]:
@@ -66,7 +76,8 @@ class Rti(Mission):
         if len(self.team) < 2 and not self.fixed:
             self.reason = "rti needs a team of two or more, or fixed radio nodes"
             return
-        scene = getattr(getattr(fc, "simulation", None), "scene", None)
+        # the scene the agent was given, or, in-process, the simulated world's
+        scene = ctx.scene if ctx.scene is not None else getattr(getattr(fc, "simulation", None), "scene", None)
         try:
             bounds = region(settings, scene, ctx.home)
         except ValueError as error:
