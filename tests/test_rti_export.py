@@ -20,6 +20,7 @@ from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.radiostream import PAYLOAD, RADIO_LINKS, LinkLog, LinkSender
 from vehicle.protocol.tlog import LOG_EPOCH, TlogWriter
+from vehicle.tomography.links import records_of
 
 
 def radio_recording(path, rows: list) -> None:
@@ -63,7 +64,7 @@ def test_a_replay_seek_shows_the_frame_the_live_station_showed(tmp_path):
     assert imager.latest().t == 29.0  # the last record is at 29.75 s
     live = LinkLog()  # what the live station held at 25.5 s of the radios' clock (the records as the fleet got them)
     live.append([r for r in replay.fleet.radio.snapshot() if r.t < 25.5])
-    shown = frame_at(live.records(), 25.0)
+    shown = frame_at(records_of(live.snapshot()), 25.0)
     assert math.dist((shown.peaks[0]["x"], shown.peaks[0]["y"]), TARGET) < 0.5
     replay.seek(25.6)  # back: the log is rebuilt from the records up to then (sent at 25.5 s of the log)
     imager.step()
