@@ -48,7 +48,12 @@ def test_click_to_go(browser_page, station, copters, tmp_path):
     # the initial camera looks at the scene's centre from the south-west: the middle of the view is
     # open ground there (the start of the scene, clear for 6.9 m around)
     box = page.locator("#view").bounding_box()
-    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    middle = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    # nothing of the page's own (the 2D map's pane and toolbar, a banner) lies over the view's middle
+    on_top = page.evaluate("([x, y]) => document.elementFromPoint(x, y).closest('#view canvas, [id]').id || 'canvas'",
+                           list(middle))
+    assert on_top in ("canvas", "view"), f"#{on_top} covers the middle of the 3D view"
+    page.mouse.click(*middle)
     expect(coords).to_have_text(re.compile(r"^x -?[\d.]+ m, y -?[\d.]+ m$"), timeout=30_000)
     target = tuple(float(v) for v in re.findall(r"-?[\d.]+", coords.inner_text()))
     assert math.hypot(*target) < 6, target  # near the centre, on the ground
