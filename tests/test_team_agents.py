@@ -111,3 +111,18 @@ def test_two_vehicles_going_round_each_other_on_the_way_home_never_touch(make_sc
     assert [v["outcome"] for v in result["vehicles"] if v["outcome"] == "collision"] == []
     assert stepper.team.closest_gap > 0.5
 
+
+
+@pytest.mark.parametrize("apart", [5.7, 24.0])
+def test_two_vehicles_head_on_pass_each_other_and_both_arrive(flat_scene, apart):
+    """Each flies past where the other starts. Started close (the demo's spots, 5.7 m apart), both stop
+    at once for the other (the guard); each then stands in the other's way, goes round it to its right,
+    and both arrive. Before, the lower id waited for the higher, which gave way to it, and both stood for
+    good (the demo's RTI mission never began)."""
+    half = apart / 2 / 2 ** 0.5
+    stepper = simulate_team(flat_scene, "pathfind", 2, settings=Settings().updated({"time_limit": 200}),
+                            starts=[(half, half), (-half, -half)], waypoints=[[(-8.0, -8.0)], [(8.0, 8.0)]])
+    fly(stepper)
+    assert [a.outcome for a in stepper.agents] == ["finished", "finished"], [list(a.messages)[-3:] for a in stepper.agents]
+    assert stepper.team.closest_gap >= 2.0
+    assert all(s.collision is None for s in stepper.team.simulations)

@@ -47,7 +47,7 @@ class GiveWay:
         self._clear_since: float | None = None
         self._sent: tuple[float, float] | None = None
         self._said: tuple[int, str] | None = None
-        self._detour: tuple[tuple[float, float], float] | None = None  # where it goes round a team-mate, till when
+        self._detour: tuple[list[tuple[float, float]], float] | None = None  # the legs round a team-mate, till when
 
     def step(self) -> bool:
         """True while the vehicle gives way, goes round a team-mate or waits: the mission is then not stepped."""
@@ -60,12 +60,17 @@ class GiveWay:
         wanted = self._wanted if busy else self._intent()
         me = getattr(fc, "system_id", 1)
         conflicts = [o for o in others if self._conflict(wanted, o)]
-        standing = [o for o in conflicts if math.hypot(o.vx, o.vy) <= MOVING]
+        standing = [o for o in conflicts if _stands(o)]
         moving_lower = [o for o in conflicts if o.vehicle < me and o not in standing]
-        close = self._closing_in(wanted, others)
-        if close is not None:  # the guard, before any rule or detour: never fly into a team-mate's margin
+        # the guard, before any rule or detour, judges what the vehicle flies now (towards what was sent
+        # while it gives way, else the mission's way): never fly into a team-mate's margin
+        close = self._closing_in(self._flying() if busy else wanted, others)
+        if close is not None:
             self._detour = None
-            if close.vehicle < me:
+            if _stands(close):  # whatever its id: one that stands moves for no one, so it is gone round
+                self._begin(close, wanted, "going round vehicle {}, which stands close ahead")
+                self._go_round(close, wanted)
+            elif close.vehicle < me:
                 self._begin(close, wanted, "giving way to vehicle {} (lower system id), which is close")
                 self._keep_out_of(close)
             else:
@@ -81,7 +86,8 @@ class GiveWay:
             return True
         if standing:  # a team-mate that stands in the way (scanning, holding, landed): go round it
             other = min(standing, key=lambda o: math.hypot(o.x - fc.pose.x, o.y - fc.pose.y))
-            self._begin(other, wanted, "going round vehicle {}, which stands in the way")
+            if self._said != (other.vehicle, "going round vehicle {}, which stands close ahead"):
+                self._begin(other, wanted, "going round vehicle {}, which stands in the way")
             self._go_round(other, wanted)
             return True
         other = self._too_close_ahead(wanted, others)
@@ -122,8 +128,10 @@ class GiveWay:
             self._sent = target
 
     def _go_round(self, other: Traffic, wanted: tuple[float, float]) -> None:
-        """Fly to the point beside the team-mate, the margin and a metre off it on the side this vehicle is
-        already on (seen along the way it wants to go); then the mission plans on from there."""
+        """Step sideways off the way it wants to go, to the margin and a metre from the team-mate's line, on
+        the side it is already on, then fly level with the team-mate: two legs that never come closer to it
+        (one straight leg to beside it cuts into its margin when it is near). The mission plans on from there.
+        Two vehicles going round each other head on both turn to their right, away from each other."""
         ctx = self.ctx
         x, y = ctx.position
         speed = math.hypot(*wanted)
@@ -134,22 +142,40 @@ class GiveWay:
         off = math.hypot(nx, ny)
         nx, ny = (nx / off, ny / off) if off > 0.1 else (uy, -ux)  # right on its line: round its right
         reach = self._margin(other) + ASIDE
-        beside = (other.x + nx * reach, other.y + ny * reach)
-        if not (ctx.inside(beside) and ctx.is_clear(beside)):
-            beside = (other.x - nx * reach, other.y - ny * reach)  # the other side
-            if not (ctx.inside(beside) and ctx.is_clear(beside)):
-                self._hold()
+        for side in (1.0, -1.0):  # this side, else the other
+            beside = (other.x + side * nx * reach, other.y + side * ny * reach)
+            aside = (beside[0] + along * ux, beside[1] + along * uy)  # level with here
+            legs = [aside, beside] if along < 0 else [aside]  # once level with it or past, stepping aside does
+            if all(ctx.inside(p) and ctx.is_clear(p) for p in legs):
+                self._detour = (legs, ctx.time + DETOUR_FOR)
+                self._send(legs[0])
                 return
-        self._detour = (beside, ctx.time + DETOUR_FOR)
-        self._send(beside)
+        self._hold()
 
     def _detouring(self) -> bool:
-        """Still on the way round (not there yet, and not for too long)."""
-        beside, until = self._detour
-        if self.ctx.distance_to(beside) > DETOUR_REACHED and self.ctx.time < until:
-            return True
+        """Still on the way round (not at its last point yet, and not for too long)."""
+        legs, until = self._detour
+        if self.ctx.time < until:
+            while legs and self.ctx.distance_to(legs[0]) <= DETOUR_REACHED:
+                legs.pop(0)
+            if legs:
+                self._send(legs[0])
+                return True
         self._detour = None
         return False
+
+    def _flying(self) -> tuple[float, float]:
+        """The velocity it flies while giving way: towards what it sent, at the cruise speed (none when
+        there)."""
+        if self._sent is None:
+            return 0.0, 0.0
+        x, y = self.ctx.position
+        dx, dy = self._sent[0] - x, self._sent[1] - y
+        distance = math.hypot(dx, dy)
+        if distance < DETOUR_REACHED:
+            return 0.0, 0.0
+        speed = self.ctx.settings.speed
+        return speed * dx / distance, speed * dy / distance
 
     def _margin(self, other: Traffic) -> float:
         return self.ctx.settings.separation + self.ctx.radius + other.radius
@@ -232,6 +258,10 @@ class GiveWay:
             if ctx.inside(aside) and ctx.is_clear(aside):
                 target = aside
         self._send(target)
+
+
+def _stands(other: Traffic) -> bool:
+    return math.hypot(other.vx, other.vy) <= MOVING
 
 
 def team_mates(fc) -> list[Traffic]:
