@@ -33,6 +33,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import httpx
+import pytest
 import uvicorn
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -55,6 +56,15 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
                  "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+NO_CHROMIUM = "needs Debian's chromium at /usr/bin/chromium (./scripts/test.sh installs it)"
+needs_chromium = pytest.mark.skipif(not Path(CHROMIUM).exists(), reason=NO_CHROMIUM)
+
+
+def skip_module_without_chromium() -> None:
+    """Called at the top of a browser test module: skips the whole module on a machine without Chromium, before
+    it imports Playwright."""
+    if not Path(CHROMIUM).exists():
+        pytest.skip(NO_CHROMIUM, allow_module_level=True)
 
 # flat ground, a wall north of the start and one east of it: something for the sonar to see
 SCENE_TEXT = f"""#VRML V2.0 utf8

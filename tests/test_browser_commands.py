@@ -13,17 +13,15 @@ from __future__ import annotations
 
 import math
 import re
-from pathlib import Path
 
 import pytest
-from harness import CHROMIUM, operator_page, start_sim, wait_wall
+from harness import operator_page, skip_module_without_chromium, start_sim, wait_wall
 
 from vehicle.agent.settings import Settings
 
 pytestmark = pytest.mark.browser
 
-if not Path(CHROMIUM).exists():
-    pytest.skip("needs Debian's chromium at /usr/bin/chromium (./scripts/test.sh installs it)", allow_module_level=True)
+skip_module_without_chromium()
 
 from playwright.sync_api import expect  # noqa: E402 - once Chromium is known to exist
 

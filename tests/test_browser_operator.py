@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from harness import CHROMIUM, RunningStation, operator_page, start_sim, wait_wall
+from harness import RunningStation, operator_page, skip_module_without_chromium, start_sim, wait_wall
 from PIL import Image
 
 from vehicle.agent.settings import Settings
@@ -31,8 +31,7 @@ from vehicle.protocol.statustext import statustexts
 
 pytestmark = pytest.mark.browser
 
-if not Path(CHROMIUM).exists():
-    pytest.skip("needs Debian's chromium at /usr/bin/chromium (./scripts/test.sh installs it)", allow_module_level=True)
+skip_module_without_chromium()
 
 from playwright.sync_api import expect  # noqa: E402 - once Chromium is known to exist
 

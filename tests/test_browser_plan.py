@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 import pytest
-from harness import CHROMIUM, RunningStation, operator_page, start_sim, wait_wall
+from harness import RunningStation, operator_page, skip_module_without_chromium, start_sim, wait_wall
 
 from vehicle.agent.settings import Settings
 from vehicle.protocol.mav import mavlink
@@ -25,8 +25,7 @@ from vehicle.protocol.waypoints import parse_mission
 
 pytestmark = pytest.mark.browser
 
-if not Path(CHROMIUM).exists():
-    pytest.skip("needs Debian's chromium at /usr/bin/chromium (./scripts/test.sh installs it)", allow_module_level=True)
+skip_module_without_chromium()
 
 from playwright.sync_api import expect  # noqa: E402 - once Chromium is known to exist
 

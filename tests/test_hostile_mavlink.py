@@ -24,12 +24,10 @@ import time
 import tracemalloc
 import zlib
 from collections import Counter
-from pathlib import Path
 from unittest import mock
 
 import pytest
 from harness import (
-    CHROMIUM,
     HEARTBEAT_WAIT,
     SPEEDUP,
     RunningSim,
@@ -39,6 +37,7 @@ from harness import (
     free_udp_port,
     launch_chromium,
     make_vehicle,
+    needs_chromium,
     small_scene,
     start_sim,
     wait_mode,
@@ -686,7 +685,7 @@ def test_the_station_shows_when_another_ground_station_commands_its_vehicle(scen
     other.close()
 
 
-@pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="needs Debian's chromium at /usr/bin/chromium")
+@needs_chromium
 @pytest.mark.browser
 def test_the_page_shows_another_ground_station_and_a_signed_link(scene, tmp_path):
     from playwright.sync_api import expect, sync_playwright

@@ -16,14 +16,13 @@ import re
 import socket
 import threading
 import time
-from pathlib import Path
 
 import httpx
 import msgspec
 import pytest
 import viser
 import websockets
-from harness import CHROMIUM, TOKEN, RunningStation, during, small_scene, start_sim, wait_wall
+from harness import TOKEN, RunningStation, during, needs_chromium, small_scene, start_sim, wait_wall
 from websockets.sync.client import connect as ws_connect
 
 from groundstation.security import MAX_BODY, NO_HOST, Access, Gate
@@ -648,11 +647,9 @@ def test_a_cookie_other_than_the_session_is_no_token_to_watch(exposed):
 
 
 # ---- in the browser -------------------------------------------------------------------------------------------
-chromium_needed = pytest.mark.skipif(
-    not Path(CHROMIUM).exists(), reason="needs Debian's chromium at /usr/bin/chromium (scripts/test.sh installs it)")
 
 
-@chromium_needed
+@needs_chromium
 @pytest.mark.browser
 def test_script_a_viser_server_sends_does_not_run(station, browser):
     server = station.station.view.server
@@ -669,7 +666,7 @@ def test_script_a_viser_server_sends_does_not_run(station, browser):
         page.close()
 
 
-@chromium_needed
+@needs_chromium
 @pytest.mark.browser
 def test_the_view_cannot_open_a_socket_to_another_server(station, browser):
     listener = socket.create_server(("127.0.0.1", 0))
@@ -691,7 +688,7 @@ def test_the_view_cannot_open_a_socket_to_another_server(station, browser):
         listener.close()
 
 
-@chromium_needed
+@needs_chromium
 @pytest.mark.browser
 def test_the_api_page_needs_nothing_from_the_internet(station, browser):
     page = browser.new_page()
@@ -707,7 +704,7 @@ def test_the_api_page_needs_nothing_from_the_internet(station, browser):
 
 
 
-@chromium_needed
+@needs_chromium
 @pytest.mark.browser
 def test_the_page_asks_a_token_to_watch_and_a_viewer_token_only_watches(guarded, browser):
     from playwright.sync_api import expect
@@ -738,7 +735,7 @@ def test_the_page_asks_a_token_to_watch_and_a_viewer_token_only_watches(guarded,
         context.close()
 
 
-@chromium_needed
+@needs_chromium
 @pytest.mark.browser
 def test_the_page_says_when_a_link_is_down(browser):
     from playwright.sync_api import expect
@@ -758,7 +755,7 @@ def test_the_page_says_when_a_link_is_down(browser):
     closed.close()
 
 
-@chromium_needed
+@needs_chromium
 @pytest.mark.browser
 def test_the_page_says_when_a_vehicle_flies_far_from_the_scene(browser):
     """A vehicle in Zurich, placed by a datum in Canberra, was drawn 15,700 km away: the 3D view showed the scene
@@ -789,7 +786,7 @@ def test_the_page_says_when_a_vehicle_flies_far_from_the_scene(browser):
                 page.close()
 
 
-@chromium_needed
+@needs_chromium
 @pytest.mark.browser
 def test_the_page_says_when_messages_in_a_vehicles_name_come_from_elsewhere(browser):
     """The station drops them (they moved the vehicle on the page); the operator should know someone sends them."""
@@ -826,7 +823,7 @@ def test_the_page_says_when_messages_in_a_vehicles_name_come_from_elsewhere(brow
                 page.close()
 
 
-@chromium_needed
+@needs_chromium
 @pytest.mark.browser
 def test_a_healthy_station_shows_no_health_banner(station, browser):
     from playwright.sync_api import expect

@@ -27,12 +27,12 @@ import viser
 import websockets.sync.client
 import zstandard
 from harness import (
-    CHROMIUM,
     RunningStation,
     WaitTimeout,
     during,
     launch_chromium,
     load_default_scene,
+    needs_chromium,
     start_sim,
     wait_wall,
 )
@@ -343,7 +343,7 @@ def test_an_export_carries_the_recordings_scene_and_a_telemetry_label(exported):
     assert clocks == sorted(clocks) and clocks[-1] > clocks[0]  # rewritten as the replay plays
 
 
-@pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="needs Debian's chromium at /usr/bin/chromium")
+@needs_chromium
 @pytest.mark.browser
 def test_an_export_plays_offline_in_chromium_and_draws_the_scene(exported, tmp_path):
     from playwright.sync_api import sync_playwright

@@ -123,6 +123,7 @@ def test_two_vehicles_head_on_pass_each_other_and_both_arrive(flat_scene, apart)
     stepper = simulate_team(flat_scene, "pathfind", 2, settings=Settings().updated({"time_limit": 200}),
                             starts=[(half, half), (-half, -half)], waypoints=[[(-8.0, -8.0)], [(8.0, 8.0)]])
     fly(stepper)
-    assert [a.outcome for a in stepper.agents] == ["finished", "finished"], [list(a.messages)[-3:] for a in stepper.agents]
+    last_words = [list(a.messages)[-3:] for a in stepper.agents]
+    assert [a.outcome for a in stepper.agents] == ["finished", "finished"], last_words
     assert stepper.team.closest_gap >= 2.0
     assert all(s.collision is None for s in stepper.team.simulations)
