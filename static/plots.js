@@ -7,7 +7,7 @@
 import { $, EVENTS, REPLAY_SIGN_IN_HINT, api, el, fmt, getJson, isNum, on } from "./common.js";
 
 const POLL_MS = 2000;
-const KINDS = new Set(["mode", "armed", "command", "ack", "message", "agent", "crash"]);
+const KINDS = new Set(["mode", "armed", "command", "ack", "message", "agent", "crash", "near miss"]);
 const LOG_SHOWN = 300;  // events in the log below the plot, newest first
 
 const canvas = $("#plot");
@@ -184,7 +184,7 @@ function renderEvents() {
     const at = (e.t - origin - span[0]) / (span[1] - span[0]);
     const marker = el("button");
     marker.type = "button";
-    const kind = KINDS.has(e.kind) ? e.kind : "message";
+    const kind = (KINDS.has(e.kind) ? e.kind : "message").replace(" ", "-");
     const level = isNum(e.severity) ? (e.severity <= 3 ? " severe" : e.severity <= 4 ? " warning" : "") : "";
     marker.className = `event-marker ${kind}${level}`;
     marker.style.left = `${Math.max(0, Math.min(1, at)) * 100}%`;

@@ -286,6 +286,9 @@ function renderCard(card, v) {
   crash.hidden = !v.crash;
   setText(crash, v.crash ? `CRASH: ${v.crash.text} (${fmt(v.crash.age)} s ago)` : "");
   setText(card.querySelector(".map"), mapText(v.map));
+  const nearMisses = card.querySelector(".near-misses");
+  setText(nearMisses, isNum(v.near_misses) && v.near_misses > 0 ? `${v.near_misses} (see the event log)` : "none");
+  nearMisses.classList.toggle("warning", isNum(v.near_misses) && v.near_misses > 0);
   setText(card.querySelector(".sim-time"), isNum(v.time_boot_s) ? `t = ${fmt(v.time_boot_s)} s` : "–");
   renderMessages(card.querySelector(".messages"), v.messages);
 }
