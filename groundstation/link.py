@@ -3,7 +3,8 @@
 One thread reads every link (``vehicle.protocol.links``: any transport, UDP
 parsed per datagram and per sender, TCP and serial reopened whenever they
 drop), feeds each message to the Fleet and to whoever waits for it, sends a
-GCS heartbeat every second and writes everything, both directions, to the
+GCS heartbeat every second (and the vehicles' positions to each other, as
+``groundstation.traffic_relay`` says) and writes everything, both directions, to the
 session recording. Like QGroundControl and Mission Planner it asks each
 vehicle for the telemetry it shows (SET_MESSAGE_INTERVAL, and the older
 REQUEST_DATA_STREAM for autopilots without it), again when the vehicle
@@ -51,6 +52,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from groundstation.state import FORGET_AFTER, LINK_LOST_AFTER, Fleet
+from groundstation.traffic_relay import RELAY_PERIOD, relay_reports
 from vehicle.protocol import links, mission, signing
 from vehicle.protocol.mav import AUTOPILOT, RESULT_WORDS, mavlink, pack
 from vehicle.protocol.mission import MissionItem
@@ -156,7 +158,7 @@ class Link:
 
     # ---- the loop ---------------------------------------------------------------------------------
     def _run(self) -> None:
-        next_beat = 0.0
+        next_beat = next_relay = 0.0
         while not self._stop.is_set():
             self.turned = time.monotonic()
             try:
@@ -164,6 +166,10 @@ class Link:
                 if now >= next_beat:
                     self.send(_gcs_heartbeat())
                     next_beat = now + 1.0
+                if now >= next_relay:
+                    for report in relay_reports(self.fleet, now):
+                        self.send(report)
+                    next_relay = now + RELAY_PERIOD
                 busy = self._read()
                 self._record_tick()
                 self._prune(now)

@@ -138,6 +138,9 @@ class VehicleState:
     lat: float | None = None
     lon: float | None = None
     alt: float | None = None  # m above home
+    alt_msl: float | None = None  # m above sea level
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s east, north, up
+    positioned: float | None = None  # receiver clock of its last GLOBAL_POSITION_INT with a fix
     x: float | None = None  # scene metres east
     y: float | None = None  # scene metres north
     roll: float = 0.0  # rad
@@ -246,6 +249,7 @@ class Fleet:
         self._swept = -math.inf  # when silent vehicles were last looked for
         self.own_sysid = own_sysid
         self.stations: OrderedDict[int, float] = OrderedDict()  # other ground stations: sysid -> last heartbeat
+        self.reported: dict[int, float] = {}  # sysid -> when a vehicle last reported it as traffic (ADSB_VEHICLE)
         self.moved: set[int] = set()  # vehicles whose pose changed since a view last took them (``take_moved``)
         self.pose_news = threading.Event()  # set when one did: a view waits on it to draw a pose as it comes
 
@@ -253,6 +257,7 @@ class Fleet:
         with self.lock:
             self.vehicles.clear()
             self.stations.clear()
+            self.reported.clear()
             self.texts = Reassembler()
             self.history.clear()
             self._occupied.clear()
@@ -335,6 +340,7 @@ class Fleet:
                   self.forget_after]
         for sysid in silent:
             del self.vehicles[sysid]
+            self.reported.pop(sysid, None)
         if silent:
             self.forgotten += len(silent)
             self.version += 1
@@ -445,6 +451,8 @@ class Fleet:
         datum = self._ensure_datum(lat, lon)
         vehicle.lat, vehicle.lon, vehicle.alt = lat, lon, m.relative_alt / 1000.0
         vehicle.x, vehicle.y = datum.to_local(lat, lon)
+        vehicle.alt_msl, vehicle.positioned = m.alt / 1000.0, now
+        vehicle.velocity = (m.vy / 100.0, m.vx / 100.0, -m.vz / 100.0)
         vehicle.speed = math.hypot(m.vx, m.vy) / 100.0
         vehicle.climb = -m.vz / 100.0
         self._fall(vehicle, now)
@@ -453,6 +461,13 @@ class Fleet:
         if vehicle.home is None:  # until HOME_POSITION comes, the first fix is home
             vehicle.home = (vehicle.x, vehicle.y)
         self._extend_trail(vehicle)
+
+    def _adsb_vehicle(self, vehicle, m, now) -> None:
+        """A vehicle tells of a team-mate it hears (our simulated world's autopilots do): that one needs no
+        relay (``groundstation.traffic_relay``). Only vehicles held are noted, so a flood of addresses costs
+        nothing."""
+        if m.ICAO_address in self.vehicles and m.ICAO_address != vehicle.sysid:
+            self.reported[m.ICAO_address] = now
 
     def _local_position_ned(self, vehicle, m, now) -> None:
         self._boot(vehicle, m)

@@ -15,7 +15,7 @@ import sys
 import time
 
 import pytest
-from harness import SCENE_TEXT, free_port, free_udp_port, wait_sim, wait_wall
+from harness import SCENE_TEXT, during, free_port, free_udp_port, wait_sim, wait_wall
 from test_demo import WAIT, processes_mentioning, vehicles
 
 from vehicle.agent.mavlink_controller import MavlinkController
@@ -186,3 +186,74 @@ def test_a_near_miss_is_one_event_on_each_vehicles_timeline_naming_both_and_coun
         fly([3.0, 10.0, 1.5, 1.3])  # 3 m is still close (within the margin and a metre more): no new event
         wait_wall(lambda: settled(2, 1.3), 10, "vehicle 2 close again")
         assert len(near_misses(1)) == 2 and api.vehicle(2)["near_misses"] == 2
+
+
+def test_the_station_relays_each_vehicle_to_the_others_unless_their_team_reports_it():
+    """Two vehicles that do not share a world (two ArduPilots) hear of each other only through the station: it
+    sends ADSB_VEHICLE for each (its place, altitude above sea level and velocity) to every link, and stops
+    relaying one that a vehicle reports itself (our world's autopilots do). An agent takes the relay on its
+    direct link to the station, as a team-mate."""
+    from harness import RunningStation
+    from mavlink_peer import Peer, vehicle_heartbeat
+
+    metre = 1 / 111_320
+    with RunningStation(None, None) as station, Peer(("127.0.0.1", station.mavlink_port), 1) as one, \
+            Peer(("127.0.0.1", station.mavlink_port), 2) as two:
+        def placed(step: int) -> None:
+            one.send(vehicle_heartbeat(), mavlink.MAVLink_global_position_int_message(
+                1000 + step, -353632610, 1491652300, 590_000, 4000, 0, 0, 0, 65535))
+            two.send(vehicle_heartbeat(), mavlink.MAVLink_global_position_int_message(
+                1000 + step, int((-35.363261 + 8 * metre) * 1e7), 1491652300, 588_000, 2000, -150, 0, 0, 9000))
+
+        def relayed(peer: Peer, icao: int):
+            for step in range(40):
+                placed(step)
+                for m in peer.receive(0.05):
+                    if m.get_type() == "ADSB_VEHICLE" and m.ICAO_address == icao:
+                        return m
+            return None
+
+        report = relayed(one, 2)
+        assert report is not None, "vehicle 1 hears of vehicle 2"
+        assert report.get_srcSystem() == 255
+        assert abs(report.lat - int((-35.363261 + 8 * metre) * 1e7)) <= 1 and report.altitude == 588_000
+        assert report.hor_velocity == 150 and report.heading == 18000  # 1.5 m/s south
+        assert relayed(two, 1) is not None, "vehicle 2 hears of vehicle 1"
+
+        # vehicle 1's autopilot reports vehicle 2 itself: the station relays 2 no more, 1 still
+        own = mavlink.MAVLink_adsb_vehicle_message(2, report.lat, report.lon, 0, 588_000, 18000, 150, 0, b"VEH2",
+                                                   14, 0, report.flags, 0)
+        for _ in range(5):
+            one.send(own)
+        time.sleep(0.3)
+        for peer in (one, two):
+            peer.receive(0.2)  # what was on the way
+        heard = []
+        for step in range(20):
+            placed(step)
+            heard += [m.ICAO_address for m in two.receive(0.05) if m.get_type() == "ADSB_VEHICLE"]
+        assert 1 in heard and 2 not in heard, heard
+
+    # an agent takes a relay from its direct link to a station (--gcs), never a station's through the autopilot's
+    autopilot, gcs = free_udp_port(), free_udp_port()
+    pilot = MavlinkController(links.connect(f"udpin:127.0.0.1:{autopilot}", 1, 191), "copter", Datum(),
+                              extra_links=(links.connect(f"udpin:127.0.0.1:{gcs}", 1, 191),))
+    try:
+        with Peer(("127.0.0.1", autopilot), 1) as fc, Peer(("127.0.0.1", gcs), 255, 190) as station_side:
+            fc.send(vehicle_heartbeat())
+            relay = mavlink.MAVLink_adsb_vehicle_message(2, -353632610, 1491652300, 0, 588_000, 0, 0, 0, b"VEH2", 14,
+                                                         0, report.flags, 0)
+            fc.as_system(255, 190).send(relay)  # a station's, through the autopilot's link: not taken
+            def taken() -> list:
+                pilot.pump()
+                return pilot.traffic()
+
+            for _ in during(0.5):
+                assert taken() == []
+            station_side.send(relay)
+            found = wait_wall(taken, 5, "the relay taken as a team-mate")
+            assert [t.vehicle for t in found] == [2]
+    finally:
+        pilot.conn.close()
+        for link in pilot.extra_links:
+            link.close()

@@ -33,7 +33,10 @@ Team-mates (``traffic``) are the ADSB_VEHICLE reports the autopilot forwards
 ADS-B receiver forwards what it hears): ICAO address = the team-mate's system
 id, altitude geometric above sea level. A report older than TRAFFIC_STALE s of
 the autopilot's clock is forgotten. ADS-B carries no size: a team-mate's
-radius is assumed to be this vehicle's own.
+radius is assumed to be this vehicle's own. A ground station the agent talks
+to directly (``--gcs``) relays the team-mates it sees when the autopilots do
+not report them (two ArduPilots do not: each has its own world); those are
+taken from that link only.
 """
 
 from __future__ import annotations
@@ -294,6 +297,9 @@ class MavlinkController:
                 self.dropped[TOO_MANY] += 1
                 return
             self._requests.append((m, link))  # a ground station asks the agent (resume, its parameters)
+            return
+        if kind == "ADSB_VEHICLE" and link in self.extra_links:
+            self._on_adsb_vehicle(m)  # a ground station's relay of a team-mate (groundstation.traffic_relay)
             return
         if m.get_srcSystem() != self.sysid or m.get_srcComponent() == COMPONENT:
             return  # another system (a ground station), or an echo of ourselves

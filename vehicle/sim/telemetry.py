@@ -27,6 +27,7 @@ from vehicle.protocol.mav import from_wire, mavlink
 from vehicle.protocol.modes import mode_number
 from vehicle.protocol.rangefinder import Reading, distance_sensor
 from vehicle.protocol.statustext import statustexts
+from vehicle.protocol.traffic import adsb_report
 from vehicle.sim.simulation import Simulation
 
 # SYS_STATUS sensor bits we claim present, enabled and healthy (MAVProxy warns of a fence breach
@@ -266,21 +267,10 @@ class Telemetry:
         return distance_sensor(reading, self._ms(now))
 
 
-ADSB_FLAGS = (mavlink.ADSB_FLAGS_VALID_COORDS | mavlink.ADSB_FLAGS_VALID_ALTITUDE | mavlink.ADSB_FLAGS_VALID_HEADING
-              | mavlink.ADSB_FLAGS_VALID_VELOCITY | mavlink.ADSB_FLAGS_VALID_CALLSIGN
-              | mavlink.ADSB_FLAGS_VERTICAL_VELOCITY_VALID | mavlink.ADSB_FLAGS_SIMULATED)
-
-
 def adsb_vehicle(other: Simulation, sysid: int):
-    """ADSB_VEHICLE for a team-mate, as an ADS-B receiver on an ArduPilot vehicle forwards what it hears: the ICAO
-    address is the team-mate's system id, its callsign VEH<id>, its altitude geometric (above sea level: the
-    datum's altitude plus scene z), its heading and ground speed its track over the ground."""
+    """ADSB_VEHICLE for a team-mate, as an ADS-B receiver on an ArduPilot vehicle forwards what it hears (its
+    altitude the datum's plus scene z)."""
     body, pose = other.body, other.pose
     lat, lon = other.datum.to_global(pose.x, pose.y)
-    track = math.degrees(math.atan2(body.vx, body.vy)) % 360 if math.hypot(body.vx, body.vy) > 0.05 else \
-        math.degrees(pose.yaw) % 360
-    return mavlink.MAVLink_adsb_vehicle_message(
-        sysid, int(round(float(lat) * 1e7)), int(round(float(lon) * 1e7)), mavlink.ADSB_ALTITUDE_TYPE_GEOMETRIC,
-        int(round((other.datum.alt + pose.z) * 1000)), int(track * 100) % 36000,
-        min(65535, int(round(math.hypot(body.vx, body.vy) * 100))), max(-32768, min(32767, int(round(body.vz * 100)))),
-        f"VEH{sysid}".encode(), mavlink.ADSB_EMITTER_TYPE_UAV, 0, ADSB_FLAGS, 0)
+    return adsb_report(sysid, float(lat), float(lon), other.datum.alt + pose.z, body.vx, body.vy, body.vz,
+                       math.degrees(pose.yaw), simulated=True)
