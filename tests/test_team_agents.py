@@ -127,3 +127,23 @@ def test_two_vehicles_head_on_pass_each_other_and_both_arrive(flat_scene, apart)
     assert [a.outcome for a in stepper.agents] == ["finished", "finished"], last_words
     assert stepper.team.closest_gap >= 2.0
     assert all(s.collision is None for s in stepper.team.simulations)
+
+
+def test_stepping_out_of_one_team_mates_way_never_cuts_into_anothers(make_scene):
+    """The bench's run that crashed after going round a standing team-mate became the guard's answer (5 copters,
+    Pathfind, default scene, 60 s, seed 40): vehicle 5, giving way to vehicle 1 and going round vehicle 4 by
+    turns, flew into 4. Every leg a vehicle sends while it gives way now keeps clear of the known walls and out of
+    every team-mate's margin, or it holds (the old check, of the leg's end point alone, fails this)."""
+    from pathlib import Path
+
+    from vehicle.agent.settings import load_settings
+    from vehicle.lab.experiment import Experiment, run_team
+    from vehicle.world.scene import load_scene
+
+    scene = load_scene(Path(__file__).resolve().parent.parent / "scenes" / "default.wrl")
+    settings = load_settings(scene_hints=scene.hints).updated({"time_limit": 60})
+    starts = [(-0.8, 2.978), (6.2, -4.022), (8.2, 4.978), (-1.8, -5.022), (2.2, -1.022)]
+    stepper = simulate_team(scene, "pathfind", 5, settings=settings, starts=starts, seed=40)
+    result = run_team(Experiment("default.wrl", "pathfind", settings=settings, seed=40), stepper)
+    assert [v["reason"] for v in result["vehicles"] if v["outcome"] == "collision"] == []
+    assert stepper.team.closest_gap > 1.0

@@ -48,12 +48,13 @@ class GiveWay:
         self._sent: tuple[float, float] | None = None
         self._said: tuple[int, str] | None = None
         self._detour: tuple[list[tuple[float, float]], float] | None = None  # the legs round a team-mate, till when
+        self._others: list[Traffic] = []  # the team-mates known at this step
 
     def step(self) -> bool:
         """True while the vehicle gives way, goes round a team-mate or waits: the mission is then not stepped."""
         ctx = self.ctx
         fc = ctx.fc
-        others = team_mates(fc)
+        others = self._others = team_mates(fc)
         busy = self.giving_way_to is not None
         if not others and not busy:
             return False
@@ -146,7 +147,7 @@ class GiveWay:
             beside = (other.x + side * nx * reach, other.y + side * ny * reach)
             aside = (beside[0] + along * ux, beside[1] + along * uy)  # level with here
             legs = [aside, beside] if along < 0 else [aside]  # once level with it or past, stepping aside does
-            if all(ctx.inside(p) and ctx.is_clear(p) for p in legs):
+            if self._safe(legs):
                 self._detour = (legs, ctx.time + DETOUR_FOR)
                 self._send(legs[0])
                 return
@@ -255,9 +256,34 @@ class GiveWay:
         target = (x, y)
         if need > 0:
             aside = (x + ox / off * need, y + oy / off * need)
-            if ctx.inside(aside) and ctx.is_clear(aside):
+            if self._safe([aside]):
                 target = aside
         self._send(target)
+
+    def _safe(self, points: list[tuple[float, float]]) -> bool:
+        """Whether flying straight from here through ``points`` stays clear of the scene's known obstacles and
+        out of every team-mate's margin (one already within it: never closer than now). Checked against all of
+        them: stepping out of one's way must not cut into another's."""
+        ctx = self.ctx
+        if not all(ctx.inside(p) and ctx.is_clear(p) for p in points) or not ctx.path_clear(points):
+            return False
+        pose = ctx.fc.pose
+        legs = list(zip([(pose.x, pose.y), *points[:-1]], points, strict=True))
+        for other in self._others:
+            dz2 = (pose.z - other.z) ** 2
+            now = math.sqrt((pose.x - other.x) ** 2 + (pose.y - other.y) ** 2 + dz2)
+            keep = min(self._margin(other), now) - 1e-6
+            if any(math.sqrt(_to_segment((other.x, other.y), a, b) ** 2 + dz2) < keep for a, b in legs):
+                return False
+        return True
+
+
+def _to_segment(point: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Distance from ``point`` to the segment a-b."""
+    ax, ay = b[0] - a[0], b[1] - a[1]
+    length2 = ax * ax + ay * ay
+    t = 0.0 if length2 < 1e-12 else max(0.0, min(1.0, ((point[0] - a[0]) * ax + (point[1] - a[1]) * ay) / length2))
+    return math.hypot(point[0] - a[0] - t * ax, point[1] - a[1] - t * ay)
 
 
 def _stands(other: Traffic) -> bool:
