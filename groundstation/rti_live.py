@@ -2,7 +2,8 @@
 
 A frame is a pure function of the records: the frame at window boundary T (a multiple of ``window`` s of the
 records' own clock) images the records with ``T - history <= t < T`` (``vehicle.tomography.reconstruct``: one image over
-them all of each path's attenuation below its usual level, so a team's dwells build the image up), leaving out links
+them all of each path's attenuation below the level a path-loss model fitted across the links predicts for it, so
+a team's dwells build the image up), leaving out links
 heard fewer than ``MIN_HEARD`` times (a radio in motion makes a new link with every packet: each says little
 and all of them grow the solve).
 The live thread images the newest complete window whenever the log grows past a boundary; a solve slower than a
@@ -32,8 +33,12 @@ WINDOW = 1.0  # s of the records' clock per frame
 HISTORY = 60.0  # s of records imaged in a frame
 CELL = 0.25  # m: the image's pixel (the experiments' choice: half the 0.5 m a target must be found within)
 PEAKS = 3
-MEASURE = "mean"  # attenuation from each link's own typical level: the station has no empty-area capture, and a
-# target that stood still for most of the history looks like no change to the kernel distance and the variance
+MEASURE = "mean"  # attenuation below each link's empty-area level: a target that stood still for most of the
+# history looks like no change to the kernel distance and the variance
+EMPTY_FROM = "brief"  # a link heard only briefly gets the level a path-loss model fitted across the links predicts:
+# the station has no empty-area capture, and radios on vehicles measure a pair of spots only while they stand
+# there, so such a link's own level is the obstructed one (against it, the peak was 2 to 7 m off a standing
+# target); links heard all along (fixed nodes) keep their own robust level
 MIN_HEARD = 3  # packets a link needs in the history to be imaged
 POLL = 0.02  # s between two looks at the log's size (an arrival is noticed within this)
 ARRIVALS = 500  # arrival times remembered (10 s of polls)
@@ -81,7 +86,7 @@ def frame_at(records: Records, end: float, window: float = WINDOW, history: floa
         used = used.select(np.bincount(link)[link] >= MIN_HEARD)
     if len(used) < 2:
         return None
-    result = reconstruct(used, bounds=bounds, cell=cell, peaks=peaks, measure=MEASURE)
+    result = reconstruct(used, bounds=bounds, cell=cell, peaks=peaks, measure=MEASURE, empty_from=EMPTY_FROM)
     grid, first = result.grid, result.frames[0]
     if "image" not in first:
         return None

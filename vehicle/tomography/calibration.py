@@ -71,6 +71,48 @@ def empty_levels(records: Records, table: LinkTable, calibration: Records | None
     return Levels(empty, calibrated, fade, model)
 
 
+def model_levels(records: Records, table: LinkTable) -> Levels:
+    """Every link-channel's empty-area level as the log-distance model P0 - 10 n log10(d), fitted across all of
+    them, predicts it: the reference for radios that measure a link only while it is obstructed or not at all
+    (vehicles that stop at a pair of spots once, a person who stands still all along), which no level of the link's
+    own can give. The fit is made robust by refitting without the link-channels more than 2.5 deviations off it
+    (those a target shadows, or deep fades); what the model misses of each link (its static shadowing) is noise
+    the image averages out over many links."""
+    measured = file_levels(records, table)
+    distance = np.maximum(table.lc_length, 0.1)
+    A = np.column_stack([np.ones_like(distance), -10 * np.log10(distance)])
+    keep = np.isfinite(measured)
+    if len(np.unique(np.round(distance[keep], 2))) < 2:  # one length only: the exponent is not identifiable
+        p0 = float(np.median(measured[keep])) if keep.any() else 0.0
+        empty = np.full(len(measured), p0)
+        return Levels(empty, np.zeros(len(empty), bool), measured - empty, (p0, 0.0))
+    for _ in range(2):
+        (p0, n), *_ = np.linalg.lstsq(A[keep], measured[keep], rcond=None)
+        residual = measured - A @ (p0, n)
+        spread = 1.4826 * float(np.median(np.abs(residual[keep])))
+        keep = np.isfinite(measured) & (np.abs(residual) <= 2.5 * max(spread, 1.0))
+    empty = A @ (p0, n)
+    return Levels(empty, np.zeros(len(empty), bool), measured - empty, (float(p0), float(n)))
+
+
+def brief_or_model_levels(records: Records, table: LinkTable, calibration: Records | None) -> Levels:
+    """The calibration's levels where it has a link-channel; else the link-channel's own robust level when it was
+    heard over at least half the file's span (long enough for an obstruction to come and go, which that estimate
+    assumes); else, for one heard only briefly (a pair of spots a team stood at once), the fitted path-loss
+    model's (``model_levels``)."""
+    data = empty_levels(records, table, calibration)
+    model = model_levels(records, table)
+    first = np.full(len(table.lc_keys), np.inf)
+    last = np.full(len(table.lc_keys), -np.inf)
+    np.minimum.at(first, table.row_lc, records.t)
+    np.maximum.at(last, table.row_lc, records.t)
+    span = float(records.t.max() - records.t.min()) if len(records) else 0.0
+    brief = (last - first < 0.5 * span) & ~data.calibrated
+    empty = np.where(brief, model.empty, data.empty)
+    fade, path_loss = fade_levels(empty, table.lc_length)
+    return Levels(empty, data.calibrated, fade, path_loss)
+
+
 def fade_levels(empty: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
     """Empty level minus the log-distance model P0 - 10 n log10(d) fitted (least squares) across links."""
     distance = np.maximum(length, 0.1)

@@ -26,7 +26,15 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.ndimage import maximum_filter
 
-from vehicle.tomography.calibration import Levels, channel_weights, empty_levels, file_levels, group_mean
+from vehicle.tomography.calibration import (
+    Levels,
+    brief_or_model_levels,
+    channel_weights,
+    empty_levels,
+    file_levels,
+    group_mean,
+    model_levels,
+)
 from vehicle.tomography.kernel import kernel_distances, kernel_width, reference_rows
 from vehicle.tomography.links import LinkTable, Records, link_table
 from vehicle.tomography.solvers import RegularisedLS, difference_prior_times, tv_discrepancy
@@ -43,6 +51,7 @@ SOLVERS = ("ls", "tv")
 MEASURES = ("mean", "kernel", "variance")
 PRIORS = ("exponential", "difference")
 REFERENCES = ("auto", "file", "empty")
+EMPTY_SOURCES = ("data", "model", "brief")
 SMOOTH = 3  # windows: the centred moving average of each path's measurement (see smooth)
 
 
@@ -209,8 +218,13 @@ def reconstruct(records: Records, calibration: Records | None = None, calibratio
                 bounds: tuple[float, float, float, float] | None = None, cell: float | None = None,
                 window: float | None = None, peaks: int = 3, solver: str = "ls", model: str = "ellipse",
                 drift: bool = True, span: int = SMOOTH, measure: str = "kernel", variance: str = "sub-mean",
-                reference: str = "auto", prior: str = "exponential") -> Result:
-    """The whole method on one file (see the module's docstring and docs/rti.md)."""
+                reference: str = "auto", prior: str = "exponential", empty_from: str = "data") -> Result:
+    """The whole method on one file (see the module's docstring and docs/rti.md). ``empty_from``: each link's
+    empty-area level from the calibration, else the file's own robust level ("data"), or from a path-loss
+    model fitted across the links ("model", ``calibration.model_levels``), or the model's only for links heard
+    briefly ("brief": radios that stop at spots once, ``calibration.brief_or_model_levels``)."""
+    if empty_from not in EMPTY_SOURCES:
+        raise ValueError(f"unknown empty-area source {empty_from!r} (one of {', '.join(EMPTY_SOURCES)})")
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r} (one of {', '.join(SOLVERS)})")
     if measure not in MEASURES:
@@ -234,7 +248,9 @@ def reconstruct(records: Records, calibration: Records | None = None, calibratio
         bounds = (*ends.min(axis=0).tolist(), *ends.max(axis=0).tolist())
     grid = Grid(tuple(float(v) for v in bounds), float(cell) if cell else default_cell(bounds))
     table = link_table(records)
-    levels = empty_levels(records, table, calibration)
+    levels = (model_levels(records, table) if empty_from == "model" else
+              brief_or_model_levels(records, table, calibration) if empty_from == "brief" else
+              empty_levels(records, table, calibration))
     weights = channel_weights(table, levels.fade)
     times, Y = window_measurements(records, table, levels, weights, start, window)
     sigma = np.ones(len(table.paths))  # paths weigh alike: see docs/rti.md on weighting by the empty-area noise
