@@ -24,7 +24,7 @@ from vehicle.agent.controller import FlightController
 from vehicle.agent.missions import mission_class
 from vehicle.agent.missions.base import Context, Status
 from vehicle.agent.missions.routines import Travel
-from vehicle.agent.monitor import Monitor
+from vehicle.agent.monitor import RIDE_HEIGHT, Monitor
 from vehicle.agent.settings import Settings
 from vehicle.agent.traffic import GiveWay
 from vehicle.mapping.memory_map import MemoryMap
@@ -59,7 +59,8 @@ class Agent:
         self.settings = settings
         home = (fc.home[0], fc.home[1])
         self.map = MemoryMap(home, settings.space_size, settings.resolution)
-        self.monitor = Monitor(settings, self.map, home, fc.radius, brake=fc.brake)
+        height = fc.radius + RIDE_HEIGHT if fc.kind is Kind.ROVER else None  # a copter's ground is unknown
+        self.monitor = Monitor(settings, self.map, home, fc.radius, brake=fc.brake, height=height, say=self.say)
         self.messages: deque[str] = deque(maxlen=MESSAGES_KEPT)
         self.outbox: deque[tuple[int, str]] = deque(maxlen=MESSAGES_KEPT)  # (severity, text) for the wire
         self.ctx = Context(fc, self.map, self.monitor, settings, waypoints, say=self.say, scene=scene)

@@ -6,6 +6,13 @@ agent keeps apart from team-mates through ``vehicle.agent.traffic``), projects
 the rest into the memory map, and reports an obstacle closer
 than ``closeness`` in the direction the vehicle is moving, so the agent can
 stop before it gets any closer. It also keeps the mission's progress figures.
+
+A sensor pitched down (``vehicle.world.suites.LOOKS_DOWN``) watches the ground
+ahead instead: on flat ground it echoes where the ground plane under the vehicle
+meets its beam, so no echo there (or one from deeper than ``drop_depth``) is an
+edge, and one from ground rising more steeply than ``max_slope`` is a slope the
+vehicle cannot drive. Either is an obstacle: marked in the map and reported
+ahead like a wall. Its echoes off the ground itself are never walls.
 """
 
 from __future__ import annotations
@@ -19,6 +26,11 @@ from vehicle.agent.settings import Settings
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol.geodesy import heading_of
 from vehicle.protocol.rangefinder import Reading
+from vehicle.world.suites import LOOKS_DOWN
+
+RIDE_HEIGHT = 0.05  # m: a rover's body above the ground (the simulator's ground clearance)
+MIN_RUN = 0.05  # m between two echoes off risen ground to measure a slope between them
+RISE_NOISE = 0.05  # m: ground this little above the vehicle's is flat (the cone's edge echoes a little short)
 
 
 @dataclass
@@ -30,11 +42,14 @@ class Observation:
     nearest_ahead: float | None = None  # closest echo in the direction of travel, metres
     too_close: bool = False
     outside: bool = False  # the vehicle left the allowed space around home
+    ground: str | None = None  # what the ground ahead forbids ("ground drops away ..."), None when drivable
 
 
 class Monitor:
     def __init__(self, settings: Settings, memory_map: MemoryMap, home: tuple[float, float], radius: float,
-                 brake: float = 2.5):
+                 brake: float = 2.5, height: float | None = None, say=None):
+        """``height``: of the sensors above the ground under the vehicle (a rover's; None: unknown, as for a
+        copter, and then sensors looking down are ignored). ``say`` tells the operator of ground it refuses."""
         self.settings = settings
         self.map = memory_map
         self.home = home
@@ -45,6 +60,10 @@ class Monitor:
         self.distance_travelled = 0.0
         self._last_xy: tuple[float, float] | None = None
         self._pending: list[Reading] = []
+        self.height = height
+        self.say = say
+        self._ground_said: str | None = None
+        self._risen: dict[int, tuple[float, float, float]] = {}  # each ground sensor's last echo off risen ground
 
     def _nearest_ahead(self, x: float, y: float, travel: float, readings: list[Reading],
                        reach: float) -> float | None:
@@ -66,6 +85,69 @@ class Monitor:
             if 0 < ahead < reach + corridor and abs(dx * uy - dy * ux) < corridor:
                 nearest = ahead if nearest is None else min(nearest, ahead)
         return nearest
+
+    def _ground_ahead(self, x: float, y: float, travel: float | None,
+                      readings: list[Reading]) -> tuple[float | None, str | None]:
+        """Edges and steep slopes seen by the sensors looking down: mark each in the map, and return the
+        distance ahead of the nearest in the corridor along ``travel`` and what it is."""
+        nearest, what = None, None
+        corridor = self.radius + self.settings.padding
+        max_slope = math.radians(self.settings.max_slope)
+        for reading in readings:
+            ox, oy, oz = reading.origin.tolist()
+            dx, dy, dz = reading.direction.tolist()
+            level = math.hypot(dx, dy)
+            if dz > -1e-3 or level < 1e-6:
+                continue  # pitched level or up by the vehicle's own slope: it sees no ground
+            flat = self.height / -dz  # range of the beam's centre to ground level with the vehicle's
+            # the cone's lower edge meets that ground first: the edge lies no further than there
+            edge = self.height / math.tan(math.asin(-dz) + math.radians(reading.beam_angle))
+            if reading.distance is None:
+                self._risen.pop(reading.sensor, None)
+                if flat > reading.max_range or reading.max_range * -dz - self.height <= self.settings.drop_depth:
+                    continue  # it could not have seen the ground, or not deep enough to tell
+                reach, kind = edge, "drops away"
+            else:
+                # below the ground under the vehicle, along the cone's lower edge (the first to meet the ground)
+                depth = reading.distance * math.sin(math.asin(-dz) + math.radians(reading.beam_angle)) - self.height
+                run = reading.distance * level
+                if depth > self.settings.drop_depth:
+                    reach, kind = edge, "drops away"
+                elif -depth <= RISE_NOISE:
+                    self._risen.pop(reading.sensor, None)  # level ground
+                    continue
+                elif self._too_steep(reading, -depth, max_slope):
+                    reach, kind = run, "rises too steeply"
+                else:
+                    continue
+            ux, uy = dx / level, dy / level
+            self.map.add_reading(np.array([ox, oy, oz]), np.array([ux, uy, 0.0]), reach, reach + 1.0)
+            if travel is None:
+                continue
+            ex, ey = ox + ux * reach - x, oy + uy * reach - y
+            tx, ty = math.sin(travel), math.cos(travel)
+            ahead = ex * tx + ey * ty
+            if 0 < ahead and abs(ex * ty - ey * tx) < corridor and (nearest is None or ahead < nearest):
+                nearest, what = ahead, f"ground {kind} {ahead:.1f} m ahead"
+        return nearest, what
+
+    def _too_steep(self, reading: Reading, rise: float, max_slope: float) -> bool:
+        """Ground ``rise`` above the vehicle's: a step up higher than ``drop_depth``, or a slope steeper than
+        ``max_slope`` between this echo and the sensor's last one off risen ground (one echo cannot tell a
+        steep slope near from a gentle one further away; two points on it can)."""
+        if rise > self.settings.drop_depth:
+            return True
+        ox, oy, oz = reading.origin.tolist()
+        dx, dy, dz = reading.direction.tolist()
+        level = math.hypot(dx, dy)
+        lower = math.asin(-dz) + math.radians(reading.beam_angle)  # the cone's lower edge echoes first
+        run = reading.distance * math.cos(lower) / level
+        hit = (ox + dx * run, oy + dy * run, oz - reading.distance * math.sin(lower))
+        last, self._risen[reading.sensor] = self._risen.get(reading.sensor), hit
+        if last is None:
+            return False
+        run = math.hypot(hit[0] - last[0], hit[1] - last[1])
+        return run > MIN_RUN and math.atan2(abs(hit[2] - last[2]), run) > max_slope
 
     def collect(self, readings: list[Reading]) -> None:
         """Buffer readings taken between two monitor periods."""
@@ -98,6 +180,13 @@ class Monitor:
         readings = [r if r.vehicle is None or r.distance is None else replace(r, distance=None, max_range=r.distance)
                     for r in readings]
         observation.readings = readings
+        if any(r.pitch <= LOOKS_DOWN for r in readings):  # the ground's sensors: never walls
+            ground = [r for r in readings if r.pitch <= LOOKS_DOWN]
+            readings = [r for r in readings if r.pitch > LOOKS_DOWN]
+            count = len(readings)
+            if self.height is not None:
+                ahead, observation.ground = self._ground_ahead(x, y, travel, ground)
+                observation.nearest_ahead = ahead
         if readings:
             # one pass into arrays (np.array of a list of small arrays is slow)
             origins, directions = np.empty((count, 3)), np.empty((count, 3))
@@ -115,11 +204,17 @@ class Monitor:
             free[list(latest.values())] = True
             self.map.add_readings(origins, directions, distances, max_ranges, beams, free)
             if travel is not None:
-                observation.nearest_ahead = self._nearest_ahead(x, y, travel, readings, reach)
+                level = self._nearest_ahead(x, y, travel, readings, reach)
+                if level is not None and (observation.nearest_ahead is None or level < observation.nearest_ahead):
+                    observation.nearest_ahead = level
         self._pending = []
         stopping = speed * self.settings.monitor_period + speed * speed / (2 * self.brake)
         observation.too_close = (observation.nearest_ahead is not None
                                  and observation.nearest_ahead < self.settings.closeness + stopping)
+        if observation.ground != self._ground_said:
+            self._ground_said = observation.ground
+            if observation.ground is not None and observation.too_close and self.say is not None:
+                self.say(f"Stopping: {observation.ground}")
         half = self.settings.space_size
         observation.outside = abs(x - self.home[0]) > half or abs(y - self.home[1]) > half
         return observation

@@ -44,6 +44,10 @@ class Settings(BaseModel):
                                  ge=0.5, le=50)
     share_maps: float = _setting(1.0, "0/1", "1: take the team-mates' map updates into the memory map; 0: map alone",
                                  "SCN_SHARE_MAPS", ge=0, le=1)
+    drop_depth: float = _setting(0.3, "m", "ground that drops away deeper than this ahead (seen by a sonar looking "
+                                 "down) is an obstacle", "SCN_DROP_DEPTH", ge=0.05, le=20)
+    max_slope: float = _setting(20.0, "deg", "ground ahead that rises more steeply than this is an obstacle (a rover "
+                                "cannot drive up it)", "SCN_MAX_SLOPE", ge=1, le=80)
     # radio tomography (--mission rti, vehicle.agent.missions.rti)
     rti_planner: float = _setting(0.0, "0/1", "rti: 0 (or 'uncertainty'): where the image is least sure; 1 (or "
                                   "'perimeter'): pairs across the region stepping round it", "RTI_PLANNER", ge=0, le=1)

@@ -11,7 +11,10 @@ SENSOR_SUITES = {
     "single": "one sonar looking forward (the thesis's vehicle)",
     "triple": "three sonars: forward and 45 degrees to each side (sees walls alongside the path)",
     "servo": "one sonar on a servo that sweeps it 90 degrees either side (the thesis's servo option)",
+    "ground": "the triple suite and a fourth sonar looking ahead and 10 degrees down at the ground, so the agent "
+              "sees a drop or a steep slope before it drives onto it",
 }
+LOOKS_DOWN = -5.0  # degrees: a sensor pitched further down than this watches the ground, not for walls
 DEFAULT_SUITE = "triple"
 
 
@@ -24,6 +27,9 @@ def sensor_suite(name: str) -> list:
         return [Sonar("front")]
     if name == "triple":
         return [Sonar("front"), Sonar("left", mount_yaw=-45.0), Sonar("right", mount_yaw=45.0)]
+    if name == "ground":  # narrow and echoing off ground met at a grazing angle (rough ground scatters)
+        down = Sonar("down", mount_pitch=-10.0, max_range=6.0, beam_angle=2.0, rings=1, critical_angle=85.0)
+        return [*sensor_suite("triple"), down]
     if name == "servo":
         return [Sonar("sweep", servo=Servo())]
     raise ValueError(f"unknown sensor suite {name!r}; suites: {', '.join(SENSOR_SUITES)}")

@@ -1,0 +1,128 @@
+"""Ground that drops away or rises too steeply (issue 32): a rover with the "ground" suite's sonar looking
+down and ahead stops before an edge it could have seen and goes no further, takes a step down shallower
+than ``drop_depth`` (the monitor alone: the simulated body cannot roll down a step), and refuses a ramp
+steeper than ``max_slope`` while it takes a gentle one.
+
+Each scene is a plateau (top at z = 0) south of y = 8 with the rover at its middle facing north, and a
+Pathfind waypoint at (0, 16) past whatever lies at y = 8; simulated time throughout.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from conftest import vrml_box
+
+from vehicle.agent.monitor import Monitor
+from vehicle.agent.settings import Settings
+from vehicle.lab.stepper import simulate
+from vehicle.mapping.memory_map import MemoryMap
+from vehicle.protocol.rangefinder import Reading
+from vehicle.world.suites import sensor_suite
+
+EDGE = 8.0  # m north of the start, where the plateau ends
+GOAL = (0.0, 16.0)
+PLATEAU = vrml_box(0, -20, -1.0, 60, 56, 2.0)  # top at z = 0 up to y = 8
+HEIGHT = 0.35  # m: the simulated rover's sensors above its ground
+SETTINGS = dict(speed=1.5, space_size=30, time_limit=120)
+
+
+def lower_ground(depth: float) -> str:
+    """Ground north of the edge, ``depth`` below the plateau."""
+    return vrml_box(0, 30, -depth - 1.0, 60, 44, 2.0)
+
+
+def ramp(degrees: float) -> str:
+    """A ramp rising north from the plateau's edge at ``degrees``, on flat ground level with the plateau."""
+    length = 12.0
+    tilt = math.radians(degrees)
+    # a slab 1 m thick whose top face starts at (y = EDGE, z = 0) and rises northwards
+    cy = EDGE + length / 2 * math.cos(tilt) + 0.5 * math.sin(tilt)
+    cz = length / 2 * math.sin(tilt) - 0.5 * math.cos(tilt)
+    return vrml_box(0, 30, -1.0, 60, 44, 2.0) + vrml_box(0, cy, cz, 60, length, 1.0, f"1 0 0 {tilt}")
+
+
+def drive(scene, suite: str = "ground", **settings):
+    """Pathfind to GOAL; the lowest and the northmost the rover's centre came, whether it arrived, the stepper."""
+    stepper = simulate(scene, "pathfind", "rover", Settings(**SETTINGS | settings), start=(0.0, 0.0), heading=0.0,
+                       waypoints=[GOAL], sensors=sensor_suite(suite))
+    start_z = stepper.simulation.pose.z
+    lowest, northmost, arrived = start_z, 0.0, False
+    for _ in range(int(90 / stepper.simulation.dt)):
+        stepper.step()
+        pose = stepper.simulation.pose
+        lowest, northmost = min(lowest, pose.z), max(northmost, pose.y)
+        arrived = arrived or math.hypot(pose.x - GOAL[0], pose.y - GOAL[1]) < 2.0
+        if stepper.simulation.collision is not None or arrived or stepper.agent.outcome is not None:
+            break
+    return start_z - lowest, northmost, arrived, stepper
+
+
+def test_a_rover_stops_before_a_2_m_bank_and_never_falls(make_scene):
+    fall, northmost, arrived, stepper = drive(make_scene(PLATEAU, lower_ground(2.0)))
+    assert stepper.simulation.collision is None
+    assert fall < 0.05, f"the rover fell {fall:.2f} m"
+    assert northmost < EDGE - 0.3, f"its centre came to y = {northmost:.2f}, over the edge at {EDGE}"
+    assert not arrived
+    said = " ".join(stepper.agent.messages)
+    assert "ground drops away" in said, said
+    memory = stepper.agent.map  # the edge is in the map, so the planner goes round it
+    assert memory.occupied[memory.cell_of(0.0, EDGE + 0.1)] or memory.occupied[memory.cell_of(0.0, EDGE)] \
+        or memory.occupied_in(*_around(memory, 0.0, EDGE)).any()
+
+
+def _around(memory, x, y, half=0.6):
+    (r0, c0), (r1, c1) = memory.cell_of(x - half, y - half), memory.cell_of(x + half, y + half)
+    return slice(r0, r1 + 1), slice(c0, c1 + 1)
+
+
+def ground_echo(depth: float, pitch: float = -10.0, beam: float = 2.0) -> Reading:
+    """The down sonar of a rover at the origin facing north, 0.35 m above its ground, echoing off ground
+    ``depth`` below that (None: no echo within its 6 m) along the cone's lower edge."""
+    lower = math.radians(-pitch + beam)
+    distance = None if depth is None else (HEIGHT + depth) / math.sin(lower)
+    axis = np.array([0.0, math.cos(math.radians(pitch)), math.sin(math.radians(pitch))])
+    return Reading(0.0, 3, np.array([0.0, 0.0, HEIGHT]), axis, distance, 6.0, 0.0, beam, 0.02, pitch)
+
+
+def ground_monitor():
+    settings = Settings(space_size=20)
+    memory = MemoryMap((0.0, 0.0), settings.space_size, settings.resolution)
+    return Monitor(settings, memory, (0.0, 0.0), 0.3, height=HEIGHT), memory
+
+
+@pytest.mark.parametrize("depth, obstacle", [(0.0, False), (0.2, False), (0.5, True), (None, True)])
+def test_a_drop_deeper_than_drop_depth_is_an_obstacle_ahead_and_in_the_map(depth, obstacle):
+    """A step down of 0.2 m is driven over (the simulated rover's sphere cannot roll down a step, so this is
+    the monitor's word alone); 0.5 m and no echo at all are edges: ahead, too close, and marked in the map."""
+    mon, memory = ground_monitor()
+    mon.collect([ground_echo(depth)])
+    observation = mon.observe(1.0, 0.0, 0.0, 0.0, speed=1.5)
+    assert observation.too_close is obstacle
+    assert (observation.ground is not None) is obstacle
+    edge = HEIGHT / math.tan(math.radians(12.0))  # where the cone's lower edge met level ground
+    assert (memory.detections > 0) is obstacle
+    if obstacle:
+        assert memory.occupied_in(*_around(memory, 0.0, edge, 0.15)).any()
+
+
+def test_ground_echoes_are_never_walls():
+    """The old monitor took the down sonar's echo off level ground 1.6 m ahead for a wall."""
+    mon, memory = ground_monitor()
+    mon.collect([ground_echo(0.0)])
+    observation = mon.observe(1.0, 0.0, 0.0, 0.0, speed=1.5)
+    assert observation.nearest_ahead is None and memory.detections == 0
+
+
+def test_a_steep_ramp_is_refused(make_scene):
+    """24 degrees up the ramp; the rover meets it on a slant, where it climbs about 20 degrees: over 15."""
+    fall, northmost, arrived, stepper = drive(make_scene(PLATEAU, ramp(24.0)), max_slope=15)
+    assert not arrived
+    assert northmost < EDGE, f"it drove onto the ramp, to y = {northmost:.2f}"
+    assert "ground rises too steeply" in " ".join(stepper.agent.messages)
+
+
+def test_a_gentle_ramp_is_taken(make_scene):
+    fall, northmost, arrived, stepper = drive(make_scene(PLATEAU, ramp(8.0)), max_slope=15)
+    assert stepper.simulation.collision is None
+    assert arrived, f"stopped at y = {northmost:.2f}: {stepper.agent.messages}"
