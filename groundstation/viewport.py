@@ -29,6 +29,8 @@ ZOOM_STEP = 0.85  # distance factor per wheel step
 FOLLOW_DISTANCE = (8.0, 2.0, 200.0)  # m behind the vehicle: default, nearest, furthest
 TOP_HEIGHT = (30.0, 3.0, 500.0)  # m above the vehicle (top-down): default, lowest, highest
 SELECTED = (255, 255, 255)
+TARGET_COLOUR = (255, 230, 0)
+TARGET_REACHED = 1.0  # m (across the ground) from the target at which a vehicle sent there has reached it
 
 
 def opacity_root(opacity: float) -> str:
@@ -62,6 +64,18 @@ HALO = trimesh.creation.torus(major_radius=HALO_RADIUS, minor_radius=0.06, major
 HALO.apply_translation((0.0, 0.0, 0.1))  # just above the ground under a landed vehicle
 
 
+def _target_symbol() -> trimesh.Trimesh:
+    """A ring on the ground with a pole through it: a picked point that reads from afar (1 m high at scale 1)."""
+    ring = trimesh.creation.torus(major_radius=0.5, minor_radius=0.06, major_sections=32, minor_sections=6)
+    ring.apply_translation((0.0, 0.0, 0.06))
+    pole = trimesh.creation.cylinder(radius=0.04, height=1.0, sections=8)
+    pole.apply_translation((0.0, 0.0, 0.5))
+    return trimesh.util.concatenate([ring, pole])
+
+
+TARGET = _target_symbol()
+
+
 class Viewport:
     """The per-client half of the 3D view (driven by ``SceneView`` on its thread, under its lock)."""
 
@@ -71,6 +85,7 @@ class Viewport:
         self.levels = {o: client.scene.add_frame(opacity_root(o), show_axes=False, visible=o == 1.0)
                        for o in OPACITIES}
         self.markers: dict[int, dict] = {}  # sysid -> its dart, its ring and their last scale
+        self.target: dict | None = None  # the point this viewer picked: its symbol, where, who stood on it then
         self.version = -1
         self.mode = "orbit"
         self.sysid: int | None = None
@@ -121,6 +136,40 @@ class Viewport:
                 marker["scale"] = scale
             marker["dart"].visible = not own_view
             marker["halo"].visible = selected is v and not own_view
+        self._draw_target(vehicles, eye, pixels_per_metre_at_1m)
+
+    def pick(self, point: tuple[float, float, float], vehicles: list[Vehicle]) -> None:
+        """Mark the point this viewer picked (a new pick replaces the old); vehicles on it already don't reach it."""
+        self.drop_target()
+        node = self.client.scene.add_mesh_simple("/target", TARGET.vertices.astype(np.float32),
+                                                 TARGET.faces.astype(np.uint32), color=TARGET_COLOUR,
+                                                 position=point)
+        self.target = {"node": node, "point": np.array(point[:2]), "scale": 1.0,
+                       "there": {v.sysid for v in vehicles if self._on_target(v, np.array(point[:2]))}}
+
+    def drop_target(self) -> None:
+        if self.target is not None:
+            self.target["node"].remove()
+            self.target = None
+
+    @staticmethod
+    def _on_target(v: Vehicle, point: np.ndarray) -> bool:
+        return float(np.linalg.norm(v.position[:2] - point)) < TARGET_REACHED
+
+    def _draw_target(self, vehicles: list[Vehicle], eye: np.ndarray | None, pixels_per_metre_at_1m: float) -> None:
+        """Scale the target for this screen; drop it once a vehicle that was elsewhere at the pick reaches it."""
+        target = self.target
+        if target is None:
+            return
+        if any(self._on_target(v, target["point"]) and v.sysid not in target["there"] for v in vehicles):
+            self.drop_target()
+            return
+        target["there"] &= {v.sysid for v in vehicles if self._on_target(v, target["point"])}
+        if eye is not None:
+            distance = float(np.linalg.norm(np.array(target["node"].position) - eye))
+            scale = max(1.0, MARKER_PIXELS * distance / pixels_per_metre_at_1m)
+            if abs(scale - target["scale"]) > target["scale"] * 0.03:
+                target["node"].scale = target["scale"] = scale
 
     def _lens(self) -> tuple[np.ndarray | None, float]:
         """The client's eye and its pixels per metre at 1 m (None before it reported its camera)."""

@@ -81,6 +81,7 @@ class SceneView:
         self._levels: set[float] = {1.0}  # map opacities some viewer uses: each is drawn
         self._last_frame = time.monotonic()  # the viewers' last frame
         self._drawn: dict[int, dict] = {}
+        self._seen: list[Vehicle] = []  # the vehicles as the last frame drew them
         self._draw_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="viz", daemon=True)
@@ -125,7 +126,10 @@ class SceneView:
             point = self.ground_point(event.ray_origin, event.ray_direction)
             if point is None:
                 return
-            event.client.scene.add_icosphere("/target", radius=0.4, color=(255, 230, 0), position=point)
+            with self._draw_lock:
+                viewport = self._viewports.get(event.client_id)
+                if viewport is not None:
+                    viewport.pick(point, self._seen)
             if self._on_target is not None:
                 self._on_target(event.client_id, point[0], point[1])
 
@@ -208,6 +212,7 @@ class SceneView:
                 now = time.monotonic()
                 dt, self._last_frame = min(now - self._last_frame, 0.5), now
                 self._draw_viewports(seen, dt)
+                self._seen = seen
         self.server.flush()
 
     def _draw_poses(self, everyone: bool = False) -> list[VehicleState]:

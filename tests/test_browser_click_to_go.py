@@ -60,6 +60,8 @@ def test_click_to_go(browser_page, station, copters, tmp_path):
     browser_page.poll(lambda: ("/target" in {name for _, name in browser_page.scene_nodes}), 10,
                       "the target marker is drawn in this viewer")
     page.screenshot(path=str(tmp_path / "target.png"))
+    removed = ("RemoveSceneNodeMessage", "/target")
+    assert removed not in browser_page.scene_nodes  # it stays while nobody has reached it
 
     page.select_option("#target-vehicle", str(sysid))
     go = page.locator("#go-here")
@@ -73,6 +75,8 @@ def test_click_to_go(browser_page, station, copters, tmp_path):
                      distance / 2.5 * 2 + 10, f"vehicle {sysid} reaches the target {target}")
     assert there["mode"] == "GUIDED"
     assert there["position"]["alt"] > 2.0  # it flew there
+    # the marker is gone once the vehicle sent there reached it: not left behind after Go here is done
+    browser_page.poll(lambda: removed in browser_page.scene_nodes, 10, "the target marker is taken away")
     page.screenshot(path=str(tmp_path / "arrived.png"))
 
 
