@@ -276,6 +276,16 @@ def position(lat: float = -35.363261, lon: float = 149.165230, alt: float = 4.0,
                                                        0, 0, 0, 0)
 
 
+def fly_pair(one: Peer, two: Peer, north_of_one: list[float]) -> None:
+    """Two vehicles' heartbeats and positions, 20 ms apart: ``one`` at the datum, ``two`` each of the given
+    distances (m) north of it in turn."""
+    metre = 1 / 111_320  # degrees of latitude
+    for step, north in enumerate(north_of_one):
+        one.send(vehicle_heartbeat(), position(time_ms=1000 + step))
+        two.send(vehicle_heartbeat(), position(lat=-35.363261 + north * metre, time_ms=1000 + step))
+        time.sleep(0.02)
+
+
 def non_finite_messages(time_ms: int = 2000) -> list:
     """One of every message the station reads floats from, each with NaN or an infinity where a number goes."""
     nan, inf = math.nan, math.inf

@@ -3,19 +3,15 @@ on the event strip, naming both (two vehicles' own MAVLink bytes to a real stati
 
 from __future__ import annotations
 
-import time
-
 import pytest
 from harness import RunningStation, operator_page, skip_module_without_chromium, wait_wall
-from mavlink_peer import Peer, position, vehicle_heartbeat
+from mavlink_peer import Peer, fly_pair
 
 pytestmark = pytest.mark.browser
 
 skip_module_without_chromium()
 
 from playwright.sync_api import expect  # noqa: E402 - once Chromium is known to exist
-
-METRE = 1 / 111_320  # degrees of latitude
 
 
 def test_a_near_miss_is_on_both_cards_and_in_the_event_log(browser):
@@ -24,10 +20,7 @@ def test_a_near_miss_is_on_both_cards_and_in_the_event_log(browser):
         api = station.api()
 
         def fly(north_of_one: list[float]) -> None:
-            for step, north in enumerate(north_of_one):
-                one.send(vehicle_heartbeat(), position(time_ms=1000 + step))
-                two.send(vehicle_heartbeat(), position(lat=-35.363261 + north * METRE, time_ms=1000 + step))
-                time.sleep(0.02)
+            fly_pair(one, two, north_of_one)
 
         fly([10.0] * 5)
         wait_wall(lambda: all(api.vehicle(s) and api.vehicle(s)["position"] for s in (1, 2)), 10, "both placed")

@@ -152,18 +152,14 @@ def test_a_near_miss_is_one_event_on_each_vehicles_timeline_naming_both_and_coun
     """Two vehicles' own MAVLink bytes to a real station: they close in to 1.5 m (inside 2 m + both radii), stay
     there for many poses, part, and close in again."""
     from harness import RunningStation
-    from mavlink_peer import Peer, position, vehicle_heartbeat
+    from mavlink_peer import Peer, fly_pair
 
-    metre = 1 / 111_320  # degrees of latitude
     with RunningStation(None, None) as station, Peer(("127.0.0.1", station.mavlink_port), 1) as one, \
             Peer(("127.0.0.1", station.mavlink_port), 2) as two:
         api = station.api()
 
         def fly(north_of_one: list[float]) -> None:
-            for step, north in enumerate(north_of_one):
-                one.send(vehicle_heartbeat(), position(time_ms=1000 + step))
-                two.send(vehicle_heartbeat(), position(lat=-35.363261 + north * metre, time_ms=1000 + step))
-                time.sleep(0.02)
+            fly_pair(one, two, north_of_one)
 
         def near_misses(sysid: int) -> list[str]:
             events = api.get(f"/api/vehicles/{sysid}/history").json()["events"]
