@@ -175,7 +175,7 @@ def test_the_triple_suite_has_three_sensors_forward_and_45_degrees_each_side():
     assert len(suite) == 3
     assert sorted(s.mount_yaw for s in suite) == [-45.0, 0.0, 45.0]
     assert len(sensor_suite("single")) == 1
-    assert set(SENSOR_SUITES) == {"single", "triple", "servo"}
+    assert set(SENSOR_SUITES) == {"single", "triple", "servo", "ground"}
     with pytest.raises(ValueError, match="unknown sensor suite"):
         sensor_suite("octo")
 
