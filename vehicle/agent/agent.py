@@ -26,7 +26,7 @@ from vehicle.agent.missions.base import Context, Status
 from vehicle.agent.missions.routines import Travel
 from vehicle.agent.monitor import RIDE_HEIGHT, Monitor
 from vehicle.agent.settings import Settings
-from vehicle.agent.traffic import GiveWay
+from vehicle.agent.traffic import CLEAR_FOR, GiveWay, column
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol.mav import mavlink
 from vehicle.protocol.modes import Kind
@@ -80,6 +80,7 @@ class Agent:
         self._errand: Travel | None = None  # the operator's "Go here", flown while the mission is paused
         self._settling = False
         self._blocked_since: float | None = None
+        self._clear_below: float | None = None  # since when no team-mate is below a landing held for one
         self._relaunch: Phase | None = None  # the phase to go back to after taking off again on a resume
         self.give_way = GiveWay(self.ctx, self._after_giving_way)  # to team-mates (none alone)
 
@@ -295,17 +296,22 @@ class Agent:
         if self.paused and (taken is not None or not self._passed()):
             return
         self._note_blocked(now, observation)
-        if self._guided_flight() and self.give_way.step():
+        if self._level_flight() and self.give_way.step():
             return
         getattr(self, f"_{self.phase.value}")(now)
 
-    def _guided_flight(self) -> bool:
-        """The agent steers (a GUIDED mission, or on the way home): it may give way to a team-mate."""
-        return self.phase is Phase.HOMING or (self.phase is Phase.MISSION and self.mission.mode == "GUIDED")
+    def _level_flight(self) -> bool:
+        """On the mission (GUIDED or AUTO) or on the way home, off the ground: it may give way to a team-mate."""
+        return (self.phase in (Phase.MISSION, Phase.HOMING)
+                and (self.fc.kind is Kind.ROVER or self.fc.flying) and not self.fc.taking_off)
 
     def _after_giving_way(self) -> None:
-        """The way is clear again: send again whatever the mission or the way home was doing."""
-        if self.phase is Phase.MISSION:
+        """The way is clear again: send again whatever the mission or the way home was doing (an AUTO mission:
+        back to AUTO, which flies on to the waypoint it was flying to)."""
+        if self.phase is Phase.MISSION and self.mission.mode == "AUTO":
+            self._set_mode("AUTO")
+            self.say("Traffic: back to AUTO")
+        elif self.phase is Phase.MISSION:
             self.mission.resume()
         if self._travel is not None:
             self._travel.resume()
@@ -337,6 +343,10 @@ class Agent:
             self._carry_on()
             return
         if not fc.taking_off:
+            above = column(self.ctx, fc.home[2] + self.settings.altitude, fc.pose.z)
+            if above is not None:  # it would climb into a team-mate: wait on the ground
+                self._say_once(f"Traffic: waiting to take off: vehicle {above.vehicle} is above")
+                return
             fc.takeoff(self.settings.altitude)
         self.phase = Phase.TAKEOFF
 
@@ -416,8 +426,27 @@ class Agent:
             self.phase = Phase.DONE
 
     def _landing(self, now: float) -> None:
-        if not self.fc.armed:
+        """Land, but never onto a team-mate: hold the height (GUIDED) while one is below, within the margin."""
+        fc = self.fc
+        if not fc.armed:
             self.phase = Phase.DONE
+            return
+        below = column(self.ctx, fc.pose.z, fc.home[2]) if fc.flying else None
+        if below is not None:
+            self._clear_below = None
+            if fc.mode == "LAND":
+                self._set_mode("GUIDED")
+                fc.goto(fc.pose.x, fc.pose.y)  # at the height it has reached
+                self.say(f"Traffic: holding the landing: vehicle {below.vehicle} is below")
+        elif fc.mode != "LAND":
+            self._clear_below = now if self._clear_below is None else self._clear_below
+            if now - self._clear_below >= CLEAR_FOR:
+                self.say("Traffic: clear below; landing")
+                self._set_mode("LAND")
+
+    def _say_once(self, text: str) -> None:
+        if not self.messages or self.messages[-1] != text:
+            self.say(text)
 
 
 def place(point: tuple[float, float]) -> str:

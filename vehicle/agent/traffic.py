@@ -13,6 +13,17 @@ last resort a vehicle waits rather than move closer to a team-mate already
 within the margin. Each says what it does, and carries on once the way has
 been clear for a second: the mission is never given up for a team-mate, and
 its echoes are no walls in the map (``vehicle.agent.monitor``).
+
+It gives way in every phase it flies level (a GUIDED mission, an AUTO one, the way
+home): giving way from AUTO switches to GUIDED to hold or step aside, and the
+agent switches back to AUTO, which flies on to the waypoint it was flying to.
+The margin is a sphere round each body: two vehicles whose tracks cross more
+than the margin apart in height (a copter at 4 m over a rover, or over a copter
+at 1 m) pass each other, neither gives way. A vehicle that climbs or descends
+in place (taking off, landing) keeps out of the column it moves through: it
+does not take off under a team-mate, nor land onto one, within the margin
+across and in height (``column``), but waits where it is; team-mates flying
+level meanwhile go round it as one that stands.
 """
 
 from __future__ import annotations
@@ -33,6 +44,7 @@ MOVING = 0.3  # m/s: a team-mate slower than this stands: it has no track to kee
 DETOUR_REACHED = 0.7  # m from the point beside a team-mate at which going round it is done
 DETOUR_FOR = 20.0  # s at most spent going round one
 GUARD_EXTRA = 0.5  # s looked ahead by the guard beyond the time to stop
+COLUMN_AHEAD = 3.0  # s looked ahead for a team-mate coming into the column a vehicle climbs or descends through
 _TIMES = np.linspace(0.0, HORIZON, SAMPLES)
 
 
@@ -124,6 +136,9 @@ class GiveWay:
         self._send(self.ctx.position)
 
     def _send(self, target: tuple[float, float]) -> None:
+        if self.ctx.fc.mode != "GUIDED":  # an AUTO mission: the agent steers while it gives way
+            self.ctx.fc.set_mode("GUIDED")
+            self._sent = None
         if self._sent is None or math.dist(target, self._sent) > 0.5:
             self.ctx.goto(target)
             self._sent = target
@@ -276,6 +291,22 @@ class GiveWay:
             if any(math.sqrt(_to_segment((other.x, other.y), a, b) ** 2 + dz2) < keep for a, b in legs):
                 return False
         return True
+
+
+def column(ctx: Context, top: float, bottom: float) -> Traffic | None:
+    """The team-mate that is, or within ``COLUMN_AHEAD`` s will be, within the margin of the column this vehicle
+    climbs or descends through, between the heights ``bottom`` and ``top`` (scene z): the nearest across."""
+    pose = ctx.fc.pose
+    found, nearest = None, math.inf
+    for other in team_mates(ctx.fc):
+        margin = ctx.settings.separation + ctx.radius + other.radius
+        if not bottom - margin < other.z < top + margin:
+            continue
+        ahead = _TIMES[_TIMES <= COLUMN_AHEAD]
+        across = np.hypot(other.x + other.vx * ahead - pose.x, other.y + other.vy * ahead - pose.y).min()
+        if across < margin and across < nearest:
+            found, nearest = other, across
+    return found
 
 
 def _to_segment(point: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
