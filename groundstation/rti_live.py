@@ -30,7 +30,10 @@ from vehicle.tomography.links import KEY_STEP, Records, factorize, link_keys, re
 from vehicle.tomography.picture import STOPS, colours
 
 WINDOW = 1.0  # s of the records' clock per frame
-HISTORY = 60.0  # s of records imaged in a frame
+HISTORY = 300.0  # s of records imaged in a frame: a team's mission (40 pairs of spots, 3 s dwells) measures each
+# pair once, so the image needs the paths of the whole mission to cross the area from many sides; with 60 s (10 to
+# 16 paths) the demo's peak jumped 2 to 8 m off a standing target between frames; a person who walks on leaves a
+# trail in it (the experiments below image a whole run too)
 CELL = 0.25  # m: the image's pixel (the experiments' choice: half the 0.5 m a target must be found within)
 PEAKS = 3
 MEASURE = "mean"  # attenuation below each link's empty-area level: a target that stood still for most of the
@@ -40,6 +43,9 @@ EMPTY_FROM = "brief"  # a link heard only briefly gets the level a path-loss mod
 # there, so such a link's own level is the obstructed one (against it, the peak was 2 to 7 m off a standing
 # target); links heard all along (fixed nodes) keep their own robust level
 MIN_HEARD = 3  # packets a link needs in the history to be imaged
+PER_LINK = 100  # records of one link imaged at most, evenly spread over the history: a fixed network heard all
+# along would otherwise cost a frame in proportion to the history (16 radios on 4 channels: 2.6 s for 300 s), and
+# a link's mean over 100 packets is within a tenth of its noise of the mean over all
 POLL = 0.02  # s between two looks at the log's size (an arrival is noticed within this)
 ARRIVALS = 500  # arrival times remembered (10 s of polls)
 
@@ -83,7 +89,7 @@ def frame_at(records: Records, end: float, window: float = WINDOW, history: floa
     used = records.select((records.t >= end - history) & (records.t < end))
     if len(used):
         _, link = factorize(pair_keys(used))
-        used = used.select(np.bincount(link)[link] >= MIN_HEARD)
+        used = used.select((np.bincount(link)[link] >= MIN_HEARD) & evenly(link, PER_LINK))
     if len(used) < 2:
         return None
     result = reconstruct(used, bounds=bounds, cell=cell, peaks=peaks, measure=MEASURE, empty_from=EMPTY_FROM)
@@ -98,6 +104,19 @@ def frame_at(records: Records, end: float, window: float = WINDOW, history: floa
                  coverage=coverage(factorize(pair_keys(used)[:, :4])[0] * KEY_STEP, grid.bounds, grid.cell,
                                    first["image"].shape), paths=first["paths"],
                  records=len(used), info={**info, "cell": grid.cell, "window": window, "history": history})
+
+
+def evenly(link: np.ndarray, most: int) -> np.ndarray:
+    """Which records to keep so that no link (``link``: each record's link number, records in time order) keeps
+    more than ``most``, those it keeps spread evenly over its records."""
+    order = np.argsort(link, kind="stable")
+    counts = np.bincount(link)
+    starts = np.cumsum(counts) - counts
+    rank = np.arange(len(link)) - starts[link[order]]
+    count = counts[link[order]]
+    keep = np.empty(len(link), bool)
+    keep[order] = (count <= most) | (rank * most // count != (rank - 1) * most // count)
+    return keep
 
 
 def pair_keys(records: Records) -> np.ndarray:

@@ -113,3 +113,30 @@ def test_switching_logs_forgets_the_other_frame(rows):
     logs["which"] = LinkLog()  # a replay with no radio records
     imager.step()
     assert imager.latest() is None
+
+
+def test_a_team_that_hears_each_pair_once_is_imaged_over_its_whole_mission():
+    """A mission's pairs of spots are each heard once, one after another (here 120 pairs in 240 s): the frame
+    images them all, where the last minute's 30 pairs put the peak metres off the standing person."""
+    from test_tomography_reference import TARGET as STANDING
+    from test_tomography_reference import one_turn_each
+
+    misses = []
+    for seed in (1, 2, 3, 4):
+        best = frame_at(one_turn_each(seed), 240.0).peaks[0]
+        misses.append(math.dist((best["x"], best["y"]), STANDING))
+    assert sum(m < 0.5 for m in misses) >= 3, misses
+
+
+def test_a_link_heard_all_along_is_imaged_from_records_spread_over_the_history():
+    """A fixed network heard for 300 s costs a frame no more records per link than PER_LINK, taken evenly from
+    the whole history (its first minute included), and still finds the person who walked in."""
+    from groundstation.rti_live import PER_LINK, evenly
+
+    assert evenly(np.array([0, 0, 0, 0, 0, 1, 1, 0, 0, 0]), 3).tolist() == [True, False, False, True, False,
+                                                                            True, True, False, True, False]
+    records = records_of(sweep_rows(0.0, 300.0, person_from=200.0))
+    frame = frame_at(records, 300.0)
+    assert frame.records <= 120 * PER_LINK < len(records) / 2
+    best = frame.peaks[0]
+    assert math.dist((best["x"], best["y"]), TARGET) < 0.5, frame.peaks
