@@ -54,6 +54,11 @@ class VizProxy:
     async def close(self) -> None:
         pass
 
+    def connected(self, viewer: str | None) -> bool:
+        """Is this viewer's 3D view connected now? Its page reloads a view that stays away (viser's client
+        in a frame without focus does not reconnect by itself)."""
+        return viewer in self._claimed
+
     def http(self, query: dict[str, str]) -> Response:
         """viser's page; never with a ``websocket`` query (it would connect wherever that names)."""
         if "websocket" in query:

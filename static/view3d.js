@@ -1,7 +1,9 @@
 // scanstation: this page's own 3D view — camera mode, selected vehicle, layers, map opacity, keys and
 // zoom towards the cursor. It asks the station over the page's /ws socket (app.js hands it over in a
 // "station-socket" event); the station moves this viewer's camera alone, and answers with what it now
-// does ("view") or why not ("view-error"). No inline script, no eval: the page's policy forbids both.
+// does ("view") or why not ("view-error"). It also keeps the view connected: viser's client in a frame without
+// focus does not reconnect by itself, so the view is reloaded when the station restarts (a new session in the
+// status) or when its socket stays closed. No inline script, no eval: the page's policy forbids both.
 
 import { $, EVENTS, on } from "./common.js";
 
@@ -9,6 +11,8 @@ const MODES = ["orbit", "follow", "onboard", "top"];
 const KEYS = { 1: "orbit", 2: "follow", 3: "onboard", 4: "top" };
 const ACTION_KEYS = { f: "fit", v: "vehicle" };
 const ZOOM_EVERY_MS = 50;  // wheel steps are summed and sent at most this often
+const VIEW_GRACE_MS = 15000;  // a loaded view whose socket stays closed this long is reloaded (then twice as long...)
+const VIEW_GRACE_MAX_MS = 60000;
 
 const view = {
   send: null,            // the socket's send, while it is open
@@ -17,6 +21,10 @@ const view = {
   chosen: null,          // a vehicle the operator selected explicitly
   vehicles: [],
   zoom: null,            // {x, y, steps} not yet sent
+  session: null,         // the station's session the view was loaded from
+  loaded: false,         // the view's frame has loaded its page (its socket is about to open)
+  downSince: null,       // since when (ms) the station has said the loaded view is not connected
+  grace: VIEW_GRACE_MS,
 };
 
 function send(request) {
@@ -120,8 +128,41 @@ function flushZoom() {
   send({ type: "zoom", x: clamp(zoom.x, -1, 1), y: clamp(zoom.y, -1, 1), steps: clamp(zoom.steps, -20, 20) });
 }
 
+/** Load the view's page again: a new viser client, which connects to the station now serving and draws its
+ * scene from nothing (the old session's vehicles, labels and trails go with the old page). From its address
+ * as the page set it (viser's client adds a ?websocket= query to its own, which the station refuses), in place
+ * (no step added to the browser's history). */
+function reloadFrame() {
+  const frame = $("#view");
+  const src = frame.getAttribute("src");
+  view.loaded = false;
+  view.downSince = null;
+  try { frame.contentWindow.location.replace(src); } catch { frame.src = src; }
+}
+
+/** Each status frame says the station's session and whether this page's view is connected to it. */
+function watchFrame(msg) {
+  if (!$("#view").getAttribute("src") || typeof msg.session !== "string") return;  // not watching (yet)
+  const restarted = view.session !== null && msg.session !== view.session;
+  view.session = msg.session;
+  if (restarted) {
+    reloadFrame();
+  } else if (msg.view === true) {
+    view.downSince = null;
+    view.grace = VIEW_GRACE_MS;
+  } else if (msg.view === false && view.loaded) {
+    const now = performance.now();
+    if (view.downSince === null) view.downSince = now;
+    else if (now - view.downSince > view.grace) {
+      view.grace = Math.min(view.grace * 2, VIEW_GRACE_MAX_MS);
+      reloadFrame();
+    }
+  }
+}
+
 function hookFrame() {
   const frame = $("#view");
+  frame.addEventListener("load", () => { view.loaded = Boolean(frame.getAttribute("src")); });
   const attach = () => {
     let win;
     try { win = frame.contentWindow; void win.document; } catch { return; }  // not ours (never, same origin)
@@ -156,6 +197,7 @@ function main() {
   on(EVENTS.status, (msg) => {
     view.vehicles = msg.vehicles.filter((v) => Number.isInteger(v.sysid));
     select();
+    watchFrame(msg);
   });
   // the panel's selection (operator.js)
   on(EVENTS.selected, (detail) => {

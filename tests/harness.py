@@ -285,14 +285,16 @@ class RunningStation:
     """GroundStation on ``udpin:127.0.0.1:<free port>`` with its app served by uvicorn on a thread."""
 
     def __init__(self, scene: Scene | None, record_dir: str | Path | None, token: str = TOKEN,
-                 urls: list[str] | None = None, access: Access | None = None, **station):
+                 urls: list[str] | None = None, access: Access | None = None, http_port: int | None = None,
+                 **station):
         """``urls``: the MAVLink links (default: ``udpin`` on a free port, which ``vehicle_url`` sends to);
-        ``access``: who may reach the app (default: as when served on loopback)."""
+        ``access``: who may reach the app (default: as when served on loopback); ``http_port``: the web port
+        (default: a free one; a restarted station takes its predecessor's)."""
         self.mavlink_port = free_udp_port()
         self.url = f"udpin:127.0.0.1:{self.mavlink_port}"
         self.station = GroundStation(urls or [self.url], scene, token, record_dir, **station)
         self.token = token
-        self.http_port = free_tcp_port()
+        self.http_port = http_port or free_tcp_port()
         self.base = f"http://127.0.0.1:{self.http_port}"
         config = app_config(self.station, "127.0.0.1", self.http_port, access=access)
         self.server = uvicorn.Server(config)

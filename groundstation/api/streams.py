@@ -5,6 +5,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import secrets
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from fastapi import APIRouter, HTTPException, Request, WebSocket, WebSocketDisconnect
@@ -24,6 +26,7 @@ MAX_STREAMS = 256  # /ws connections at once
 
 def routes(station: GroundStation, guards: Guards) -> APIRouter:
     router = APIRouter()
+    session = secrets.token_hex(8)  # this station's run: a page that sees it change knows the station restarted
 
     @router.websocket("/ws")
     async def stream(socket: WebSocket, viewer: str | None = None):
@@ -37,7 +40,8 @@ def routes(station: GroundStation, guards: Guards) -> APIRouter:
             return
         await socket.accept()
         inbox = station.subscribe(viewer)
-        sender = asyncio.create_task(_send_status(socket, inbox, station))
+        sender = asyncio.create_task(_send_status(socket, inbox, lambda: {
+            **station.status(), "session": session, "view": station.proxy.connected(viewer)}))
         receiver = asyncio.create_task(_receive_view_requests(socket, inbox, station, viewer))
         try:  # until the page goes, or either half fails: then the page hears the stream end, and reconnects
             done, _ = await asyncio.wait((sender, receiver), return_when=asyncio.FIRST_COMPLETED)
@@ -85,11 +89,11 @@ async def _receive_view_requests(socket: WebSocket, inbox: asyncio.Queue, statio
         station.view_request(viewer, message.get("text") or message.get("bytes") or "", inbox)
 
 
-async def _send_status(socket: WebSocket, inbox: asyncio.Queue, station: GroundStation) -> None:
+async def _send_status(socket: WebSocket, inbox: asyncio.Queue, status: Callable[[], dict]) -> None:
     """The status at once, then notes as they come, and the status when none came for a period. A frame
     that cannot be JSON (it never should: the fleet keeps only finite numbers) is logged and skipped, never
-    sent as NaN."""
-    frame = station.status()  # a new viewer sees the vehicles now, not a period later
+    sent as NaN. The status says this station's ``session`` and whether this page's 3D ``view`` is connected."""
+    frame = status()  # a new viewer sees the vehicles now, not a period later
     while True:
         try:
             text = json.dumps(frame, allow_nan=False)
@@ -100,4 +104,4 @@ async def _send_status(socket: WebSocket, inbox: asyncio.Queue, station: GroundS
         try:
             frame = await asyncio.wait_for(inbox.get(), timeout=STREAM_PERIOD)
         except TimeoutError:
-            frame = station.status()
+            frame = status()
