@@ -38,13 +38,17 @@ async function checkWatching() {
   return refused;
 }
 
-// A token opened a session: when watching was refused before, the view and the stream start again now.
-on(EVENTS.session, () => {
-  if (!watchRefused) return;
-  watchRefused = false;
-  emit(EVENTS.watching, { refused: false });
-  setupView();
-  reconnectNow();
+// A token opened a session: when watching was refused before, the view and the stream start again now; when a
+// new token replaced the old one (a new address in this tab), the stream (and view3d.js its view).
+on(EVENTS.session, ({ renewed }) => {
+  if (watchRefused) {
+    watchRefused = false;
+    emit(EVENTS.watching, { refused: false });
+    setupView();
+    reconnectNow();
+  } else if (renewed) {
+    reconnectNow();
+  }
 });
 
 // ---------------------------------------------------------------------------------------------

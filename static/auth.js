@@ -39,16 +39,16 @@ function storeToken(value) {
  * Ask the server whether `candidate` is the operator token. `quiet` re-checks a token already
  * accepted (after a reconnect) without disabling the buttons meanwhile.
  */
-async function checkToken(candidate, quiet = false) {
+async function checkToken(candidate, quiet = false, renewed = false) {
   use(candidate);
   if (!quiet) setAuth("checking");
   const { status } = await api("GET", "/api/auth");
   if (token !== candidate) return;  // signed out or replaced meanwhile
   if (status === 200) {
     storeToken(candidate);
-    await openSession();
+    await openSession(renewed);
     if (auth !== "valid") setAuth("valid");
-  } else if ((status === 401 || status === 403) && await openSession() && token === candidate) {
+  } else if ((status === 401 || status === 403) && await openSession(renewed) && token === candidate) {
     storeToken(candidate);  // not the operator's, but a viewer's: it may watch
     if (auth !== "viewer") setAuth("viewer");
   } else if (status === 401 || status === 403) {
@@ -64,12 +64,13 @@ async function checkToken(candidate, quiet = false) {
 
 /**
  * Trade the token for the cookie that lets this browser watch (the 3D view and the stream cannot send
- * a header). Only a station served beyond loopback asks for it; elsewhere it is harmless.
+ * a header). Only a station served beyond loopback asks for it; elsewhere it is harmless. ``renewed``: a new
+ * token replaced the old one, so the stream and the view connect again with it.
  */
-async function openSession() {
+async function openSession(renewed = false) {
   const { status } = await api("POST", "/api/session");
   if (status !== 204) return false;
-  emit(EVENTS.session);
+  emit(EVENTS.session, { renewed });
   return true;
 }
 
@@ -113,6 +114,13 @@ $("#auth-form").addEventListener("submit", (event) => {
   checkToken(typed);
 });
 $("#sign-out").addEventListener("click", signOut);
+
+// A new address pasted into this tab (a restarted station prints one; only its #token differs) changes only the
+// hash, so the page is not loaded again: take its token in place of the old one.
+window.addEventListener("hashchange", () => {
+  const found = takeTokenFromHash();
+  if (found) checkToken(found, false, true);
+});
 
 // The token changes every time the server starts: a command refused for it drops it, so the page asks again.
 on(EVENTS.tokenRejected, () => {

@@ -30,7 +30,8 @@
 //   station-watching app.js, whether this station lets the page watch without a token: {refused: bool}, once
 //                    at start and again whenever it changes -> auth (its hint; it checks the token after the
 //                    first), recordings (reloads)
-//   station-session  auth.js, a token opened a session (the cookie that lets this browser watch): {} -> app
+//   station-session  auth.js, a token opened a session (the cookie that lets this browser watch): {renewed}, true
+//                    when a new token (a new address's #token) replaced the old one -> app, view3d
 //   station-auth     auth.js, the sign-in state changed: {auth: "none"|"checking"|"valid"|"viewer"|"invalid"|
 //                    "unverified"} (only "valid" commands) -> vehicles, target, replay, recordings
 //   station-token-rejected  common.js (describeResult), a command answered 401: {} -> auth

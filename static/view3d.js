@@ -162,7 +162,10 @@ function watchFrame(msg) {
 
 function hookFrame() {
   const frame = $("#view");
-  frame.addEventListener("load", () => { view.loaded = Boolean(frame.getAttribute("src")); });
+  frame.addEventListener("load", () => {  // loaded again (by this script or app.js): its grace starts now
+    view.loaded = Boolean(frame.getAttribute("src"));
+    view.downSince = null;
+  });
   const attach = () => {
     let win;
     try { win = frame.contentWindow; void win.document; } catch { return; }  // not ours (never, same origin)
@@ -198,6 +201,10 @@ function main() {
     view.vehicles = msg.vehicles.filter((v) => Number.isInteger(v.sysid));
     select();
     watchFrame(msg);
+  });
+  // a new token replaced the old one (auth.js): the view connects again with it
+  on(EVENTS.session, ({ renewed }) => {
+    if (renewed && view.loaded) reloadFrame();
   });
   // the panel's selection (operator.js)
   on(EVENTS.selected, (detail) => {

@@ -109,3 +109,29 @@ def test_the_3d_view_shows_the_new_session_after_the_station_restarts(browser, p
         viewer = page.page.evaluate("document.querySelector('#view').getAttribute('src')").strip("/").split("/")[2]
         page.poll(lambda: viewer in second.station.proxy.viewers.values(), VIEW_BACK,
                   "the new station ties the view to this page")
+
+
+def test_a_new_address_in_the_same_tab_signs_the_page_in_again(browser, page, tmp_path):
+    port = free_tcp_port()
+    with station(tmp_path, FIRST_TOKEN, port) as first:
+        page.page.goto(f"{first.base}/#token={FIRST_TOKEN}")
+        expect(page.page.locator("#auth-status")).to_have_text("Signed in")
+    with station(tmp_path, SECOND_TOKEN, port) as second:
+        # the page reconnects, and the old token is refused
+        expect(page.page.locator("#auth-status")).to_contain_text("no longer accepts this token")
+        page.page.evaluate("window.sameDocument = true")
+        streams, views = page.streams, len(page.views)
+        # the operator pastes the address the new station printed: only its #token differs
+        page.page.goto(f"{second.base}/#token={SECOND_TOKEN}")
+        expect(page.page.locator("#auth-status")).to_have_text("Signed in")
+        assert page.page.evaluate("window.sameDocument") is True, "the page was loaded again"
+        assert "token" not in page.page.url, "the token stays in the address bar"
+        assert page.page.evaluate("localStorage.getItem('scanstation.token')") == SECOND_TOKEN
+        # its stream and its 3D view connect again, with the new token
+        page.poll(lambda: page.streams > streams and len(page.views) > views, VIEW_BACK,
+                  "the page opens its stream and its 3D view again")
+        expect(page.page.locator("#connection-text")).to_have_text("connected")
+        viewer = page.page.evaluate("document.querySelector('#view').getAttribute('src')").strip("/").split("/")[2]
+        page.poll(lambda: viewer in second.station.proxy.viewers.values(), VIEW_BACK,
+                  "the station ties the view to this page")
+        expect(page.badge()).to_have_count(0)
