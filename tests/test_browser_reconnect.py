@@ -135,3 +135,18 @@ def test_a_new_address_in_the_same_tab_signs_the_page_in_again(browser, page, tm
         page.poll(lambda: viewer in second.station.proxy.viewers.values(), VIEW_BACK,
                   "the station ties the view to this page")
         expect(page.badge()).to_have_count(0)
+
+
+def test_the_3d_view_comes_back_when_its_socket_drops(browser, page, tmp_path):
+    with station(tmp_path, FIRST_TOKEN, free_tcp_port()) as running, \
+            FakeVehicle(("127.0.0.1", running.mavlink_port), OLD):
+        page.page.goto(f"{running.base}/#token={FIRST_TOKEN}")
+        page.poll(lambda: page.shows(OLD), VIEW_BACK, f"the 3D view shows vehicle {OLD}")
+        views = len(page.views)
+        # the view's socket drops, the station and the page's stream stay: viser's client, in a frame without
+        # focus, does not connect again by itself (viser's own way to drop its clients, as for a network cut)
+        running.station.view.server._websock_server.disconnect_all_clients()
+        expect(page.badge()).to_have_count(1)
+        page.poll(lambda: len(page.views) > views and page.shows(OLD), VIEW_BACK,
+                  "the page loads its 3D view again, and it shows the vehicle")
+        expect(page.badge()).to_have_count(0)
