@@ -5,7 +5,8 @@
 import { $, EVENTS, api, emit, on, setToken } from "./common.js";
 
 const TOKEN_KEY = "scanstation.token";
-const TOKEN_EXPIRED = "The server no longer accepts this token (it changes when the server restarts). Sign in again.";
+const TOKEN_EXPIRED = "The server no longer accepts this token (it changes when the server restarts). Sign in again,"
+  + " or open the new address it printed.";
 const MESSAGES = {
   none: "Not signed in",
   checking: "Checking token…",
@@ -143,7 +144,11 @@ on(EVENTS.socket, () => {
 let started = false;
 on(EVENTS.watching, ({ refused }) => {
   $("#watch-hint").hidden = !refused;
-  if (started) return;
+  if (started) {
+    // refused now with a token that was taken: the station restarted with another (its session cookie went too)
+    if (refused && token && (auth === "valid" || auth === "viewer")) checkToken(token, true);
+    return;
+  }
   started = true;
   const found = takeTokenFromHash() || readStoredToken();
   if (found) checkToken(found);

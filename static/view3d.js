@@ -135,6 +135,7 @@ function flushZoom() {
 function reloadFrame() {
   const frame = $("#view");
   const src = frame.getAttribute("src");
+  if (!src) return;  // not watching
   view.loaded = false;
   view.downSince = null;
   try { frame.contentWindow.location.replace(src); } catch { frame.src = src; }

@@ -13,6 +13,8 @@ from __future__ import annotations
 import pytest
 from harness import RunningStation, free_tcp_port, skip_module_without_chromium, small_scene, wait_wall
 
+from groundstation.security import Access
+
 skip_module_without_chromium()
 
 import msgspec  # noqa: E402
@@ -85,8 +87,10 @@ def page(browser):
     opened.close()
 
 
-def station(tmp_path, token: str, port: int) -> RunningStation:
-    return RunningStation(small_scene(), tmp_path / token, token, http_port=port)
+def station(tmp_path, token: str, port: int, beyond_loopback: bool = False) -> RunningStation:
+    """A station on ``port``; ``beyond_loopback``: as served beyond loopback, where watching needs a token."""
+    access = Access(token, viewing_needs_token=True) if beyond_loopback else None
+    return RunningStation(small_scene(), tmp_path / token, token, http_port=port, access=access)
 
 
 def test_the_3d_view_shows_the_new_session_after_the_station_restarts(browser, page, tmp_path):
@@ -111,14 +115,18 @@ def test_the_3d_view_shows_the_new_session_after_the_station_restarts(browser, p
                   "the new station ties the view to this page")
 
 
-def test_a_new_address_in_the_same_tab_signs_the_page_in_again(browser, page, tmp_path):
+@pytest.mark.parametrize("beyond_loopback", [False, True], ids=["loopback", "beyond-loopback"])
+def test_a_new_address_in_the_same_tab_signs_the_page_in_again(browser, page, tmp_path, beyond_loopback):
     port = free_tcp_port()
-    with station(tmp_path, FIRST_TOKEN, port) as first:
+    with station(tmp_path, FIRST_TOKEN, port, beyond_loopback) as first:
         page.page.goto(f"{first.base}/#token={FIRST_TOKEN}")
         expect(page.page.locator("#auth-status")).to_have_text("Signed in")
-    with station(tmp_path, SECOND_TOKEN, port) as second:
-        # the page reconnects, and the old token is refused
+    with station(tmp_path, SECOND_TOKEN, port, beyond_loopback) as second:
+        # the page reconnects, and the old token is refused (beyond loopback, its session's cookie too: the page
+        # may not even watch)
         expect(page.page.locator("#auth-status")).to_contain_text("no longer accepts this token")
+        if beyond_loopback:
+            expect(page.page.locator("#connection-text")).to_contain_text("needs a token to watch")
         page.page.evaluate("window.sameDocument = true")
         streams, views = page.streams, len(page.views)
         # the operator pastes the address the new station printed: only its #token differs
