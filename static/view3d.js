@@ -11,8 +11,8 @@ const MODES = ["orbit", "follow", "onboard", "top"];
 const KEYS = { 1: "orbit", 2: "follow", 3: "onboard", 4: "top" };
 const ACTION_KEYS = { f: "fit", v: "vehicle" };
 const ZOOM_EVERY_MS = 50;  // wheel steps are summed and sent at most this often
-const VIEW_GRACE_MS = 15000;  // a loaded view whose socket stays closed this long is reloaded (then twice as long...)
-const VIEW_GRACE_MAX_MS = 60000;
+const DROPPED_VIEW_MS = 5000;  // a view that was connected and stays closed this long is loaded again
+const SLOW_VIEW_MS = 60000;  // and one that never connected since it loaded (slow, or refused), this long
 
 const view = {
   send: null,            // the socket's send, while it is open
@@ -23,8 +23,8 @@ const view = {
   zoom: null,            // {x, y, steps} not yet sent
   session: null,         // the station's session the view was loaded from
   loaded: false,         // the view's frame has loaded its page (its socket is about to open)
+  connected: false,      // the station has said the view is connected since it last loaded
   downSince: null,       // since when (ms) the station has said the loaded view is not connected
-  grace: VIEW_GRACE_MS,
 };
 
 function send(request) {
@@ -149,22 +149,20 @@ function watchFrame(msg) {
   if (restarted) {
     reloadFrame();
   } else if (msg.view === true) {
+    view.connected = true;
     view.downSince = null;
-    view.grace = VIEW_GRACE_MS;
   } else if (msg.view === false && view.loaded) {
     const now = performance.now();
     if (view.downSince === null) view.downSince = now;
-    else if (now - view.downSince > view.grace) {
-      view.grace = Math.min(view.grace * 2, VIEW_GRACE_MAX_MS);
-      reloadFrame();
-    }
+    else if (now - view.downSince > (view.connected ? DROPPED_VIEW_MS : SLOW_VIEW_MS)) reloadFrame();
   }
 }
 
 function hookFrame() {
   const frame = $("#view");
-  frame.addEventListener("load", () => {  // loaded again (by this script or app.js): its grace starts now
+  frame.addEventListener("load", () => {  // loaded again (by this script or app.js): its wait starts now
     view.loaded = Boolean(frame.getAttribute("src"));
+    view.connected = false;
     view.downSince = null;
   });
   const attach = () => {
