@@ -492,6 +492,15 @@ def test_the_start_viewpoints_height_counts_as_the_start_height(make_scene, box)
     assert world.home[2] == pytest.approx(0.0, abs=1e-4)  # under the roof, on the ground
 
 
+def test_a_start_on_the_top_of_a_wall_is_refused_and_one_beside_it_on_the_roof_is_not(roofed_room, make_scene, box):
+    """A random team start once stood a copter on a house's wall, 0.2 m thick: it flew, and landed back
+    onto the wall's edge. The roof is wide enough to stand on."""
+    with pytest.raises(PlacementError, match=r"stands on an edge: the ground 0.3 m from it lies at 0.00 m"):
+        Simulation(make_scene(box(0, 0, -0.05, 100, 100, 0.1), box(3.1, 0, 1.5, 0.2, 6, 3)), Kind.COPTER,
+                   start=(3.1, 0.0))
+    assert Simulation(roofed_room, Kind.COPTER, start=(0.0, 0.0)).home[2] == pytest.approx(3.1)
+
+
 def test_a_start_height_with_nothing_below_it_is_refused(roofed_room):
     with pytest.raises(PlacementError, match="nothing to stand on below the start"):
         Simulation(roofed_room, Kind.COPTER, start=(20.0, 20.0, -5.0))

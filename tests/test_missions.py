@@ -676,3 +676,15 @@ def test_a_star_presumes_the_unseen_continuation_of_a_wall(flat_scene):
     known.mark(-2, 2, 4.9, 5.1)
     path, _ = known.ctx.plan((0.0, 10.0))
     assert abs(crossing_x(path, known.ctx.position, 5.0)) < keep - 0.25  # now it may pass closer
+
+
+def test_a_copter_comes_to_rest_over_home_before_it_lands(scene_of):
+    """LAND descends where it begins (the autopilot comes back there): begun at speed on arrival, it landed
+    0.3 m off a home 0.4 m from a bed in the house, onto the bed's edge."""
+    flight = Flight(scene_of(), "pathfind", waypoints=[(0.0, 8.0)])
+    assert flight.run(120, until=lambda: flight.agent.phase is Phase.LANDING)
+    assert flight.world.autopilot.mode == "LAND"
+    assert flight.world.body.speed <= 0.1, flight.world.body.speed
+    flight.run(60, until=lambda: not flight.world.autopilot.armed)
+    assert not flight.world.autopilot.armed
+    assert math.dist(flight.xy, flight.world.home[:2]) < 0.15, (flight.xy, flight.world.home)

@@ -33,6 +33,7 @@ from vehicle.protocol.modes import Kind
 
 HOME_TOLERANCE = 0.5  # m
 SETTLED = 0.1  # m/s: slower than this counts as at rest
+SETTLE_OVER_HOME = 10.0  # s a copter waits at most to come to rest over home before it lands (a gusty day)
 BLOCKED_FOR = 1.0  # s held back by avoidance before the monitor treats it as an obstacle too close
 RESERVE = 60.0  # s kept for scans, detours and landing on the way home (at most a sixth of the time limit)
 MESSAGES_KEPT = 200
@@ -78,6 +79,7 @@ class Agent:
         self._paused_since: float | None = None  # when the mission's clock stopped for a pause
         self._travel: Travel | None = None
         self._errand: Travel | None = None  # the operator's "Go here", flown while the mission is paused
+        self._over_home: float | None = None  # since when a copter back home has been coming to rest to land
         self._settling = False
         self._blocked_since: float | None = None
         self._clear_below: float | None = None  # since when no team-mate is below a landing held for one
@@ -400,6 +402,7 @@ class Agent:
         self.mission.stop()
         self._travel = Travel(self.ctx, self.ctx.home, HOME_TOLERANCE, relax=True)
         self._settling = True
+        self._over_home = None
         self.phase = Phase.HOMING
 
     def _homing(self, now: float) -> None:
@@ -419,6 +422,13 @@ class Agent:
             self.phase = Phase.DONE
             return
         if self.fc.kind is Kind.COPTER:
+            # come to rest over home first: LAND descends where it begins, and one begun at speed drifts (in the
+            # house, onto the bed beside a home 0.4 m from it)
+            if self._over_home is None:
+                self._over_home = now
+                self.ctx.goto(self.ctx.home)
+            if self.fc.speed > SETTLED and now - self._over_home < SETTLE_OVER_HOME:
+                return
             self._set_mode("LAND")
             self.phase = Phase.LANDING
         else:

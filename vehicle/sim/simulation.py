@@ -68,6 +68,7 @@ class Simulation:
             ground = self.caster.ground_height(x, y, default=math.nan, below=height[0])
             if math.isnan(ground):
                 raise PlacementError(f"nothing to stand on below the start x={x:g} y={y:g} z={height[0]:g}")
+        self._check_footing(x, y, ground)
         self.body = Body(self.kind, self.limits, Pose(x, y, 0.0, yaw=math.radians(heading) % (2 * math.pi)))
         self.body.pose.z = self.body.rest_height(ground)
         walkable = self.kind is Kind.ROVER  # a rover's wheels touch the ground it drives on
@@ -88,6 +89,17 @@ class Simulation:
         self._ground_xy = (x, y)
         self.sonar_rate = sonar_rate
         self._next_reading = 0.0
+
+    def _check_footing(self, x: float, y: float, ground: float) -> None:
+        """Refuse a start whose ground falls away under the body (the top of a wall, the edge of a roof): the
+        vehicle would stand on nothing there, and a copter landing back home would land onto the edge."""
+        radius = self.limits.radius
+        heights = [self.caster.ground_height(x + radius * math.cos(a), y + radius * math.sin(a),
+                                             below=ground + radius) for a in np.linspace(0, 2 * math.pi, 8, False)]
+        if not all(abs(h - ground) <= radius for h in heights):
+            low = min(heights, key=lambda h: -abs(h - ground))
+            raise PlacementError(f"the start x={x:g} y={y:g} stands on an edge: the ground {radius:g} m from it "
+                                 f"lies at {low:.2f} m, {ground:.2f} m under it")
 
     def _battery_alarm(self) -> None:
         """The battery crossed the low or the critical level: the autopilot says so, and at critical acts."""
