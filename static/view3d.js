@@ -146,7 +146,7 @@ function watchFrame(msg) {
   if (!$("#view").getAttribute("src") || typeof msg.session !== "string") return;  // not watching (yet)
   const restarted = view.session !== null && msg.session !== view.session;
   view.session = msg.session;
-  if (restarted) {
+  if (restarted && msg.view !== true) {  // (connected already: viser's client, focused, came back by itself)
     reloadFrame();
   } else if (msg.view === true) {
     view.connected = true;

@@ -93,13 +93,17 @@ def station(tmp_path, token: str, port: int, beyond_loopback: bool = False) -> R
     return RunningStation(small_scene(), tmp_path / token, token, http_port=port, access=access)
 
 
-def test_the_3d_view_shows_the_new_session_after_the_station_restarts(browser, page, tmp_path):
+@pytest.mark.parametrize("focused", [False, True], ids=["panel-focused", "view-focused"])
+def test_the_3d_view_shows_the_new_session_after_the_station_restarts(browser, page, tmp_path, focused):
     port = free_tcp_port()
     with station(tmp_path, FIRST_TOKEN, port) as first, \
             FakeVehicle(("127.0.0.1", first.mavlink_port), OLD):
         page.page.goto(f"{first.base}/#token={FIRST_TOKEN}")
         expect(page.page.locator("#auth-status")).to_have_text("Signed in")
         page.poll(lambda: page.shows(OLD), VIEW_BACK, f"the 3D view shows vehicle {OLD}")
+        if focused:  # the operator last clicked in the view: viser's client there reconnects by itself
+            page.page.locator("#view").click(position={"x": 450, "y": 200})  # clear of the panels
+            assert page.page.frame_locator("#view").locator("body").evaluate("() => document.hasFocus()")
         first_views = len(page.views)
     # the station restarts on the same port: another session, another token, another vehicle
     with station(tmp_path, SECOND_TOKEN, port) as second, \
