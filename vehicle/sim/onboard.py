@@ -108,9 +108,7 @@ class SimController:
     def traffic(self) -> list[Traffic]:
         if self.team is None:
             return []
-        own, now = self.simulation, self.simulation.time
-        return [Traffic(vehicle, *sim.body.pose.xyz(), sim.body.vx, sim.body.vy, sim.limits.radius, now)
-                for vehicle, sim in zip(self.team.ids, self.team.simulations, strict=True) if sim is not own]
+        return [other for other in self.team.traffic() if other.vehicle != self.system_id]
 
     def took_over(self) -> str | None:
         pilot = self.autopilot

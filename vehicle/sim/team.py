@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from vehicle.protocol.traffic import Traffic
 from vehicle.sim.simulation import PlacementError, Simulation
 from vehicle.world.collision import WALKABLE_NORMAL_Z, Collider, Contact, TriangleGrid
 from vehicle.world.sonar import Bodies
@@ -58,6 +59,9 @@ class Team:
         self._pair_list = [(i, j, float(self.radii[i] + self.radii[j]))
                            for i in range(len(simulations)) for j in range(i + 1, len(simulations))]
         self._ids = np.array(ids)
+        self._radii = self.radii.tolist()
+        self._traffic: list[Traffic] = []
+        self._traffic_steps = -1
 
     def __len__(self) -> int:
         return len(self.simulations)
@@ -77,24 +81,41 @@ class Team:
         if len(sims) > 1:
             self._collide(moves)
         readings = []
+        centres = None  # every body's centre, taken once a step when some sonar reads (all moved by then)
         for index, (gap, simulation) in enumerate(zip(self.scene_gaps, sims, strict=True)):
             if not simulation.reading_due:  # ten times a second is enough for the scene-gap figure too
                 readings.append([])
                 continue
-            gap.note(simulation.body.pose.xyz())
-            readings.append(simulation.sense(self.others(index, within=simulation.sonars.reach)))
+            if centres is None:
+                centres = [s.body.pose.xyz() for s in sims]
+            gap.note(centres[index])
+            readings.append(simulation.sense(self.others(index, within=simulation.sonars.reach, centres=centres)))
         return readings
 
-    def others(self, index: int, within: float = math.inf) -> Bodies | None:
+    def others(self, index: int, within: float = math.inf,
+               centres: list[tuple[float, float, float]] | None = None) -> Bodies | None:
         """Every body but vehicle ``index``'s (wrecks too: they still stand in the way) whose surface is
-        within ``within`` metres of its centre; None when there is none (then a read costs what it does alone)."""
-        here = self.simulations[index].body.pose.xyz()
-        near = [k for k, sim in enumerate(self.simulations)
-                if k != index and math.dist(here, sim.body.pose.xyz()) - self.radii[k] <= within]
+        within ``within`` metres of its centre; None when there is none (then a read costs what it does alone).
+        ``centres``: every body's centre now, when the caller has them already."""
+        if centres is None:
+            centres = [s.body.pose.xyz() for s in self.simulations]
+        here = centres[index]
+        near = [k for k, (centre, radius) in enumerate(zip(centres, self._radii, strict=True))
+                if k != index and math.dist(here, centre) - radius <= within]
         if not near:
             return None
-        centres = np.array([self.simulations[k].body.pose.xyz() for k in near], dtype=np.float64)
-        return Bodies(self._ids[near], centres, self.radii[near])
+        return Bodies(self._ids[near], np.array([centres[k] for k in near], dtype=np.float64), self.radii[near])
+
+    def traffic(self) -> list[Traffic]:
+        """Every vehicle as its team-mates know it now, in the team's order: made once a step, however many
+        agents ask how many times (each agent asks for its team-mates several times a step)."""
+        steps = self.simulations[0].steps
+        if self._traffic_steps != steps:
+            now = self.simulations[0].time
+            self._traffic = [Traffic(vehicle, *sim.body.pose.xyz(), sim.body.vx, sim.body.vy, sim.limits.radius, now)
+                             for vehicle, sim in zip(self.ids, self.simulations, strict=True)]
+            self._traffic_steps = steps
+        return self._traffic
 
     def _collide(self, moves: list) -> None:
         """Check every pair over the step just taken (a wreck stands where it lies); note the closest.
