@@ -1,11 +1,14 @@
 """The station's live radio tomography: one image per window of the fleet's link records, in a thread of its own.
 
 A frame is a pure function of the records: the frame at window boundary T (a multiple of ``window`` s of the
-records' own clock) images the records with ``T - history <= t < T`` (``vehicle.tomography.reconstruct``: one image over
-them all of each path's attenuation below the level a path-loss model fitted across the links predicts for it, so
-a team's dwells build the image up), leaving out links
-heard fewer than ``MIN_HEARD`` times (a radio in motion makes a new link with every packet: each says little
-and all of them grow the solve).
+records' own clock) images, of every path heard in the last ``FORGET`` s before T, its records of the last
+``history`` s in which it was heard (``vehicle.tomography.reconstruct``: one image over them all of each path's
+attenuation below the level a path-loss model fitted across the links predicts for it, so a team's dwells build
+the image up). A fixed network's paths are heard all along, so its image slides with the last ``history`` s; a
+team's pair of spots is heard only while it dwells there, and stays in the image for ``FORGET`` s after, so the
+image of a mission outlives the mission (the landed team's one link at home does not replace it). Links heard
+fewer than ``MIN_HEARD`` times are left out (a radio in motion makes a new link with every packet: each says
+little and all of them grow the solve).
 The live thread images the newest complete window whenever the log grows past a boundary; a solve slower than a
 window skips the windows that closed meanwhile, it never queues them. In replay the log is the replayed one,
 rebuilt by a seek, so the frame at any time is the one the live station showed then. The thread reads only the
@@ -30,10 +33,12 @@ from vehicle.tomography.links import KEY_STEP, Records, factorize, link_keys, re
 from vehicle.tomography.picture import STOPS, colours
 
 WINDOW = 1.0  # s of the records' clock per frame
-HISTORY = 300.0  # s of records imaged in a frame: a team's mission (40 pairs of spots, 3 s dwells) measures each
-# pair once, so the image needs the paths of the whole mission to cross the area from many sides; with 60 s (10 to
-# 16 paths) the demo's peak jumped 2 to 8 m off a standing target between frames; a person who walks on leaves a
-# trail in it (the experiments below image a whole run too)
+HISTORY = 300.0  # s of a path's records imaged, back from when it was last heard: a fixed network's image slides
+# with it (a person standing for most of it starts to fade into the paths' own levels)
+FORGET = 900.0  # s after which a path no longer heard leaves the image: a team's mission (40 pairs of spots, 3 s
+# dwells) measures each pair once, so its image needs every pair of the mission; with the last 60 s of records (10
+# to 16 paths) the demo's peak jumped 2 to 8 m off a standing target between frames, and once the team landed its
+# one link at home was all the image had left
 CELL = 0.25  # m: the image's pixel (the experiments' choice: half the 0.5 m a target must be found within)
 PEAKS = 3
 MEASURE = "mean"  # attenuation below each link's empty-area level: a target that stood still for most of the
@@ -86,9 +91,12 @@ def frame_at(records: Records, end: float, window: float = WINDOW, history: floa
              peaks: int = PEAKS) -> Frame | None:
     """The frame at window boundary ``end`` from every record the station holds (see the module's docstring);
     None when no link was heard often enough to image."""
-    used = records.select((records.t >= end - history) & (records.t < end))
+    used = records.select((records.t >= end - FORGET - history) & (records.t < end))
     if len(used):
         _, link = factorize(pair_keys(used))
+        last = np.full(int(link.max()) + 1, -np.inf)
+        np.maximum.at(last, link, used.t)
+        used, link = used.select(keep := (last[link] >= end - FORGET) & (used.t >= last[link] - history)), link[keep]
         used = used.select((np.bincount(link)[link] >= MIN_HEARD) & evenly(link, PER_LINK))
     if len(used) < 2:
         return None

@@ -140,3 +140,26 @@ def test_a_link_heard_all_along_is_imaged_from_records_spread_over_the_history()
     assert frame.records <= 120 * PER_LINK < len(records) / 2
     best = frame.peaks[0]
     assert math.dist((best["x"], best["y"]), TARGET) < 0.5, frame.peaks
+
+
+def test_a_missions_image_outlives_the_mission():
+    """Landed at home, a team's radios go on measuring the one link between their homes: the paths the mission
+    measured stay in the image (for FORGET s), where a sliding history forgot them and showed that one link."""
+    from test_tomography_reference import TARGET as STANDING
+    from test_tomography_reference import one_turn_each
+
+    from groundstation.rti_live import FORGET
+    from vehicle.tomography.links import Records
+
+    mission = one_turn_each(2)
+    home = np.arange(240.0, 640.0, 0.5)  # a pair of spots heard on after the mission, as two homes are
+    rows = np.flatnonzero(mission.t < 2.0)[:1]  # the first pair's path
+    after = Records("after", home, np.repeat(mission.tx[rows], len(home), 0), np.repeat(mission.rx[rows], len(home), 0),
+                    np.full(len(home), mission.rssi[rows][0]), np.repeat(mission.channel[rows], len(home)))
+    records = Records("all", *(np.concatenate([a, b]) for a, b in zip(
+        (mission.t, mission.tx, mission.rx, mission.rssi, mission.channel),
+        (after.t, after.tx, after.rx, after.rssi, after.channel), strict=True)))
+    frame = frame_at(records, 640.0)
+    assert 640.0 - 240.0 < FORGET and frame.paths > 100
+    best = frame.peaks[0]
+    assert math.dist((best["x"], best["y"]), STANDING) < 0.5, frame.peaks
