@@ -94,8 +94,9 @@ class SonarArray:
         self._servos = any(s.servo is not None for s in sensors)
         self._yaw_offsets = [s.yaw_offset for s in sensors]  # fixed unless a servo turns one
         self._max_range = max((s.max_range for s in sensors), default=0.0)
-        self._cone_sin = [math.sin(math.radians(s.beam_angle)) for s in sensors]
-        self._cone_cos = [math.cos(math.radians(s.beam_angle)) for s in sensors]
+        self._cone_sin = np.array([math.sin(math.radians(s.beam_angle)) for s in sensors])
+        self._cone_cos = np.array([math.cos(math.radians(s.beam_angle)) for s in sensors])
+        self._max_ranges = np.array([s.max_range for s in sensors], dtype=np.float64)
 
     @property
     def reach(self) -> float:
@@ -129,7 +130,7 @@ class SonarArray:
         hit_by = [None] * len(self.sensors)
         world_axes = axes @ to_world
         if bodies is not None and len(bodies.ids):
-            near = self._in_cones(xyz, world_axes.tolist(), bodies)
+            near = self._in_cones(xyz, world_axes, bodies)
             if near:
                 self._echo_off_bodies(origin, directions, bodies, near, nearest, hit_by)
         readings = []
@@ -146,28 +147,12 @@ class SonarArray:
                                     None if value is None else hit_by[index]))
         return readings
 
-    def _in_cones(self, xyz: tuple[float, float, float], axes: list[list[float]], bodies: Bodies) -> list[int]:
+    def _in_cones(self, xyz: tuple[float, float, float], axes, bodies: Bodies) -> list[int]:
         """The bodies some sensor's cone may meet: within its range and inside its angle, widened by the angle
-        the sphere itself spans. Plain floats: most reads have none, and must then cost what a lone read does."""
-        near = []
-        for k, ((cx, cy, cz), radius) in enumerate(zip(bodies.centres.tolist(), bodies.radii.tolist(), strict=True)):
-            dx, dy, dz = cx - xyz[0], cy - xyz[1], cz - xyz[2]
-            distance = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if distance <= radius:
-                near.append(k)  # inside it: every ray starts in the sphere
-                continue
-            sin_body = radius / distance  # the half-angle the sphere spans, as seen from here
-            cos_body = math.sqrt(1.0 - sin_body * sin_body)
-            for (ax, ay, az), sensor, sin_cone, cos_cone in zip(axes, self.sensors, self._cone_sin, self._cone_cos,
-                                                                strict=True):
-                if distance - radius > sensor.max_range:
-                    continue
-                # inside the cone when the angle to the centre is under the cone's half-angle plus the sphere's
-                cos_widened = cos_cone * cos_body - sin_cone * sin_body
-                if (dx * ax + dy * ay + dz * az) / distance >= cos_widened:
-                    near.append(k)
-                    break
-        return near
+        the sphere itself spans (``axes``: each sensor's beam axis in the scene frame)."""
+        return _bodies_in_cones(np.asarray(xyz, dtype=np.float64), np.asarray(axes, dtype=np.float64),
+                                bodies.centres, bodies.radii, self._cone_sin, self._cone_cos,
+                                self._max_ranges).tolist()
 
     def _echo_off_bodies(self, origin: np.ndarray, directions: np.ndarray, bodies: Bodies, near: list[int],
                          nearest: list[float], hit_by: list[int | None]) -> None:
@@ -179,6 +164,35 @@ class SonarArray:
             if k >= 0 and value < nearest[index]:
                 nearest[index] = value
                 hit_by[index] = int(bodies.ids[near[k]])
+
+
+@numba.njit(cache=True)
+def _bodies_in_cones(xyz, axes, centres, radii, cone_sin, cone_cos, max_range):
+    """The indices of the spheres inside some sensor's range and cone (its half-angle widened by the angle the
+    sphere spans from ``xyz``), or that ``xyz`` lies in. Compiled: every read of a team's vehicle asks it of
+    every team-mate within range, and most answers are none."""
+    near = np.empty(len(radii), dtype=np.int64)
+    count = 0
+    for k in range(len(radii)):
+        dx, dy, dz = centres[k, 0] - xyz[0], centres[k, 1] - xyz[1], centres[k, 2] - xyz[2]
+        distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+        radius = radii[k]
+        if distance <= radius:
+            near[count] = k  # inside it: every ray starts in the sphere
+            count += 1
+            continue
+        sin_body = radius / distance  # the half-angle the sphere spans, as seen from here
+        cos_body = math.sqrt(1.0 - sin_body * sin_body)
+        for sensor in range(len(cone_sin)):
+            if distance - radius > max_range[sensor]:
+                continue
+            # inside the cone when the angle to the centre is under the cone's half-angle plus the sphere's
+            cos_widened = cone_cos[sensor] * cos_body - cone_sin[sensor] * sin_body
+            if (dx * axes[sensor, 0] + dy * axes[sensor, 1] + dz * axes[sensor, 2]) / distance >= cos_widened:
+                near[count] = k
+                count += 1
+                break
+    return near[:count]
 
 
 @numba.njit(cache=True)
