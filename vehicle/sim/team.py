@@ -7,10 +7,11 @@ step is two halves over every vehicle: all bodies move (``Simulation.move``,
 checked against the scene), then every pair is checked over that same step,
 then all sonars read (``Simulation.sense``) with the other bodies as spheres
 to echo off. So one vehicle costs what it costs alone, plus a pair check per
-step in plain floats and, per read, a scalar pick of the bodies within sonar
+step in plain floats and, per read, a compiled pick of the bodies within sonar
 range and inside a cone: a read with none costs what a lone one does, and
-only the bodies picked meet the rays as arrays. The same vehicles given the
-same seeds fly the same way, whatever the machine.
+only the bodies picked meet the rays (a compiled ray-sphere loop). What the
+agents ask of their team-mates (``traffic``) is made once a step. The same
+vehicles given the same seeds fly the same way, whatever the machine.
 
 Two bodies collide when their centres, each moving in a straight line over the
 step, come closer than the sum of their radii (the closest approach of two

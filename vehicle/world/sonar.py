@@ -10,7 +10,7 @@ the body, optionally on a servo driven by PWM.
 
 In a team (``vehicle.sim.team``) the other vehicles are bodies too: spheres the
 cone echoes off as off a wall, met analytically (ray-sphere), the nearest echo
-of mesh and bodies winning. A scalar pre-check per read keeps only the bodies
+of mesh and bodies winning. A compiled pre-check per read keeps only the bodies
 within a sensor's range and inside its cone (widened by the angle the sphere
 spans); a read with none left costs what a lone vehicle's does.
 """
