@@ -23,6 +23,7 @@ import uvicorn
 from groundstation.app import create_app
 from groundstation.link import Link
 from groundstation.mapview import MapPictures
+from groundstation.mission_left import route_of
 from groundstation.proxy import VizProxy
 from groundstation.recorder import Limits, Recorder
 from groundstation.recordings import RecordingIndex, Replays
@@ -218,6 +219,7 @@ class GroundStation:
         vehicle = self.fleet.get(sysid)
         if vehicle is not None and self.fleet.datum is not None:
             vehicle.waypoints = positions(items, self.fleet.datum)
+            vehicle.route = route_of(items, self.fleet.datum)
 
     @property
     def streams(self) -> int:

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from groundstation.history import History
+from groundstation.mission_left import Route, left
 from vehicle.mapping.memory_map import OCCUPIED_AT, MemoryMap
 from vehicle.protocol import agent_status
 from vehicle.protocol.frames import Pose
@@ -175,6 +176,7 @@ class VehicleState:
     unmapped: deque = field(default_factory=lambda: deque(maxlen=HITS_KEPT))  # readings waiting for own_map
     first_heard: float = 0.0  # receiver clock
     waypoints: list[tuple[float, float]] = field(default_factory=list)  # the AUTO mission, scene x, y
+    route: Route | None = None  # the same, with item numbers, loiter times and speeds (``mission_left``)
     other_gcs: tuple[int, str, float] | None = None  # another station in command: its sysid, what showed it, when
     ordered: tuple[float, int | None] = (-math.inf, None)  # when this station or the companion last ordered a
     # mode change, and the mode (custom_mode) if the order named one
@@ -630,7 +632,8 @@ class Fleet:
                                                        "flight_left_s": _round(self.flight_left(v), 0)},
             "link": {"state": v.link_state(now), "heartbeat_age": age, "messages": v.messages_received,
                      "mavlink": v.mavlink_version, "signed": v.signed},
-            "mission": {"current": v.mission_current, "total": v.mission_total, "reached": v.mission_reached},
+            "mission": {"current": v.mission_current, "total": v.mission_total, "reached": v.mission_reached,
+                        "left": left(v.route, v.mission_current, (v.x, v.y), v.speed)},
             "status": v.status,
             "status_age": _round(now - v.messages[-1]["time"], 1) if v.messages else None,
             "agent": None if v.agent is None else {

@@ -165,9 +165,14 @@ function headingText(h) {
   return `${((Math.round(h) % 360) + 360) % 360}°`;
 }
 
+/** The autopilot's mission: the item it flies to, and what is left of it (distance, and time at its speed). */
 function progressText(m) {
   if (!m || !isNum(m.total) || m.total <= 0) return "no mission";
-  return `item ${isNum(m.current) ? m.current : "–"} / ${m.total}`;
+  const item = `item ${isNum(m.current) ? m.current : "–"} / ${m.total}`;
+  const rest = m.left && isNum(m.left.m) ? m.left : null;
+  if (!rest) return item;
+  const time = isNum(rest.s) && isNum(rest.speed) ? `, about ${minutes(rest.s)} at ${fmt(rest.speed)} m/s` : "";
+  return `${item} · ${Math.round(rest.m)} m left${time}`;
 }
 
 function mapText(m) {

@@ -145,6 +145,9 @@ def fly_and_watch(page, station: RunningStation, sysid: int, speedup: float, tri
     expect(ack).to_have_text(re.compile(rf"^Fly \(AUTO\) vehicle {sysid}: accepted · "))
     station.http.wait_vehicle(sysid, lambda v: v["mode"] == "AUTO" and (v["mission"]["current"] or 0) >= 2, 60,
                               speedup, "AUTO, flying the plan")
+    # the card says what is left of it: the legs, and the time at the plan's speeds
+    expect(page.locator(f'.vehicle-card[data-sysid="{sysid}"] .progress-item')).to_have_text(
+        re.compile(r"^item \d+ / \d+ · \d+ m left, about \d+ (s|min) at [\d.]+ m/s$"))
     flown = station.http.wait_vehicle(
         sysid, lambda v: v["mode"] == "AUTO" and (v["mission"]["reached"] or 0) >= 4, 180, speedup,
         "waypoint 2 (mission item 4) reached")

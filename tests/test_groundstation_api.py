@@ -930,3 +930,23 @@ def test_without_a_scene_the_given_datum_places_live_and_replayed_vehicles():
     for given in (Datum(51.5, -0.12, 11.0), None):  # None: the first home heard becomes the origin
         with idle_station(datum=given) as station:
             assert station.datum == given and station.live.datum == given
+
+
+def test_an_uploaded_mission_says_what_is_left_of_it(api, grounded):
+    """QGroundControl's "time remaining": the legs from the vehicle through the items left, at the speed the
+    mission sets, plus its loiter time."""
+    datum = Datum()
+    home = datum.to_global(-4.0, -4.0)
+    (a_lat, a_lon), (b_lat, b_lon) = datum.to_global(-4.0, 0.0), datum.to_global(-1.0, 4.0)
+    text = "\n".join(["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{home[0]:.8f}\t{home[1]:.8f}\t0.000000\t1",
+                      "1\t0\t3\t178\t1\t2.0\t-1\t0\t0\t0\t0\t1",  # DO_CHANGE_SPEED: 2 m/s
+                      f"2\t0\t3\t16\t0\t0\t0\t0\t{a_lat:.8f}\t{a_lon:.8f}\t4.000000\t1",
+                      f"3\t0\t3\t19\t10\t0\t0\t0\t{b_lat:.8f}\t{b_lon:.8f}\t4.000000\t1"]) + "\n"  # loiter 10 s
+    assert api.put("/api/vehicles/2/mission", content=text, headers=api.operator).status_code == 200
+
+    def left():
+        return api.get("/api/vehicles/2").json()["mission"]["left"]
+
+    wait_wall(lambda: left() is not None, 30.0, "the mission's remaining legs")
+    assert left()["m"] == pytest.approx(4.0 + 5.0, abs=0.05)  # from home (-4, -4) to (-4, 0), then (-1, 4)
+    assert left()["s"] == pytest.approx(9.0 / 2.0 + 10.0, abs=1.0) and left()["speed"] == 2.0
