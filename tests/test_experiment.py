@@ -83,6 +83,14 @@ def test_a_start_inside_an_obstacle_is_an_error_with_a_reason(scene_file):
     assert README_KEYS - {"sim_time_s", "distance_m"} <= set(result)
 
 
+def test_a_run_that_ends_in_a_collision_exits_1_saying_so(tmp_path, capsys):
+    """A script running experiments must not take a crash for a flight that went well (it exited 0)."""
+    path = tmp_path / "roof.wrl"
+    path.write_text(HEADER + GROUND + box(0, 0, 2.6, 12, 12, 0.2))  # a roof 2.5 m over the start
+    assert main(["experiment", "--scene", str(path), "--start", "0,0,0.5", "--mission", "square"]) == 1
+    assert "square in roof.wrl (copter): collision - collision at x=0.00 y=0.00" in capsys.readouterr().out
+
+
 def test_an_unreadable_scene_is_an_error(tmp_path):
     result = run(tmp_path / "missing.wrl")
     assert result["outcome"] == "error"

@@ -171,7 +171,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     if log_error is not None:
         print(f"vehicle {args.command}: {log_error}", file=sys.stderr)
         return 2
-    return 0 if result["outcome"] != "error" else 1
+    return failed(result)
 
 
 def _team_experiment(args: argparse.Namespace, scene, settings, datum, waypoints) -> int:
@@ -218,7 +218,7 @@ def _team_experiment(args: argparse.Namespace, scene, settings, datum, waypoints
         print(f"team: {result['detections']} occupied cells together (maps {shared}); "
               f"closest approach between vehicles {_metres(result['closest_vehicles_m'])}; "
               f"{result['sim_time_s']:.1f} s simulated in {result['wall_time_s']:.2f} s")
-    return 0 if result["outcome"] != "error" else 1
+    return failed(result)
 
 
 def _metres(value: float | None) -> str:
@@ -416,7 +416,13 @@ def cmd_agent(args: argparse.Namespace) -> int:
         if "detections" in result:
             print(f"detections {result['detections']}; {result['sim_time_s']:.1f} s of the autopilot's clock in "
                   f"{result['wall_time_s']:.1f} s; {result['distance_m']:.1f} m flown")
-    return 0 if result["outcome"] != "error" else 1
+    return failed(result)
+
+
+def failed(result: dict) -> int:
+    """A run's exit code: 1 when it ended in an error or a collision (a script must not take it for a flight
+    that went well), else 0; the result says which."""
+    return 1 if result["outcome"] in ("error", "collision") else 0
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
