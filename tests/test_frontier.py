@@ -79,3 +79,33 @@ def test_search_in_a_closed_room_ends_only_when_no_reachable_frontier_is_left():
     known = float(np.mean(m.grid[r0:r1, c0:c1] != 0))
     assert known > 0.5, known
     assert "no reachable frontier left" in result["reason"], result["reason"]
+
+
+def test_the_nearest_frontier_looked_for_near_the_vehicle_first_is_the_one_the_whole_map_gives(monkeypatch):
+    """Search looks for the nearest frontier around the vehicle before the whole map (half a team's time went
+    to the whole shared map): from every spot of a map that Search made, the answer must be the same."""
+    from vehicle.agent.missions import search
+    from vehicle.agent.settings import Settings
+    from vehicle.lab.stepper import simulate
+    from vehicle.world.bundled import default_scene
+    from vehicle.world.scene import load_scene
+
+    stepper = simulate(load_scene(str(default_scene())), "search", settings=Settings(time_limit=600))
+    stepper.run(240)
+    mission, ctx = stepper.agent.mission, stepper.agent.ctx
+    spots = [(float(x), float(y)) for x in np.arange(-18, 19, 6.0) for y in np.arange(-18, 19, 6.0)
+             if ctx.is_clear((float(x), float(y)))]
+    assert len(spots) > 20
+
+    def goals(near: float) -> list:
+        monkeypatch.setattr(search, "NEAR_FRONTIER", near)
+        found = []
+        for spot in spots:
+            monkeypatch.setattr(type(ctx), "position", property(lambda self, spot=spot: spot))
+            found.append(mission.nearest_frontier())
+        return found
+
+    whole = goals(1e6)
+    assert sum(goal is not None for goal in whole) > 10
+    for near in (search.NEAR_FRONTIER, 4.0, 2.0):  # the nearer, the more often the whole map decides
+        assert goals(near) == whole, near

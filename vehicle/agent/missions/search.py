@@ -36,6 +36,8 @@ VISITED_FRACTION = 0.2  # goals closer to an earlier goal or scan spot than this
 VISITED_MAX = 6.0  # m, whatever the space size
 MIN_LEG = 1.0  # m: goals closer than this are not worth a trip
 LOOKED_RADIUS = 1.0  # m: frontier cells this near a spot scanned from (or a goal given up on) stay unknown to the sonar
+NEAR_FRONTIER = 10.0  # m: the nearest frontier is first looked for this far around the vehicle (by path) ...
+NEAR_MARGIN = 5.0  # m: ... in a square this much wider
 TIE = 1e-9  # m: arcs whose mean free distances differ by less are equally open (whatever the rounding)
 
 
@@ -126,11 +128,21 @@ class Search(Mission):
         box = (ctx.home[0] - half, ctx.home[1] - half, ctx.home[0] + half, ctx.home[1] + half)
         done = max(ctx.settings.closeness, LOOKED_RADIUS) + 1.0 / m.resolution  # a goal counts as reached that far
         min_cells = max(1, math.ceil(2 * ctx.radius * m.resolution))  # a frontier narrower than the body
-        for found in frontier.on_map(m, ctx.position, ctx.planner.margin_cells(0.0), min_cells, box,
-                                     self.looked, done):
-            goal = m.center_of(*found.goal)
-            if not someone_elses(ctx, goal):
-                return goal
+        x, y = ctx.position
+        side = NEAR_FRONTIER + NEAR_MARGIN
+        near = (max(box[0], x - side), max(box[1], y - side), min(box[2], x + side), min(box[3], y + side))
+        # first around the vehicle (a path no longer than NEAR_FRONTIER stays within it, and the margin holds
+        # what decides a frontier's goal there: the walls a body keeps clear of, the unknown beside it, the rest
+        # of the frontier), then the whole map: a team's shared map is the team's whole area, and the search
+        # over it was half of a team's time
+        for area, within in ((near, NEAR_FRONTIER * m.resolution), (box, math.inf)):
+            for found in frontier.on_map(m, ctx.position, ctx.planner.margin_cells(0.0), min_cells, area,
+                                         self.looked, done):
+                if math.isfinite(within) and (found.narrow or found.distance > within):
+                    break  # beyond the square's exact reach, or behind a gap: the whole map decides
+                goal = m.center_of(*found.goal)
+                if not someone_elses(ctx, goal):
+                    return goal
         return None
 
     def _unknown_around(self, point: tuple[float, float]) -> float:
