@@ -30,6 +30,7 @@ FOLLOW_DISTANCE = (8.0, 2.0, 200.0)  # m behind the vehicle: default, nearest, f
 TOP_HEIGHT = (30.0, 3.0, 500.0)  # m above the vehicle (top-down): default, lowest, highest
 SELECTED = (255, 255, 255)
 TARGET_COLOUR = (255, 230, 0)
+WALL_MARGIN = 0.3  # m: the follow camera stops this far in front of a wall between it and the vehicle
 TARGET_REACHED = 1.0  # m (across the ground) from the target at which a vehicle sent there has reached it
 
 
@@ -45,6 +46,25 @@ class Vehicle:
     yaw: float
     pitch: float
     colour: tuple[int, int, int]
+
+
+def clear_eye(vehicle, eye, ground_point) -> np.ndarray:
+    """The eye pulled in front of the first wall (or the ground) between the vehicle and it, so the
+    follow camera sees the vehicle rather than the back of a building. ``ground_point(origin, direction)``
+    is the scene's ray cast (falling back to the plane z = 0)."""
+    vehicle, eye = np.asarray(vehicle, dtype=float), np.asarray(eye, dtype=float)
+    offset = eye - vehicle
+    length = float(np.linalg.norm(offset))
+    if length < 1e-6:
+        return eye
+    direction = offset / length
+    hit = ground_point(vehicle, direction)
+    if hit is None:
+        return eye
+    distance = float(np.dot(np.asarray(hit, dtype=float) - vehicle, direction))
+    if distance < 0.0 or distance >= length:
+        return eye
+    return vehicle + direction * max(distance - WALL_MARGIN, 0.0)
 
 
 def _dart() -> tuple[np.ndarray, np.ndarray]:
@@ -217,7 +237,8 @@ class Viewport:
             return
         if self.mode == "follow":
             self.heading = camera.smooth_angle(self.heading, target.yaw, dt, HEADING_LAG)
-            self._place(camera.follow(target.position, self.heading, self.follow_distance))
+            eye, look = camera.follow(target.position, self.heading, self.follow_distance)
+            self._place((clear_eye(target.position, eye, ground_point), look))
         elif self.mode == "onboard":
             self._place(camera.onboard(target.position, target.yaw, target.pitch))
         elif self.mode == "top":
