@@ -15,6 +15,10 @@ const colourRe = /^#[0-9a-f]{6}$/i;
 
 const MISSING_MS = 15000;
 let vehicles = [];
+const PROXIMITY_LADDER = [5, 10, 20, 40];  // m: the proximity ring's ranges, the nearest above the farthest echo
+const ECHO_MEMORY_MS = 3000;  // the ring scales to the echoes of the last few seconds, so it does not flicker
+const LABEL_PX = 11;  // the instruments' letters are at least this tall on screen
+let echoes = [];  // recent echoes of the selected vehicle: {sysid, t, distance}
 let missingSince = null;
 const dismissed = new Set();
 window.selectedVehicle = null;
@@ -132,7 +136,27 @@ function renderInstruments() {
     ? `roll ${fmt(att.roll)}°, pitch ${fmt(att.pitch)}°` : "–";
   drawAttitude($("#attitude"), isNum(att.roll) ? att.roll : 0, isNum(att.pitch) ? att.pitch : 0);
   drawCompass($("#compass"), isNum(v.heading) ? v.heading : null, colourOf(v));
-  drawProximity($("#proximity"), sonars, colourOf(v));
+  drawProximity($("#proximity"), sonars, colourOf(v), proximityRange(v.sysid, sonars));
+}
+
+/** A canvas font size (canvas pixels) that shows ``px`` tall on screen: the instruments are drawn at 150 and
+ * shown at 100 px. */
+function screenPx(canvas, px) {
+  return Math.ceil(px * canvas.width / (canvas.clientWidth || canvas.width));
+}
+
+/** The proximity ring's range: the ladder's step just above the farthest echo of the last few seconds (the
+ * nearest step when nothing echoes), so echoes at 7 to 11 m fill the ring rather than a corner of 40 m. */
+function proximityRange(sysid, sonars) {
+  const now = performance.now();
+  echoes = echoes.filter((e) => e.sysid === sysid && now - e.t < ECHO_MEMORY_MS);
+  for (const s of sonars) {
+    if (s && isNum(s.distance) && isNum(s.max_range) && s.distance < s.max_range) {
+      echoes.push({ sysid, t: now, distance: s.distance });
+    }
+  }
+  const farthest = Math.max(0, ...echoes.map((e) => e.distance));
+  return PROXIMITY_LADDER.find((step) => step > farthest) ?? PROXIMITY_LADDER[PROXIMITY_LADDER.length - 1];
 }
 
 /** An artificial horizon: sky and ground turned by the roll and shifted by the pitch, the aircraft fixed. */
@@ -202,7 +226,7 @@ function drawCompass(canvas, heading, colour) {
   ctx.fillStyle = "#dde3ea";
   ctx.textAlign = "center";
   ctx.textBaseline = "middle";
-  ctx.font = "bold 12px system-ui, sans-serif";
+  ctx.font = `bold ${screenPx(canvas, LABEL_PX + 1)}px system-ui, sans-serif`;
   for (let d = 0; d < 360; d += 10) {
     const a = d * Math.PI / 180;
     const long = d % 30 === 0;
@@ -248,11 +272,13 @@ function proximityColour(s) {
 
 /** The sonars seen from above, nose up: each a sector at its bearing and beam width, as long as its echo
  * (clear to its range when there is none), coloured by distance. */
-function drawProximity(canvas, sonars, colour) {
+/** The sonars around the vehicle out to ``range`` metres: an echo is a sector as long as its distance, a clear
+ * sonar (or an echo beyond the range) a sector to the ring's edge. */
+function drawProximity(canvas, sonars, colour, range) {
   const ctx = canvas.getContext("2d");
   const w = canvas.width, r = w / 2;
-  const range = Math.max(1, ...sonars.map((s) => (isNum(s.max_range) ? s.max_range : 0)));
   const scale = (r - 6) / range;
+  canvas.dataset.range = String(range);
   ctx.clearRect(0, 0, w, w);
   ctx.fillStyle = "#0b0e11";
   ctx.beginPath();
@@ -269,7 +295,7 @@ function drawProximity(canvas, sonars, colour) {
     const half = Math.max(6, isNum(s.beam) ? s.beam / 2 : 10) * Math.PI / 180;  // narrow beams still show
     const a = s.bearing * Math.PI / 180 - Math.PI / 2;  // canvas angle: 0 east, clockwise; bearing 0 is up
     const near = isNum(s.distance) && isNum(s.max_range) && s.distance < s.max_range;
-    const length = Math.max(4, (near ? s.distance : (isNum(s.max_range) ? s.max_range : range)) * scale);
+    const length = Math.max(4, Math.min(near ? s.distance : range, range) * scale);
     ctx.fillStyle = proximityColour(s);
     ctx.beginPath();
     ctx.moveTo(r, r);
@@ -284,9 +310,9 @@ function drawProximity(canvas, sonars, colour) {
   ctx.lineTo(r - 5, r + 6);
   ctx.fill();
   ctx.fillStyle = "#8d99a6";
-  ctx.font = "10px system-ui, sans-serif";
+  ctx.font = `${screenPx(canvas, LABEL_PX)}px system-ui, sans-serif`;
   ctx.textAlign = "center";
-  ctx.fillText(`${Math.round(range)} m`, r, w - 6);
+  ctx.fillText(`${range} m`, r, w - 6);
   ctx.textAlign = "start";
 }
 

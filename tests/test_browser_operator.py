@@ -155,6 +155,25 @@ def test_instruments_show_the_selected_vehicle(page, station):
     colours = canvas_colours(page, "#proximity")
     sectors = {c for c in colours if c[1] >= 8 and c[0] <= 8 or c[0] >= 14 and c[2] <= 5}
     assert sectors, colours
+    # the ring's range is the ladder's step (5, 10, 20, 40 m) just above the farthest echo, not the sonars' 40 m:
+    # the copter waiting on the ground hears walls 8 to 18 m away, so its ring is 20 m
+    ladder = [5, 10, 20, 40]
+    page.locator(f'#fleet-list .fleet-item[data-sysid="{IDLE}"]').click()
+    expect(page.locator("#instruments-vehicle")).to_have_text(f"{IDLE} copter")
+
+    def ring_fits() -> bool:
+        sonar = station.http.vehicles()[IDLE]["sonar"]
+        echoes = [s["distance"] for s in sonar if s["distance"] is not None and s["distance"] < s["max_range"]]
+        wanted = next((step for step in ladder if step > max(echoes, default=0.0)), ladder[-1])
+        shown = page.eval_on_selector("#proximity", "c => Number(c.dataset.range)")
+        seen.append((echoes, shown))
+        return shown == wanted < ladder[-1]
+    seen.clear()
+    try:
+        wait_wall(ring_fits, 30, "the proximity ring at the ladder's step above the echoes",
+                  sleep=lambda: page.wait_for_timeout(300))
+    except AssertionError as error:
+        raise AssertionError(f"{error}; (echoes, range shown): {seen[-4:]}") from None
 
 
 # ---- 4. honest state: warnings shown whole, prominently ---------------------------------------------------
