@@ -51,6 +51,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from groundstation import params
 from groundstation.state import FORGET_AFTER, LINK_LOST_AFTER, Fleet
 from groundstation.traffic_relay import RELAY_PERIOD, relay_reports
 from vehicle.protocol import links, mission, signing
@@ -109,6 +110,7 @@ class Link:
         self.from_elsewhere: Counter[int] = Counter()  # system id -> messages dropped as not from its place
         self._asked: dict[int, tuple[float, float]] = {}  # sysid -> (its last heartbeat, its boot time) when asked
         self._signers: set[tuple[int, int]] = set()  # (system, component) heard signed with the key
+        self.params = params.Schedule()  # which battery failsafe parameters to ask whom for, on the retry clock
         self._pruned = 0.0
         self._waiters: list[_Waiter] = []
         self._transfers: set[int] = set()  # system ids a mission goes to or comes from now
@@ -171,6 +173,7 @@ class Link:
                         self.send(report)
                     next_relay = now + RELAY_PERIOD
                 busy = self._read()
+                self._ask_for_params()
                 self._record_tick()
                 self._prune(now)
             except Exception as error:  # noqa: BLE001 - nothing may stop reception; counted and reported
@@ -214,6 +217,8 @@ class Link:
         beat = message.get_type() == "HEARTBEAT" and component == AUTOPILOT
         self._learn_route(sysid, port, peer, now, beat)
         self.fleet.apply(message, now)
+        if message.get_type() == "PARAM_VALUE" and component == AUTOPILOT:
+            self.params.answered(sysid, params.name_of(message))
         if beat and sysid in self.fleet.vehicles:  # a vehicle the fleet holds (a refused one gets no answer)
             self._ask_for_telemetry(sysid, now)
         if hasattr(message, "time_boot_ms") and component == AUTOPILOT and sysid in self._asked:
@@ -267,6 +272,7 @@ class Link:
         for sysid in [s for s, (_, _, heard, _) in self.route.items() if now - heard > FORGET_AFTER]:
             del self.route[sysid]
             self._asked.pop(sysid, None)
+            self.params.forget(sysid)
             self._signers = {sender for sender in self._signers if sender[0] != sysid}
 
     def _ask_for_telemetry(self, sysid: int, now: float) -> None:
@@ -276,6 +282,7 @@ class Link:
         if heard is not None and now - heard <= LINK_LOST_AFTER:
             return
         self.send(_gcs_heartbeat(), sysid)  # first: a vehicle takes orders only from a ground station it heard
+        self.params.start(sysid)
         for message_id, rate in TELEMETRY.items():
             self.send(mavlink.MAVLink_command_long_message(sysid, AUTOPILOT, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
                                                            0, message_id, 1e6 / rate, 0, 0, 0, 0, 0), sysid)
@@ -283,6 +290,12 @@ class Link:
                                                        mavlink.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0), sysid)
         for stream, rate in DATA_STREAMS.items():
             self.send(mavlink.MAVLink_request_data_stream_message(sysid, AUTOPILOT, stream, rate, 1), sysid)
+
+    def _ask_for_params(self) -> None:
+        """PARAM_REQUEST_READ for the battery failsafe parameters each autopilot has not told yet, as
+        ``params.Schedule`` paces them."""
+        for sysid, name in self.params.due(self.retry_clock()):
+            self.send(mavlink.MAVLink_param_request_read_message(sysid, AUTOPILOT, name.encode(), -1), sysid)
 
     # ---- recording ----------------------------------------------------------------------------------
     def _record(self, packet: bytes, now: float, sender: int | None = None) -> None:

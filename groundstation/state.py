@@ -39,6 +39,7 @@ import numpy as np
 
 from groundstation.history import History
 from groundstation.mission_left import Route, left
+from groundstation.params import failsafe, value
 from vehicle.mapping.memory_map import OCCUPIED_AT, MemoryMap
 from vehicle.protocol import agent_status
 from vehicle.protocol.frames import Pose
@@ -84,7 +85,7 @@ FORGET_AFTER = 600.0  # s of the receiver's clock without a message before a veh
 # vehicle): another part of the system, or a sender that took another component's name, does not move it
 POSES = frozenset({"GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE"})  # what moves a vehicle in a view
 AUTOPILOTS_OWN = frozenset({"GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE", "VFR_HUD", "SYS_STATUS",
-                            "HOME_POSITION", "MISSION_CURRENT", "MISSION_ITEM_REACHED"})
+                            "HOME_POSITION", "MISSION_CURRENT", "MISSION_ITEM_REACHED", "PARAM_VALUE"})
 
 TYPES = {
     mavlink.MAV_TYPE_GROUND_ROVER: "rover", mavlink.MAV_TYPE_SURFACE_BOAT: "boat",
@@ -184,6 +185,8 @@ class VehicleState:
     aloft: tuple[float, float] = (0.0, 0.0)  # height at the last armed heartbeat (m), fastest descent since (m/s)
     falling: tuple[float, float] | None = None  # a fall after a disarm in the air: from (m), fastest descent (m/s)
     crash: tuple[float, str] | None = None  # the last crash or fall: when (receiver clock), what
+    params: dict[str, float] = field(default_factory=dict)  # its battery failsafe parameters (``params.WANTED``)
+    params_ignored: int = 0  # values of those that were not finite or absurd
 
     @property
     def kind(self) -> str:
@@ -554,6 +557,17 @@ class Fleet:
             return
         self.history.event(vehicle.sysid, now, "command", f"sent {_command_text(vehicle, m)}", 5, "operator")
 
+    def _param_value(self, vehicle, m, now) -> None:
+        """One of the battery failsafe parameters the link asks for (any other is not the station's business)."""
+        known = value(m)
+        if known is None:
+            return
+        name, number = known
+        if number is None:
+            vehicle.params_ignored += 1
+        else:
+            vehicle.params[name] = number
+
     def _mission_current(self, vehicle, m, now) -> None:
         vehicle.mission_current = m.seq
         total = getattr(m, "total", 0)
@@ -629,7 +643,9 @@ class Fleet:
             "heading": _round(math.degrees(v.yaw) % 360), "speed": _round(v.speed), "climb": _round(v.climb),
             "battery": None if v.voltage is None else {"voltage": _round(v.voltage), "remaining": v.remaining,
                                                        "current": _round(v.current),
-                                                       "flight_left_s": _round(self.flight_left(v), 0)},
+                                                       "flight_left_s": _round(self.flight_left(v), 0),
+                                                       "failsafe": failsafe(v.params, v.kind),
+                                                       "params_ignored": v.params_ignored},
             "link": {"state": v.link_state(now), "heartbeat_age": age, "messages": v.messages_received,
                      "mavlink": v.mavlink_version, "signed": v.signed},
             "mission": {"current": v.mission_current, "total": v.mission_total, "reached": v.mission_reached,

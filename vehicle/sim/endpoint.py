@@ -50,7 +50,7 @@ from vehicle.protocol.modes import FORCE_DISARM, STOP_MODE, Kind, mode_name
 from vehicle.protocol.tlog import TlogWriter
 from vehicle.sim.avoidance import MARGIN as AVOID_MARGIN
 from vehicle.sim.mission_server import MissionServer
-from vehicle.sim.simulation import Simulation
+from vehicle.sim.simulation import BATTERY_CRITICAL, BATTERY_LOW, Simulation
 from vehicle.sim.telemetry import Telemetry
 
 GCS = mavlink.MAV_TYPE_GCS
@@ -253,7 +253,9 @@ class Endpoint:
             return self.missions.handle(message, now)
         if kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
             if self.onboard is not None:  # one vehicle to the outside: its agent's mission parameters
-                return self.onboard.handle(message) or []
+                replies = self.onboard.handle(message) or []
+                if replies or kind != "PARAM_REQUEST_READ":
+                    return replies  # (a name the agent has not may still be the autopilot's own)
             return self._autopilot_param(message)
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
             self._position_target_local(message)
@@ -407,10 +409,15 @@ class Endpoint:
 
     # ---- the autopilot's own parameters (as a plain autopilot) ------------------------------------------
     def _autopilot_params(self) -> dict[str, float]:
-        """What an onboard agent reads to plan as the autopilot flies (ArduPilot's names and units); only
-        RTL_ALT (cm) can be set."""
+        """What an onboard agent reads to plan as the autopilot flies, and a ground station shows of its battery
+        failsafe (ArduPilot's names and units: it warns at BATTERY_LOW, lands a copter or holds a rover at
+        BATTERY_CRITICAL, no voltage levels); only RTL_ALT (cm) can be set."""
+        capacity = self.world.battery.capacity_mah
         return {"AVOID_ENABLE": 7.0 if self.autopilot.avoidance is not None else 0.0, "AVOID_MARGIN": AVOID_MARGIN,
-                "WP_RADIUS": self.autopilot.wp_radius, "RTL_ALT": self.autopilot.rtl_altitude * 100.0}
+                "WP_RADIUS": self.autopilot.wp_radius, "RTL_ALT": self.autopilot.rtl_altitude * 100.0,
+                "BATT_CAPACITY": capacity, "BATT_LOW_VOLT": 0.0, "BATT_CRT_VOLT": 0.0,
+                "BATT_LOW_MAH": BATTERY_LOW * capacity, "BATT_CRT_MAH": BATTERY_CRITICAL * capacity,
+                "BATT_FS_LOW_ACT": 0.0, "BATT_FS_CRT_ACT": 1.0 if self.world.kind is Kind.COPTER else 2.0}
 
     def _autopilot_param(self, m) -> list:
         params = self._autopilot_params()
