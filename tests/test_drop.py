@@ -45,7 +45,7 @@ def ramp(degrees: float) -> str:
 def drive(scene, suite: str = "ground", **settings):
     """Pathfind to GOAL; the lowest and the northmost the rover's centre came, whether it arrived, the stepper."""
     stepper = simulate(scene, "pathfind", "rover", Settings(**SETTINGS | settings), start=(0.0, 0.0), heading=0.0,
-                       waypoints=[GOAL], sensors=sensor_suite(suite))
+                       waypoints=[GOAL], sensors=sensor_suite(suite, "rover"))
     start_z = stepper.simulation.pose.z
     lowest, northmost, arrived = start_z, 0.0, False
     for _ in range(int(90 / stepper.simulation.dt)):
@@ -58,8 +58,10 @@ def drive(scene, suite: str = "ground", **settings):
     return start_z - lowest, northmost, arrived, stepper
 
 
-def test_a_rover_stops_before_a_2_m_bank_and_never_falls(make_scene):
-    fall, northmost, arrived, stepper = drive(make_scene(PLATEAU, lower_ground(2.0)))
+@pytest.mark.parametrize("suite", ["ground", "triple", "single", "servo"])
+def test_a_rover_stops_before_a_2_m_bank_and_never_falls(make_scene, suite):
+    """Whatever its level sonars, a rover carries the ground sonar (with the level ones alone it drove over)."""
+    fall, northmost, arrived, stepper = drive(make_scene(PLATEAU, lower_ground(2.0)), suite)
     assert stepper.simulation.collision is None
     assert fall < 0.05, f"the rover fell {fall:.2f} m"
     assert northmost < EDGE - 0.3, f"its centre came to y = {northmost:.2f}, over the edge at {EDGE}"

@@ -272,7 +272,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         parse_points(scene.hints["waypoints"]) if "waypoints" in scene.hints else None)
     stepper = simulate(scene, None if autopilot else args.mission, args.vehicle, settings, _one_start(args),
                        args.heading, waypoints, autostart=args.autostart, seed=args.seed,
-                       sensors=sensor_suite(args.sensors), datum=datum)
+                       sensors=sensor_suite(args.sensors, args.vehicle), datum=datum)
     world = stepper.simulation
     if items:
         world.autopilot.set_mission(items)
@@ -352,7 +352,8 @@ def _sim_team(args: argparse.Namespace, scene, settings) -> int:
                          "--team-link only for links that send (udpout, tcp)")
     datum = Datum.of_scene(scene.hints, args.datum)
     simulations = [Simulation(scene, team_kind(args.vehicle, k), start, args.heading, seed=args.seed + k,
-                              sensors=sensor_suite(args.sensors), datum=datum, cruise_speed=settings.speed,
+                              sensors=sensor_suite(args.sensors, team_kind(args.vehicle, k)), datum=datum,
+                              cruise_speed=settings.speed,
                               wp_radius=settings.closeness)
                    for k, start in enumerate(args.start or team_starts(scene, count))]
     team = Team(simulations, ids)

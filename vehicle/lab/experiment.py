@@ -65,7 +65,7 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
             waypoints = parse_points(scene.hints["waypoints"])
         stepper = simulate(scene, experiment.mission, experiment.vehicle, settings, experiment.start,
                            experiment.heading, waypoints, seed=experiment.seed,
-                           sensors=sensor_suite(experiment.sensors),
+                           sensors=sensor_suite(experiment.sensors, experiment.vehicle),
                            datum=Datum.of_scene(scene.hints, experiment.datum))
         outcome, reason = _fly(stepper, trail or on_step)
     except Exception as error:  # noqa: BLE001 - any failure is an outcome of the run, reported, not raised

@@ -173,7 +173,8 @@ def simulate_team(scene: Scene, mission: str, count: int, kind: str = "copter", 
     if len(starts) != count:
         raise PlacementError(f"{len(starts)} starts for {count} vehicles")
     simulations = [Simulation(scene, kind, start, cruise_speed=settings.speed, wp_radius=settings.closeness,
-                              seed=seed + k, sensors=sensor_suite(suite), **options) for k, start in enumerate(starts)]
+                              seed=seed + k, sensors=sensor_suite(suite, kind), **options)
+                   for k, start in enumerate(starts)]
     for k, simulation in enumerate(simulations):
         _check_climb(simulation, settings, k + 1 if ids is None else ids[k])
     return TeamStepper(Team(simulations, ids), mission, settings, waypoints)

@@ -80,7 +80,8 @@ class Simulation:
         self.autopilot = Autopilot(self.kind, self.body, (x, y, ground), self.datum,
                                    cruise_speed=cruise_speed, wp_radius=wp_radius,
                                    avoidance=self.avoidance)
-        self.sonars = SonarArray(sensors if sensors is not None else sensor_suite(DEFAULT_SUITE), self.caster, seed)
+        self.sonars = SonarArray(sensors if sensors is not None else sensor_suite(DEFAULT_SUITE, self.kind),
+                                 self.caster, seed)
         self.battery = battery or Battery()
         self._battery_alarm_mah = BATTERY_LOW * self.battery.capacity_mah  # the charge the next alarm comes at
         self.collision: Contact | None = None
