@@ -12,9 +12,36 @@ import {
 const KILL_HOLD_MS = 1500;
 const MAX_MESSAGES = 5;
 const STATUS_FADES_S = 30;  // s after which the last message line is shown faded
-const BATTERY_LOW = 20;  // % left at or below which a vehicle's battery is shown as low
-const FAILSAFE_LEVELS = `Marked low at ${BATTERY_LOW} %: our simulator warns there and, at 10 %, lands a copter `
-  + "(holds a rover); an ArduPilot's levels are its BATT_LOW_* and BATT_CRT_* parameters.";
+const BATTERY_LOW = 20;  // % left at or below which a battery is shown as low, until the vehicle tells its own level
+const FAILSAFE_UNREAD = "Failsafe levels not read yet: the station asks the autopilot for its BATT_LOW_* and "
+  + `BATT_CRT_* parameters when it hears it (an autopilot that never answers has none shown). Marked low at ${
+    BATTERY_LOW} % meanwhile.`;
+
+// One failsafe level of battery.failsafe (the vehicle's own BATT_* parameters): "low 20 % (1000 mAh) → warn".
+// A voltage or capacity of 0 is that check off, as ArduPilot has it; "?" is a parameter not answered yet.
+function levelText(name, level) {
+  const at = [];
+  if (isNum(level.volt) && level.volt > 0) at.push(`${fmt(level.volt)} V`);
+  if (isNum(level.mah) && level.mah > 0) {
+    at.push(isNum(level.percent) ? `${Math.round(level.percent)} % (${Math.round(level.mah)} mAh)`
+      : `${Math.round(level.mah)} mAh`);
+  }
+  const when = at.length ? at.join(" or ") : level.volt === 0 && level.mah === 0 ? "off" : "?";
+  const action = level.action == null ? "?" : level.action === "None" ? "warn" : level.action;
+  return `${name} ${when} → ${action}`;
+}
+
+function failsafeText(failsafe) {
+  if (!failsafe) return "failsafe: not read yet";
+  return `failsafe: ${levelText("low", failsafe.low)}; ${levelText("critical", failsafe.critical)}`;
+}
+
+function failsafeHelp(failsafe) {
+  if (!failsafe) return FAILSAFE_UNREAD;
+  const capacity = isNum(failsafe.capacity_mah) ? `, capacity ${Math.round(failsafe.capacity_mah)} mAh` : "";
+  return `The vehicle's own battery failsafe (its BATT_LOW_*, BATT_CRT_* and BATT_FS_*_ACT parameters${capacity}): `
+    + `${failsafeText(failsafe).replace("failsafe: ", "")}. "warn" is a warning only; "?" not answered yet.`;
+}
 
 function minutes(seconds) {
   return seconds >= 90 ? `${Math.round(seconds / 60)} min` : `${Math.round(seconds)} s`;
@@ -258,12 +285,18 @@ function renderCard(card, v) {
   const battery = card.querySelector(".battery");
   const left = v.battery && isNum(v.battery.flight_left_s) ? ` · about ${minutes(v.battery.flight_left_s)} of flight left`
     : "";
-  setText(battery, `${batteryText(v.battery)}${left}`);
+  if (!battery.firstElementChild) battery.append(el("span", "battery-level"), el("div", "battery-failsafe"));
+  setText(battery.firstElementChild, `${batteryText(v.battery)}${left}`);
+  const failsafe = v.battery ? v.battery.failsafe : null;
+  const failsafeLine = battery.querySelector(".battery-failsafe");
+  failsafeLine.hidden = !v.battery;
+  setText(failsafeLine, failsafeText(failsafe));
   battery.title = `${v.battery && isNum(v.battery.current) ? `current ${fmt(v.battery.current)} A. ` : ""}${
-    left ? "Flight left: at the rate it drained over the last two minutes. " : ""}${FAILSAFE_LEVELS}`;
-  // ArduPilot warns at its low level, and our simulator at 20 %: the card says so before the failsafe acts
+    left ? "Flight left: at the rate it drained over the last two minutes. " : ""}${failsafeHelp(failsafe)}`;
+  // the card marks the battery low where the vehicle warns (its own low level once read), before a failsafe acts
+  const lowAt = failsafe && isNum(failsafe.low.percent) ? failsafe.low.percent : BATTERY_LOW;
   battery.classList.toggle("low", !!v.battery && isNum(v.battery.remaining) && v.battery.remaining >= 0
-    && v.battery.remaining <= BATTERY_LOW);
+    && v.battery.remaining <= lowAt);
 
   const link = v.link || {};
   const lost = link.state === "lost";
