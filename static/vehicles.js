@@ -32,15 +32,24 @@ function levelText(name, level) {
 }
 
 function failsafeText(failsafe) {
-  if (!failsafe) return "failsafe: not read yet";
-  return `failsafe: ${levelText("low", failsafe.low)}; ${levelText("critical", failsafe.critical)}`;
+  if (!failsafe) return "not read yet";
+  return `${levelText("low", failsafe.low)}; ${levelText("critical", failsafe.critical)}`;
+}
+
+// The card's Failsafe row, made once after the battery's (the page's card template has none): the dd.
+function failsafeRow(battery) {
+  const next = battery.nextElementSibling;
+  if (next && next.classList.contains("failsafe-label")) return next.nextElementSibling;
+  const line = el("dd", "battery-failsafe");
+  battery.after(el("dt", "failsafe-label", "Failsafe"), line);
+  return line;
 }
 
 function failsafeHelp(failsafe) {
   if (!failsafe) return FAILSAFE_UNREAD;
   const capacity = isNum(failsafe.capacity_mah) ? `, capacity ${Math.round(failsafe.capacity_mah)} mAh` : "";
   return `The vehicle's own battery failsafe (its BATT_LOW_*, BATT_CRT_* and BATT_FS_*_ACT parameters${capacity}): `
-    + `${failsafeText(failsafe).replace("failsafe: ", "")}. "warn" is a warning only; "?" not answered yet.`;
+    + `${failsafeText(failsafe)}. "warn" is a warning only; "?" not answered yet.`;
 }
 
 function minutes(seconds) {
@@ -285,14 +294,14 @@ function renderCard(card, v) {
   const battery = card.querySelector(".battery");
   const left = v.battery && isNum(v.battery.flight_left_s) ? ` · about ${minutes(v.battery.flight_left_s)} of flight left`
     : "";
-  if (!battery.firstElementChild) battery.append(el("span", "battery-level"), el("div", "battery-failsafe"));
-  setText(battery.firstElementChild, `${batteryText(v.battery)}${left}`);
+  setText(battery, `${batteryText(v.battery)}${left}`);
   const failsafe = v.battery ? v.battery.failsafe : null;
-  const failsafeLine = battery.querySelector(".battery-failsafe");
-  failsafeLine.hidden = !v.battery;
+  const failsafeLine = failsafeRow(battery);
+  failsafeLine.hidden = failsafeLine.previousElementSibling.hidden = !v.battery;
   setText(failsafeLine, failsafeText(failsafe));
   battery.title = `${v.battery && isNum(v.battery.current) ? `current ${fmt(v.battery.current)} A. ` : ""}${
     left ? "Flight left: at the rate it drained over the last two minutes. " : ""}${failsafeHelp(failsafe)}`;
+  failsafeLine.title = failsafeHelp(failsafe);
   // the card marks the battery low where the vehicle warns (its own low level once read), before a failsafe acts
   const lowAt = failsafe && isNum(failsafe.low.percent) ? failsafe.low.percent : BATTERY_LOW;
   battery.classList.toggle("low", !!v.battery && isNum(v.battery.remaining) && v.battery.remaining >= 0

@@ -62,17 +62,18 @@ def test_the_card_shows_the_vehicles_own_failsafe_levels(browser, station, vehic
         "critical": {"volt": 0.0, "mah": 5000.0, "percent": 10.0, "action": "Land"}}
     with operator_page(browser, station.base, TOKEN, timeout_ms=UI_TIMEOUT) as page:
         line = page.locator(f'.vehicle-card[data-sysid="{COPTER}"] .battery-failsafe')
-        expect(line).to_have_text("failsafe: low 20 % (10000 mAh) → warn; critical 10 % (5000 mAh) → Land")
+        expect(line).to_have_text("low 20 % (10000 mAh) → warn; critical 10 % (5000 mAh) → Land")
         expect(line).to_be_visible()
+        expect(page.locator(f'.vehicle-card[data-sysid="{COPTER}"] .failsafe-label')).to_have_text("Failsafe")
         expect(page.locator(f'.vehicle-card[data-sysid="{COPTER}"] .battery')).to_have_attribute(
             "title", ends("The vehicle's own battery failsafe (its BATT_LOW_*, BATT_CRT_* and BATT_FS_*_ACT "
             "parameters, capacity 50000 mAh): low 20 % (10000 mAh) → warn; critical 10 % (5000 mAh) → Land. "
             "\"warn\" is a warning only; \"?\" not answered yet."))
         expect(page.locator(f'.vehicle-card[data-sysid="{ROVER}"] .battery-failsafe')).to_have_text(
-            "failsafe: low 20 % (10000 mAh) → warn; critical 10 % (5000 mAh) → Hold")
+            "low 20 % (10000 mAh) → warn; critical 10 % (5000 mAh) → Hold")
         silent = page.locator(f'.vehicle-card[data-sysid="{SILENT}"] .battery')
-        expect(silent.locator(".battery-failsafe")).to_have_text("failsafe: not read yet")
+        expect(page.locator(f'.vehicle-card[data-sysid="{SILENT}"] .battery-failsafe')).to_have_text("not read yet")
         expect(silent).to_have_attribute("title", ends("Failsafe levels not read yet: the station asks the autopilot "
                                          "for its BATT_LOW_* and BATT_CRT_* parameters when it hears it (an "
                                          "autopilot that never answers has none shown). Marked low at 20 % meanwhile."))
-        expect(silent.locator(".battery-level")).to_have_text("15.8 V, 80 %")
+        expect(silent).to_have_text("15.8 V, 80 %")  # the battery line itself as before

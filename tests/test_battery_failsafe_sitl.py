@@ -38,4 +38,4 @@ def test_arducopter_answers_and_the_card_shows_its_levels(browser, tmp_path):
         assert copter["battery"]["params_ignored"] == 0
         with operator_page(browser, station.base, TOKEN) as page:
             expect(page.locator('.vehicle-card[data-sysid="1"] .battery-failsafe')).to_have_text(
-                "failsafe: low 10.5 V → warn; critical off → warn", timeout=30_000)
+                "low 10.5 V → warn; critical off → warn", timeout=30_000)
