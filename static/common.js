@@ -26,7 +26,8 @@
 //                    about this page's 3D view -> view3d, auth (a reconnect re-checks the token)
 //   station-view     app.js, the station's answer about this page's 3D view: {type: "view"|"view-error", ...}
 //                    -> view3d
-//   station-target   app.js, a ground point clicked in this page's 3D view: {x, y} (m) -> target, plan
+//   station-target   app.js, a ground point clicked in this page's 3D view, or map2d.js, a plain click on the 2D
+//                    map (not a drag, not measuring, the plan not editing): {x, y} (m) -> target, plan, map2d
 //   station-watching app.js, whether this station lets the page watch without a token: {refused: bool}, once
 //                    at start and again whenever it changes -> auth (its hint; it checks the token after the
 //                    first), recordings (reloads)

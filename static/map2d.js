@@ -27,6 +27,8 @@ let measure = [];      // up to two [x, y]
 let drag = null;
 let cursor = null;
 let plan = { editing: false, items: [], legs: [], home: null, selected: null, current: null };
+let target = null;     // [x, y]: the Go here target picked here or in the 3D view ("station-target")
+let following = false; // the view keeps the selected vehicle in its middle
 const GRAB_PX = 10;  // a plan item this close to the pointer is dragged, not the map
 const map2d = { view, measure, get distance() { return distance(); }, toScreen: (x, y) => toScreen(x, y) };
 window.map2d = map2d;  // what the map shows, for tests and the page's other scripts
@@ -241,6 +243,11 @@ function drawMeasure() {
 
 function draw() {
   const { w, h, ratio } = size();
+  const chased = following && vehicles.find((v) => v.sysid === window.selectedVehicle);
+  if (chased && chased.position && isNum(chased.position.x) && isNum(chased.position.y)) {
+    view.cx = chased.position.x;
+    view.cy = chased.position.y;
+  }
   ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
   ctx.fillStyle = "#0b0e11";
   ctx.fillRect(0, 0, w, h);
@@ -259,10 +266,27 @@ function draw() {
     polyline(v.path, "#ffd23f", 2);
   }
   drawPlan();
+  drawTarget();
   for (const v of vehicles) drawVehicle(v);
   drawMeasure();
   drawScale(w, h);
   drawNorth(w);
+}
+
+/** The Go here target: a yellow ring with a cross, as the 3D view's marker. */
+function drawTarget() {
+  if (!target) return;
+  const [sx, sy] = toScreen(target[0], target[1]);
+  ctx.strokeStyle = "#ffd23f";
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.arc(sx, sy, 9, 0, Math.PI * 2);
+  ctx.moveTo(sx - 5, sy);
+  ctx.lineTo(sx + 5, sy);
+  ctx.moveTo(sx, sy - 5);
+  ctx.lineTo(sx, sy + 5);
+  ctx.stroke();
+  ctx.lineWidth = 1;
 }
 
 /** The radio tomography layer: the image, the last window's links, the targets, the peaks, the colour bar. */
@@ -396,6 +420,7 @@ canvas.addEventListener("pointermove", (event) => {
     if (drag.moved && drag.item !== null) {
       emit(EVENTS.planMove, { index: drag.item, x: cursor[0], y: cursor[1], done: false });
     } else if (drag.moved) {
+      setFollowing(false);  // the operator looks elsewhere
       view.cx = drag.cx - dx / view.scale;
       view.cy = drag.cy + dy / view.scale;
       draw();
@@ -415,6 +440,11 @@ canvas.addEventListener("pointerup", (event) => {
   if (!wasDrag && !measuring && plan.editing && item === null) {
     const [x, y] = toScene(px, py);
     emit(EVENTS.mapClick, { x, y });
+    return;
+  }
+  if (!wasDrag && !measuring && !plan.editing) {  // a plain click picks the Go here target, as in the 3D view
+    const [x, y] = toScene(px, py);
+    emit(EVENTS.target, { x, y });
     return;
   }
   if (wasDrag || !measuring) return;
@@ -442,7 +472,16 @@ $("#map2d-measure").addEventListener("click", () => {
   showDistance();
   draw();
 });
-$("#map2d-fit").addEventListener("click", () => { fit(); draw(); });
+$("#map2d-fit").addEventListener("click", () => { setFollowing(false); fit(); draw(); });
+function setFollowing(on) {
+  following = on;
+  $("#map2d-follow").setAttribute("aria-pressed", String(on));
+}
+$("#map2d-follow").addEventListener("click", () => { setFollowing(!following); draw(); });
+on(EVENTS.target, ({ x, y }) => {
+  target = isNum(x) && isNum(y) ? [x, y] : null;
+  draw();
+});
 $("#map2d-grow").addEventListener("click", () => {
   const large = $("#map2d-pane").classList.toggle("large");
   $("#map2d-grow").setAttribute("aria-pressed", String(large));

@@ -1,4 +1,4 @@
-// "Go here": the ground point clicked in this page's 3D view ("station-target") and the vehicle to send there,
+// "Go here": the ground point clicked in this page's 3D view or 2D map ("station-target") and the vehicle to send there,
 // which follows the vehicle list and the operator's selection (operator.js sets it).
 
 import {
@@ -12,14 +12,14 @@ let mode = "live";
 
 function updateControls() {
   const reason = commandBlocker(auth, mode);
-  const missing = !target ? "Click the ground in the 3D view first" : !vehicles.length ? "No vehicle to send" : "";
+  const missing = !target ? "Click the ground in the 3D view or the 2D map first" : !vehicles.length ? "No vehicle to send" : "";
   setEnabled($("#go-here"), reason || missing, "Send the selected vehicle to the target");
   showHint($("#target .command-hint"), reason);
 }
 
 function renderTarget() {
   const coords = $("#target-coords");
-  coords.textContent = target ? `x ${fmt(target.x)} m, y ${fmt(target.y)} m` : "Click the ground in the 3D view to pick a target";
+  coords.textContent = target ? `x ${fmt(target.x)} m, y ${fmt(target.y)} m` : "Click the ground in the 3D view or the 2D map to pick a target";
   coords.classList.toggle("has-target", Boolean(target));
   updateControls();
 }

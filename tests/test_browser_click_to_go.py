@@ -42,7 +42,7 @@ def test_click_to_go(browser_page, station, copters, tmp_path):
     expect(page.locator("#auth-status")).to_have_text("Signed in")
     browser_page.wait_for_view(tmp_path, sysid)
     coords = page.locator("#target-coords")
-    expect(coords).to_have_text("Click the ground in the 3D view to pick a target")
+    expect(coords).to_have_text("Click the ground in the 3D view or the 2D map to pick a target")
     expect(page.locator("#go-here")).to_be_disabled()
 
     # the initial camera looks at the scene's centre from the south-west: the middle of the view is
@@ -106,3 +106,62 @@ def test_closing_the_page_logs_no_server_error(browser_page, station, flyer, tmp
         logger.removeHandler(errors)
     messages = [r.getMessage() + (f" ({r.exc_info[1]!r})" if r.exc_info else "") for r in errors.records]
     assert not messages, messages
+
+
+def test_the_2d_map_follows_the_vehicle_and_a_click_on_it_sends_the_vehicle_there(browser_page, station, copters):
+    """Follow keeps the selected vehicle in the map's middle; a plain click on the map picks the Go here target
+    (drawn there), and Go here flies the vehicle to it."""
+    sysid = 6
+    copters(sysid, start=(6.0, 6.0))
+    assert station.http.result(sysid, action="set_mode", mode="GUIDED") == "accepted"
+    assert station.http.result(sysid, action="arm") == "accepted"
+    assert station.http.result(sysid, action="takeoff", altitude=4) == "accepted"
+    wait_sim(station, sysid, lambda v: v["position"]["alt"] > 2.0, 20, "airborne")
+    assert station.http.result(sysid, action="abort") == "accepted"
+    wait_sim(station, sysid, lambda v: v["mode"] == "BRAKE", 5, "holding in BRAKE")
+
+    page = browser_page.open(f"#token={TOKEN}")
+    expect(page.locator("#auth-status")).to_have_text("Signed in")
+    page.locator(f'#fleet-list .fleet-item[data-sysid="{sysid}"]').click()  # select it (others may be here)
+    expect(page.locator(f'#fleet-list .fleet-item[data-sysid="{sysid}"]')).to_have_attribute("aria-pressed", "true")
+    canvas = page.locator("#map2d")
+    box = canvas.bounding_box()
+    middle = (box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+
+    def scene_at(x: float, y: float) -> tuple[float, float]:
+        page.mouse.move(x, y)
+        return tuple(float(v) for v in re.findall(r"-?[\d.]+", page.locator("#map2d-cursor").inner_text()))
+
+    here = station.http.vehicle(sysid)["position"]
+    page.mouse.move(*middle)  # drag the map away from the vehicle first
+    page.mouse.down()
+    page.mouse.move(middle[0] + 120, middle[1] - 90, steps=5)
+    page.mouse.up()
+    assert math.dist(scene_at(*middle), (here["x"], here["y"])) > 3
+    page.click("#map2d-follow")
+    expect(page.locator("#map2d-follow")).to_have_attribute("aria-pressed", "true")
+    browser_page.poll(lambda: math.dist(scene_at(*middle), (here["x"], here["y"])) < 0.5, 10,
+                      "the map's middle on the vehicle")
+
+    per_pixel = (scene_at(middle[0] + 40, middle[1])[0] - scene_at(*middle)[0]) / 40  # metres
+    # 4 m south-west of the vehicle, in the open middle of the scene (clear for 6.9 m around the origin)
+    spot = (middle[0] - 4 / per_pixel, middle[1] + 4 / per_pixel)
+    picked = scene_at(*spot)
+    page.mouse.click(*spot)
+    coords = page.locator("#target-coords")
+    expect(coords).to_have_text(re.compile(r"^x -?[\d.]+ m, y -?[\d.]+ m$"))
+    target = tuple(float(v) for v in re.findall(r"-?[\d.]+", coords.inner_text()))
+    assert math.dist(target, picked) < 0.1, (target, picked)
+    ratio = page.evaluate("window.devicePixelRatio")
+    colour = page.evaluate("""([x, y, r]) => Array.from(document.querySelector('#map2d').getContext('2d')
+        .getImageData(Math.round(x * r), Math.round(y * r), 1, 1).data)""",
+                           [spot[0] - box["x"], spot[1] - box["y"], ratio])
+    assert all(abs(a - b) <= 8 for a, b in zip(colour, (255, 210, 63), strict=False)), colour  # the yellow cross
+    distance = math.dist((here["x"], here["y"]), target)
+    assert distance > 3, (here, target)
+
+    page.select_option("#target-vehicle", str(sysid))
+    press(page.locator("#go-here"))
+    expect(page.locator("#target .ack")).to_have_text(re.compile(rf"^Go here \(vehicle {sysid}\): accepted"))
+    wait_sim(station, sysid, lambda v: math.dist((v["position"]["x"], v["position"]["y"]), target) < 1.0,
+             distance / 2.5 * 2 + 10, f"vehicle {sysid} reaches the target {target} picked on the map")

@@ -249,7 +249,7 @@ def test_vehicles_lists_a_flying_vehicle(api, flyer):
     assert one["link"]["state"] == "ok"
     assert 0 <= one["link"]["heartbeat_age"] < 3.0
     assert one["link"]["mavlink"] == 2 and one["link"]["messages"] > 0
-    assert set(one["mission"]) == {"current", "total", "reached"}
+    assert set(one["mission"]) == {"current", "total", "reached", "left"}
     texts = [m["text"] for m in one["messages"]]
     assert "Arming motors" in texts and any(t.startswith("Takeoff") for t in texts)
     assert one["battery"]["voltage"] > 10
