@@ -101,7 +101,7 @@ class OnboardAgent:
 
             caster = RayCaster(options.scene)
             ground = self.ground = caster.ground_height
-            self.sonars = SonarArray(sensor_suite(options.suite, options.vehicle), caster)
+            self.sonars = SonarArray(sensor_suite(options.suite, options.kind), caster)
             servo = next((s.servo for s in self.sonars.sensors if s.servo is not None), None)
             self.collider = Collider(options.scene, RADIUS, ignore_walkable=options.kind == "rover")
         self.fc = MavlinkController(self.conn, options.kind, options.datum, ground, radius=RADIUS, servo=servo,
