@@ -818,18 +818,23 @@ def test_an_agent_that_fails_mid_flight_holds_the_vehicle_says_why_and_ends_in_e
             assert result["reason"] == "the agent failed (ZeroDivisionError: a bug in the agent); the vehicle holds"
             assert "Agent: failed (ZeroDivisionError: a bug in the agent); holding" in result["messages"]
             assert "Traceback" in printed.err and "ZeroDivisionError: a bug in the agent" in printed.err
-            failed_at = steps[-1]  # the autopilot's clock when the agent failed
-            poses = []  # from then on its own clock, watched from another port: it brakes and stays where it was
+            # the autopilot's own clock, watched from another port: it passes on the agent's "failed" right after
+            # the hold (a starved agent holds late by the agent's clock, never by this one); from then on the
+            # vehicle brakes and stays where it was
+            poses, told = [], []
 
             def pose():
-                message = watcher.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=1)
-                if message is not None and message.time_boot_ms / 1000 >= failed_at:  # not one queued before
+                message = watcher.recv_match(type=["GLOBAL_POSITION_INT", "STATUSTEXT"], blocking=True, timeout=1)
+                if message is not None and message.get_type() == "STATUSTEXT" and "Agent: failed" in message.text:
+                    told.append(True)
+                elif message is not None and message.get_type() == "GLOBAL_POSITION_INT" and told:
                     poses.append((message.time_boot_ms / 1000, message.lat / 1e7, message.lon / 1e7))
                 return (poses[-1], poses[-1][0]) if poses else (None, None)
 
-            wait_sim(pose, lambda last: last[0] - failed_at >= 5.5, 5.5, speedup=1.0,
-                     what="5.5 s of its positions after it failed")
-            settled = [pose for pose in poses if pose[0] >= failed_at + 1.5]
+            wait_sim(pose, lambda last: last[0] - poses[0][0] >= 5.5, 5.5 + 30, speedup=1.0,
+                     what="5.5 s of its positions after it said it failed")
+            held_at = poses[0][0]
+            settled = [pose for pose in poses if pose[0] >= held_at + 1.5]
             (_, lat0, lon0), (_, lat1, lon1) = settled[0], settled[-1]
             moved = math.hypot((lat1 - lat0) * 111_320, (lon1 - lon0) * 111_320 * math.cos(math.radians(lat0)))
             assert moved < 0.3, f"{moved:.2f} m in {settled[-1][0] - settled[0][0]:.1f} s after it failed"
