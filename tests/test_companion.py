@@ -809,6 +809,16 @@ def test_an_agent_that_fails_mid_flight_holds_the_vehicle_says_why_and_ends_in_e
     monkeypatch.setattr(Agent, "step", failing)
     port, watching = free_udp_port(), free_udp_port()
     watcher = mavutil.mavlink_connection(f"udpin:127.0.0.1:{watching}")
+    heard, done = [], threading.Event()  # read as it comes: a socket left unread while the agent flies drops some
+
+    def listen():
+        while not done.is_set():
+            message = watcher.recv_match(type=["GLOBAL_POSITION_INT", "STATUSTEXT"], blocking=True, timeout=0.5)
+            if message is not None:
+                heard.append(message)
+
+    listener = threading.Thread(target=listen, daemon=True)
+    listener.start()
     try:
         with autopilot(castle_path, [f"udpout:127.0.0.1:{port}", f"udpout:127.0.0.1:{watching}"], CASTLE_START):
             code = cli.main(agent_command(port, "search", castle_path)[3:])
@@ -824,21 +834,27 @@ def test_an_agent_that_fails_mid_flight_holds_the_vehicle_says_why_and_ends_in_e
             poses, told = [], []
 
             def pose():
-                message = watcher.recv_match(type=["GLOBAL_POSITION_INT", "STATUSTEXT"], blocking=True, timeout=1)
-                if message is not None and message.get_type() == "STATUSTEXT" and "Agent: failed" in message.text:
-                    told.append(True)
-                elif message is not None and message.get_type() == "GLOBAL_POSITION_INT" and told:
-                    poses.append((message.time_boot_ms / 1000, message.lat / 1e7, message.lon / 1e7))
-                return (poses[-1], poses[-1][0]) if poses else (None, None)
+                time.sleep(0.05)
+                while len(told) < len(heard):
+                    message = heard[len(told)]
+                    told.append(message)
+                    if message.get_type() == "STATUSTEXT" and "Agent: failed" in message.text:
+                        poses.append(None)  # from here on
+                    elif message.get_type() == "GLOBAL_POSITION_INT" and poses:
+                        poses.append((message.time_boot_ms / 1000, message.lat / 1e7, message.lon / 1e7))
+                return (poses[-1], poses[-1][0]) if poses and poses[-1] else (None, None)
 
-            wait_sim(pose, lambda last: last[0] - poses[0][0] >= 5.5, 5.5 + 30, speedup=1.0,
+            wait_sim(pose, lambda last: last[0] - poses[1][0] >= 5.5, 5.5 + 30, speedup=1.0,
                      what="5.5 s of its positions after it said it failed")
+            poses = poses[1:]
             held_at = poses[0][0]
             settled = [pose for pose in poses if pose[0] >= held_at + 1.5]
             (_, lat0, lon0), (_, lat1, lon1) = settled[0], settled[-1]
             moved = math.hypot((lat1 - lat0) * 111_320, (lon1 - lon0) * 111_320 * math.cos(math.radians(lat0)))
             assert moved < 0.3, f"{moved:.2f} m in {settled[-1][0] - settled[0][0]:.1f} s after it failed"
     finally:
+        done.set()
+        listener.join(timeout=5)
         watcher.close()
 
 
