@@ -289,7 +289,7 @@ def test_ctrl_c_ends_a_logged_run_with_one_line_and_a_whole_log(tmp_path):
     finally:
         if run.poll() is None:
             os.killpg(run.pid, signal.SIGKILL)
-    assert run.returncode == 130, err
+    assert run.returncode == 130, (err, out)
     assert err.strip() == "vehicle experiment: interrupted"
     connection = mavutil.mavlink_connection(str(log))
     kinds = defaultdict(int)
