@@ -12,6 +12,7 @@ that a vehicle is never smaller than ``MARKER_PIXELS`` on its screen.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,7 +32,6 @@ TOP_HEIGHT = (30.0, 3.0, 500.0)  # m above the vehicle (top-down): default, lowe
 SELECTED = (255, 255, 255)
 TARGET_COLOUR = (255, 230, 0)
 WALL_MARGIN = 0.3  # m: the follow camera stops this far in front of a wall between it and the vehicle
-TARGET_REACHED = 1.0  # m (across the ground) from the target at which a vehicle sent there has reached it
 
 
 def opacity_root(opacity: float) -> str:
@@ -105,7 +105,7 @@ class Viewport:
         self.levels = {o: client.scene.add_frame(opacity_root(o), show_axes=False, visible=o == 1.0)
                        for o in OPACITIES}
         self.markers: dict[int, dict] = {}  # sysid -> its dart, its ring and their last scale
-        self.target: dict | None = None  # the point this viewer picked: its symbol, where, who stood on it then
+        self.target: dict | None = None  # the page's Go here target: its symbol, where, its scale
         self.version = -1
         self.mode = "orbit"
         self.sysid: int | None = None
@@ -115,11 +115,18 @@ class Viewport:
         self.top_height = TOP_HEIGHT[0]
 
     # ---- settings -------------------------------------------------------------------------------
-    def apply(self, settings: ViewSettings | None) -> None:
-        """Take the page's settings when they changed: layers and map opacity now, the mode from the next frame."""
+    def apply(self, settings: ViewSettings | None, ground: Callable[[float, float], float]) -> None:
+        """Take the page's settings when they changed: layers, map opacity and the target (marked on the
+        ``ground`` height there) now, the mode from the next frame."""
         if settings is None or settings.version == self.version:
             return
         self.version = settings.version
+        held = tuple(self.target["point"]) if self.target is not None else None
+        if settings.target is None:
+            self.drop_target()
+        elif held is None or not np.allclose(held, settings.target, atol=1e-6):
+            x, y = settings.target
+            self.pick((x, y, ground(x, y)))
         if settings.mode != self.mode:
             self.heading = None
         self.mode, self.sysid, self.opacity = settings.mode, settings.sysid, settings.opacity
@@ -156,40 +163,31 @@ class Viewport:
                 marker["scale"] = scale
             marker["dart"].visible = not own_view
             marker["halo"].visible = selected is v and not own_view
-        self._draw_target(vehicles, eye, pixels_per_metre_at_1m)
+        self._draw_target(eye, pixels_per_metre_at_1m)
 
-    def pick(self, point: tuple[float, float, float], vehicles: list[Vehicle]) -> None:
-        """Mark the point this viewer picked (a new pick replaces the old); vehicles on it already don't reach it."""
+    def pick(self, point: tuple[float, float, float]) -> None:
+        """Mark the page's Go here target (a new one replaces the old). The page drops it: it knows which
+        vehicle was sent there and sees it arrive (static/target.js)."""
         self.drop_target()
         node = self.client.scene.add_mesh_simple("/target", TARGET.vertices.astype(np.float32),
                                                  TARGET.faces.astype(np.uint32), color=TARGET_COLOUR,
                                                  position=point)
-        self.target = {"node": node, "point": np.array(point[:2]), "scale": 1.0,
-                       "there": {v.sysid for v in vehicles if self._on_target(v, np.array(point[:2]))}}
+        self.target = {"node": node, "point": np.array(point[:2]), "scale": 1.0}
 
     def drop_target(self) -> None:
         if self.target is not None:
             self.target["node"].remove()
             self.target = None
 
-    @staticmethod
-    def _on_target(v: Vehicle, point: np.ndarray) -> bool:
-        return float(np.linalg.norm(v.position[:2] - point)) < TARGET_REACHED
-
-    def _draw_target(self, vehicles: list[Vehicle], eye: np.ndarray | None, pixels_per_metre_at_1m: float) -> None:
-        """Scale the target for this screen; drop it once a vehicle that was elsewhere at the pick reaches it."""
+    def _draw_target(self, eye: np.ndarray | None, pixels_per_metre_at_1m: float) -> None:
+        """Scale the target for this screen: the same size on the screen from near and far."""
         target = self.target
-        if target is None:
+        if target is None or eye is None:
             return
-        if any(self._on_target(v, target["point"]) and v.sysid not in target["there"] for v in vehicles):
-            self.drop_target()
-            return
-        target["there"] &= {v.sysid for v in vehicles if self._on_target(v, target["point"])}
-        if eye is not None:
-            distance = float(np.linalg.norm(np.array(target["node"].position) - eye))
-            scale = max(1.0, MARKER_PIXELS * distance / pixels_per_metre_at_1m)
-            if abs(scale - target["scale"]) > target["scale"] * 0.03:
-                target["node"].scale = target["scale"] = scale
+        distance = float(np.linalg.norm(np.array(target["node"].position) - eye))
+        scale = max(1.0, MARKER_PIXELS * distance / pixels_per_metre_at_1m)
+        if abs(scale - target["scale"]) > target["scale"] * 0.03:
+            target["node"].scale = target["scale"] = scale
 
     def _lens(self) -> tuple[np.ndarray | None, float]:
         """The client's eye and its pixels per metre at 1 m (None before it reported its camera)."""

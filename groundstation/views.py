@@ -1,4 +1,4 @@
-"""What each viewer asked of its own 3D view: camera mode, selected vehicle, layers, map opacity.
+"""What each viewer asked of its own 3D view: camera mode, selected vehicle, layers, map opacity, target.
 
 The page sends these over its /ws socket, which already carries its viewer
 id; nothing here moves any other viewer's camera. Everything a page sends is
@@ -20,6 +20,7 @@ LAYERS = ("scene", "map", "trails", "beams", "echoes", "waypoints", "paths")
 OPACITIES = (1.0, 0.6, 0.3)  # the map's opacity steps (each one in use is drawn once, for all viewers)
 MAX_REQUEST = 2048  # bytes: every request is a few dozen
 MAX_ZOOM_STEPS = 20
+MAX_COORDINATE = 1e6  # m: a target further out than this from the scene's origin is no place to send a vehicle
 
 
 class ViewRequestError(ValueError):
@@ -41,6 +42,7 @@ class ViewSettings:
     opacity: float = 1.0
     action: str | None = None  # a one-shot move not yet made
     zooms: list[Zoom] = field(default_factory=list)
+    target: tuple[float, float] | None = None  # the Go here target the page holds, marked in this 3D view
     version: int = 0  # bumped on each change, so the 3D view applies what changed once
 
 
@@ -68,6 +70,13 @@ class Views:
                 return []
             zooms, view.zooms = view.zooms, []
             return zooms
+
+    def set_target(self, viewer: str, point: tuple[float, float] | None) -> None:
+        """The ground this viewer clicked in its 3D view: marked at once, before its page has heard of it."""
+        with self._lock:
+            view = self._views.setdefault(viewer, ViewSettings())
+            view.target = point
+            view.version += 1
 
     def take_action(self, viewer: str) -> str | None:
         with self._lock:
@@ -97,9 +106,11 @@ class Views:
             elif kind == "zoom":
                 if len(view.zooms) < 32:  # a flood of wheel events is cut, not queued
                     view.zooms.append(Zoom(request["x"], request["y"], request["steps"]))
+            elif kind == "target":
+                view.target = request["point"]
             view.version += 1
             return {"type": "view", "mode": view.mode, "sysid": view.sysid, "layers": dict(view.layers),
-                    "opacity": view.opacity}
+                    "opacity": view.opacity, "target": list(view.target) if view.target else None}
 
 
 def parse(text: str | bytes) -> dict:
@@ -114,7 +125,7 @@ def parse(text: str | bytes) -> dict:
         raise ViewRequestError("a request is a JSON object")
     kind = request.get("type")
     allowed = {"camera": {"mode", "action"}, "select": {"sysid"}, "layers": {"layers", "opacity"},
-               "zoom": {"x", "y", "steps"}}
+               "zoom": {"x", "y", "steps"}, "target": {"x", "y"}}
     if not isinstance(kind, str) or kind not in allowed:
         raise ViewRequestError("unknown request type")
     if set(request) - {"type"} - allowed[kind]:
@@ -143,6 +154,14 @@ def parse(text: str | bytes) -> dict:
             if not _is_number(opacity) or not any(abs(opacity - o) < 1e-9 for o in OPACITIES):
                 raise ViewRequestError(f"the map's opacity is one of {', '.join(str(o) for o in OPACITIES)}")
             out["opacity"] = float(opacity)
+    elif kind == "target":  # the page's Go here target (x and y in metres), or none (both null): reached, dropped
+        x, y = request.get("x"), request.get("y")
+        if x is None and y is None:
+            out["point"] = None
+        elif all(_is_number(v) and abs(v) <= MAX_COORDINATE for v in (x, y)):
+            out["point"] = (float(x), float(y))
+        else:
+            raise ViewRequestError(f"a target's x and y are numbers within {MAX_COORDINATE:g} m, or both null")
     else:
         for key, low, high in (("x", -1.0, 1.0), ("y", -1.0, 1.0), ("steps", -MAX_ZOOM_STEPS, MAX_ZOOM_STEPS)):
             value = request.get(key)

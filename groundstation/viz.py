@@ -81,7 +81,6 @@ class SceneView:
         self._levels: set[float] = {1.0}  # map opacities some viewer uses: each is drawn
         self._last_frame = time.monotonic()  # the viewers' last frame
         self._drawn: dict[int, dict] = {}
-        self._seen: list[Vehicle] = []  # the vehicles as the last frame drew them
         self._draw_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="viz", daemon=True)
@@ -126,10 +125,13 @@ class SceneView:
             point = self.ground_point(event.ray_origin, event.ray_direction)
             if point is None:
                 return
+            viewer = self.viewer_of(event.client_id)
             with self._draw_lock:
                 viewport = self._viewports.get(event.client_id)
                 if viewport is not None:
-                    viewport.pick(point, self._seen)
+                    viewport.pick(point)
+                if viewer is not None:  # the page's target now, so that its next settings keep this mark
+                    self.views.set_target(viewer, point[:2])
             if self._on_target is not None:
                 self._on_target(event.client_id, point[0], point[1])
 
@@ -166,6 +168,12 @@ class SceneView:
             return None
         t = -origin[2] / direction[2]
         return float(origin[0] + t * direction[0]), float(origin[1] + t * direction[1]), 0.0
+
+    def ground_height(self, x: float, y: float) -> float:
+        """The height of what stands at ``x, y`` (a roof, else the ground; 0 outside the scene)."""
+        top = float(self.scene.bounds[1][2]) + 10.0 if self.scene is not None and len(self.scene.faces) else 10.0
+        point = self.ground_point((x, y, top), (0.0, 0.0, -1.0))
+        return point[2] if point is not None else 0.0
 
     # ---- the loop -------------------------------------------------------------------------------
     def start(self) -> SceneView:
@@ -212,7 +220,6 @@ class SceneView:
                 now = time.monotonic()
                 dt, self._last_frame = min(now - self._last_frame, 0.5), now
                 self._draw_viewports(seen, dt)
-                self._seen = seen
         self.server.flush()
 
     def _draw_poses(self, everyone: bool = False) -> list[VehicleState]:
@@ -253,7 +260,7 @@ class SceneView:
             else (np.array([-10.0, -10.0, 0.0]), np.array([10.0, 10.0, 2.0]))
         for client_id, viewport in list(self._viewports.items()):
             viewer = self.viewer_of(client_id)
-            viewport.apply(self.views.get(viewer))
+            viewport.apply(self.views.get(viewer), self.ground_height)
             action = self.views.take_action(viewer) if viewer is not None else None
             zooms = self.views.take_zooms(viewer) if viewer is not None else []
             try:

@@ -9,7 +9,7 @@
 //   vehicles.js    a card per vehicle with its commands
 //   replay.js      the LIVE/REPLAY banner and the replay's controls
 //   recordings.js  the recordings list and its Replay buttons
-//   target.js      "Go here": the target picked in the 3D view
+//   target.js      "Go here": the target picked in the 3D view or on the 2D map, until the vehicle sent reaches it
 //   health.js      the station's own health, at the top of the panel
 //   operator.js    the fleet list (the selection), the selected vehicle's instruments, the warning banner
 //   map2d.js       the 2D map;  plots.js  the selected vehicle's telemetry against time
@@ -27,7 +27,10 @@
 //   station-view     app.js, the station's answer about this page's 3D view: {type: "view"|"view-error", ...}
 //                    -> view3d
 //   station-target   app.js, a ground point clicked in this page's 3D view, or map2d.js, a plain click on the 2D
-//                    map (not a drag, not measuring, the plan not editing): {x, y} (m) -> target, plan, map2d
+//                    map (not a drag, not measuring, the plan not editing): {x, y} (m) -> target, plan, map2d,
+//                    view3d (which has the station mark it in this page's 3D view)
+//   station-target-done  target.js, the Go here target is no more: the vehicle sent there reached it
+//                    {reason} -> map2d, view3d (both take their marks away)
 //   station-watching app.js, whether this station lets the page watch without a token: {refused: bool}, once
 //                    at start and again whenever it changes -> auth (its hint; it checks the token after the
 //                    first), recordings (reloads)
@@ -52,6 +55,7 @@ export const EVENTS = Object.freeze({
   socket: "station-socket",
   view: "station-view",
   target: "station-target",
+  targetDone: "station-target-done",
   watching: "station-watching",
   session: "station-session",
   auth: "station-auth",

@@ -27,7 +27,7 @@ let measure = [];      // up to two [x, y]
 let drag = null;
 let cursor = null;
 let plan = { editing: false, items: [], legs: [], home: null, selected: null, current: null };
-let target = null;     // [x, y]: the Go here target picked here or in the 3D view ("station-target")
+let target = null;     // [x, y]: the Go here target picked here or in the 3D view, until reached (target.js)
 let following = false; // the view keeps the selected vehicle in its middle
 const GRAB_PX = 10;  // a plan item this close to the pointer is dragged, not the map
 const map2d = { view, measure, get distance() { return distance(); }, toScreen: (x, y) => toScreen(x, y) };
@@ -482,10 +482,22 @@ on(EVENTS.target, ({ x, y }) => {
   target = isNum(x) && isNum(y) ? [x, y] : null;
   draw();
 });
+on(EVENTS.targetDone, () => {
+  target = null;
+  draw();
+});
+/** Swapped, the map fills the view area and the 3D view sits in its corner; a hidden map gives it all back. */
+function placeViews() {
+  const pane = $("#map2d-pane");
+  pane.parentElement.classList.toggle("map-first", pane.classList.contains("large")
+    && !pane.classList.contains("collapsed"));
+}
 $("#map2d-grow").addEventListener("click", () => {
   const large = $("#map2d-pane").classList.toggle("large");
+  placeViews();
   $("#map2d-grow").setAttribute("aria-pressed", String(large));
-  $("#map2d-grow").title = large ? "Back to the corner of the 3D view" : "Fill the 3D view with the map";
+  $("#map2d-grow").title = large ? "Swap back: the 3D view large, the map in its corner"
+    : "Swap: the map large, the 3D view in its corner";
   fit();
   draw();
 });
@@ -493,6 +505,7 @@ $("#map2d-layer").addEventListener("change", loadOverlay);
 $("#map2d-toggle").addEventListener("click", () => {
   const pane = $("#map2d-pane");
   const collapsed = pane.classList.toggle("collapsed");
+  placeViews();
   $("#map2d-toggle").setAttribute("aria-expanded", String(!collapsed));
   $("#map2d-toggle").textContent = collapsed ? "+" : "–";
   $("#map2d-toggle").title = collapsed ? "Show the 2D map" : "Hide the 2D map";

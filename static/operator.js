@@ -17,6 +17,7 @@ const MISSING_MS = 15000;
 let vehicles = [];
 const PROXIMITY_LADDER = [5, 10, 20, 40];  // m: the proximity ring's ranges, the nearest above the farthest echo
 const ECHO_MEMORY_MS = 1500;  // the ring scales to the echoes of the last few seconds, so it does not flicker
+const INSTRUMENT = 150;  // units across an instrument's face, whatever its size on the screen
 const LABEL_PX = 11;  // the instruments' letters are at least this tall on screen
 let echoes = [];  // recent echoes of the selected vehicle: {sysid, t, distance}
 let missingSince = null;
@@ -139,10 +140,20 @@ function renderInstruments() {
   drawProximity($("#proximity"), sonars, colourOf(v), proximityRange(v.sysid, sonars));
 }
 
-/** A canvas font size (canvas pixels) that shows ``px`` tall on screen: the instruments are drawn at 150 and
- * shown at 100 px. */
+/** An instrument's drawing surface: its canvas as many pixels as it shows on this screen (the instruments
+ * grow with the panel, and stay sharp), drawn in INSTRUMENT units across whatever its size. */
+function surface(canvas) {
+  const shown = Math.round((canvas.clientWidth || INSTRUMENT) * (window.devicePixelRatio || 1));
+  if (canvas.width !== shown) canvas.width = canvas.height = shown;
+  const ctx = canvas.getContext("2d");
+  const scale = shown / INSTRUMENT;
+  ctx.setTransform(scale, 0, 0, scale, 0, 0);
+  return { ctx, w: INSTRUMENT, h: INSTRUMENT, r: INSTRUMENT / 2 };
+}
+
+/** A font size (in INSTRUMENT units) that shows ``px`` tall on screen, however large the instrument is shown. */
 function screenPx(canvas, px) {
-  return Math.ceil(px * canvas.width / (canvas.clientWidth || canvas.width));
+  return Math.ceil(px * INSTRUMENT / (canvas.clientWidth || INSTRUMENT));
 }
 
 /** The proximity ring's range: the ladder's step just above the farthest echo of the last few seconds (the
@@ -161,8 +172,7 @@ function proximityRange(sysid, sonars) {
 
 /** An artificial horizon: sky and ground turned by the roll and shifted by the pitch, the aircraft fixed. */
 function drawAttitude(canvas, roll, pitch) {
-  const ctx = canvas.getContext("2d");
-  const w = canvas.width, h = canvas.height, r = w / 2;
+  const { ctx, w, h, r } = surface(canvas);
   const perDegree = r / 35;
   ctx.save();
   ctx.clearRect(0, 0, w, h);
@@ -212,8 +222,7 @@ function drawAttitude(canvas, roll, pitch) {
 
 /** A compass rose turning under a fixed lubber line: the heading read at the top. */
 function drawCompass(canvas, heading, colour) {
-  const ctx = canvas.getContext("2d");
-  const w = canvas.width, r = w / 2;
+  const { ctx, w, r } = surface(canvas);
   ctx.clearRect(0, 0, w, w);
   ctx.fillStyle = "#0b0e11";
   ctx.beginPath();
@@ -275,8 +284,7 @@ function proximityColour(s) {
 /** The sonars around the vehicle out to ``range`` metres: an echo is a sector as long as its distance, a clear
  * sonar (or an echo beyond the range) a sector to the ring's edge. */
 function drawProximity(canvas, sonars, colour, range) {
-  const ctx = canvas.getContext("2d");
-  const w = canvas.width, r = w / 2;
+  const { ctx, w, r } = surface(canvas);
   const scale = (r - 6) / range;
   canvas.dataset.range = String(range);
   ctx.clearRect(0, 0, w, w);

@@ -5,7 +5,7 @@
 // focus does not reconnect by itself, so the view is reloaded when the station restarts (a new session in the
 // status) or when its socket stays closed. No inline script, no eval: the page's policy forbids both.
 
-import { $, EVENTS, on } from "./common.js";
+import { $, EVENTS, isNum, on } from "./common.js";
 
 const MODES = ["orbit", "follow", "onboard", "top"];
 const KEYS = { 1: "orbit", 2: "follow", 3: "onboard", 4: "top" };
@@ -16,6 +16,7 @@ const SLOW_VIEW_MS = 60000;  // and one that never connected since it loaded (sl
 
 const view = {
   send: null,            // the socket's send, while it is open
+  target: null,          // [x, y]: the Go here target this page holds, marked in its 3D view
   mode: "orbit",
   sysid: null,           // the selected vehicle (the page's selection, else the first vehicle)
   chosen: null,          // a vehicle the operator selected explicitly
@@ -84,6 +85,7 @@ function sendAll() {
   send({ type: "camera", mode: view.mode });
   send({ type: "select", sysid: view.sysid });
   send({ type: "layers", layers: layers(), opacity: opacity() });
+  if (view.target) send({ type: "target", x: view.target[0], y: view.target[1] });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -211,6 +213,15 @@ function main() {
     if (!Number.isInteger(sysid)) return;
     view.chosen = sysid;
     select();
+  });
+  // the Go here target (target.js): marked in this page's 3D view until the vehicle sent there reaches it
+  on(EVENTS.target, ({ x, y }) => {
+    view.target = isNum(x) && isNum(y) ? [x, y] : null;
+    send({ type: "target", x: view.target ? x : null, y: view.target ? y : null });
+  });
+  on(EVENTS.targetDone, () => {
+    view.target = null;
+    send({ type: "target", x: null, y: null });
   });
   on(EVENTS.view, (msg) => {
     if (msg.type === "view-error") {

@@ -108,9 +108,10 @@ def test_closing_the_page_logs_no_server_error(browser_page, station, flyer, tmp
     assert not messages, messages
 
 
-def test_the_2d_map_follows_the_vehicle_and_a_click_on_it_sends_the_vehicle_there(browser_page, station, copters):
+def test_the_2d_map_follows_the_vehicle_and_a_click_on_it_sends_the_vehicle_there(browser_page, station, copters,
+                                                                                    tmp_path):
     """Follow keeps the selected vehicle in the map's middle; a plain click on the map picks the Go here target
-    (drawn there), and Go here flies the vehicle to it."""
+    (drawn there and marked in the 3D view), and Go here flies the vehicle to it; there, both marks go."""
     sysid = 6
     copters(sysid, start=(6.0, 6.0))
     assert station.http.result(sysid, action="set_mode", mode="GUIDED") == "accepted"
@@ -120,8 +121,9 @@ def test_the_2d_map_follows_the_vehicle_and_a_click_on_it_sends_the_vehicle_ther
     assert station.http.result(sysid, action="abort") == "accepted"
     wait_sim(station, sysid, lambda v: v["mode"] == "BRAKE", 5, "holding in BRAKE")
 
-    page = browser_page.open(f"#token={TOKEN}")
+    page = browser_page.open(f"#token={TOKEN}", view=True)
     expect(page.locator("#auth-status")).to_have_text("Signed in")
+    browser_page.wait_for_view(tmp_path, sysid)
     page.locator(f'#fleet-list .fleet-item[data-sysid="{sysid}"]').click()  # select it (others may be here)
     expect(page.locator(f'#fleet-list .fleet-item[data-sysid="{sysid}"]')).to_have_attribute("aria-pressed", "true")
     canvas = page.locator("#map2d")
@@ -156,7 +158,16 @@ def test_the_2d_map_follows_the_vehicle_and_a_click_on_it_sends_the_vehicle_ther
     colour = page.evaluate("""([x, y, r]) => Array.from(document.querySelector('#map2d').getContext('2d')
         .getImageData(Math.round(x * r), Math.round(y * r), 1, 1).data)""",
                            [spot[0] - box["x"], spot[1] - box["y"], ratio])
+    def yellow_on_the_map() -> int:  # the target's pixels (#ffd23f): nothing else on the map is drawn in it
+        return page.evaluate("""() => { const c = document.querySelector('#map2d');
+            const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data; let n = 0;
+            for (let i = 0; i < d.length; i += 4) if (d[i] === 255 && d[i + 1] === 210 && d[i + 2] === 63) n++;
+            return n; }""")
+
     assert all(abs(a - b) <= 8 for a, b in zip(colour, (255, 210, 63), strict=False)), colour  # the yellow cross
+    assert yellow_on_the_map() > 20
+    browser_page.poll(lambda: "/target" in {name for _, name in browser_page.scene_nodes}, 10,
+                      "the map's pick marked in the 3D view too")
     distance = math.dist((here["x"], here["y"]), target)
     assert distance > 3, (here, target)
 
@@ -165,3 +176,40 @@ def test_the_2d_map_follows_the_vehicle_and_a_click_on_it_sends_the_vehicle_ther
     expect(page.locator("#target .ack")).to_have_text(re.compile(rf"^Go here \(vehicle {sysid}\): accepted"))
     wait_sim(station, sysid, lambda v: math.dist((v["position"]["x"], v["position"]["y"]), target) < 1.0,
              distance / 2.5 * 2 + 10, f"vehicle {sysid} reaches the target {target} picked on the map")
+    # there, the target is done: its marks go from the 3D view and the map, and the panel says who reached it
+    browser_page.poll(lambda: ("RemoveSceneNodeMessage", "/target") in browser_page.scene_nodes, 10,
+                      "the 3D view's mark taken away")
+    expect(coords).to_have_text(re.compile(rf"^Vehicle {sysid} · \w+ reached x -?[\d.]+ m, y -?[\d.]+ m\. Click"))
+    browser_page.poll(lambda: yellow_on_the_map() == 0, 10, "the map's yellow target taken away")
+
+
+def test_swap_puts_the_map_large_and_the_3d_view_in_its_corner_and_back(browser_page, station, flyer, tmp_path):
+    """Swap (picture in picture): the map fills the view area and the 3D view goes on, small, in a corner
+    above it, where a click reaches it; Swap again, and hiding the map, give the 3D view the whole area back."""
+    page = browser_page.open(view=True)
+    browser_page.wait_for_view(tmp_path, FLYER)
+    area = page.locator(".view-area").bounding_box()
+
+    def view_box() -> dict:
+        return page.locator("#view").bounding_box()
+
+    def on_top_at(box: dict) -> str:
+        return page.evaluate("([x, y]) => document.elementFromPoint(x, y).id",
+                             [box["x"] + box["width"] / 2, box["y"] + box["height"] / 2])
+
+    assert view_box()["width"] > 0.9 * area["width"]
+    page.click("#map2d-grow")
+    expect(page.locator("#map2d-grow")).to_have_attribute("aria-pressed", "true")
+    pane, small = page.locator("#map2d-pane").bounding_box(), view_box()
+    assert pane["width"] > 0.9 * area["width"] and pane["height"] > 0.9 * area["height"], (pane, area)
+    assert small["width"] < 0.4 * area["width"] and small["height"] < 0.45 * area["height"], small
+    assert small["x"] > area["x"] + area["width"] / 2 and small["y"] > area["y"] + area["height"] / 2, small
+    assert on_top_at(small) == "view"  # above the map, not under it
+    page.screenshot(path=str(tmp_path / "swapped.png"))
+    page.click("#map2d-toggle")  # the map hidden: the 3D view has the whole area again
+    wait_wall(lambda: view_box()["width"] > 0.9 * area["width"], 5, "the 3D view large with the map hidden")
+    page.click("#map2d-toggle")
+    wait_wall(lambda: view_box()["width"] < 0.4 * area["width"], 5, "back in the corner with the map shown")
+    page.click("#map2d-grow")
+    expect(page.locator("#map2d-grow")).to_have_attribute("aria-pressed", "false")
+    wait_wall(lambda: view_box()["width"] > 0.9 * area["width"], 5, "the 3D view large again")

@@ -176,6 +176,28 @@ def test_instruments_show_the_selected_vehicle(page, station):
         raise AssertionError(f"{error}; (echoes, range shown): {seen[-4:]}") from None
 
 
+def test_the_instruments_grow_with_the_panel_and_stay_sharp(page, station):
+    """On a wide screen the panel is wider and the instruments with it; each canvas has as many pixels as it
+    shows (drawn for its size, not a 150 px picture stretched), and the compass letters stay readable."""
+    expect(page.locator("#instruments")).to_be_visible()
+    shown = {}
+    try:
+        for width in (1400, 1920):
+            page.set_viewport_size({"width": width, "height": 900})
+
+            def drawn_at_its_size(width: int = width) -> bool:
+                size = page.eval_on_selector("#compass", "c => [c.clientWidth, c.width, window.devicePixelRatio]")
+                shown[width] = size
+                return size[0] > 0 and size[1] == round(size[0] * size[2])
+            wait_wall(drawn_at_its_size, 10, f"the compass drawn at its size at {width} px",
+                      sleep=lambda: page.wait_for_timeout(200))
+    finally:
+        page.set_viewport_size({"width": 1400, "height": 900})
+    assert shown[1920][0] > 1.3 * shown[1400][0], shown
+    # the compass face in the vehicle's colour at its middle at either size (drawn whole, not a corner of it)
+    assert pixel(page, "#compass", 0.5, 0.5)[3] == 255
+
+
 # ---- 4. honest state: warnings shown whole, prominently ---------------------------------------------------
 def test_warnings_are_a_banner_shown_whole(page, station):
     text = ("RTL: obstacle 1.2 m ahead at (10.5, -3.0); climbing to 15 m before flying home past the building "

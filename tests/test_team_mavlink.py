@@ -99,6 +99,8 @@ def test_two_autopilots_in_one_world_each_agent_hears_the_other_as_adsb_and_sees
         output = team.communicate(timeout=10)[0]
         for fc in controllers:
             fc.conn.close()
+    # told before its silent seconds (some 15 once after an install), where a new user took them for a hang
+    assert output.startswith("vehicle team: loading the simulation's compiled loops"), output
     assert f"vehicle 1: copter at 0.0, 0.0 on udpout:127.0.0.1:{port}" in output, output
     assert f"vehicle 2: copter at 0.0, 3.0 on udpout:127.0.0.1:{port + 10}" in output, output
 

@@ -34,6 +34,19 @@ def test_good_requests_change_that_viewer_alone():
     assert (zoom.x, zoom.y, zoom.steps) == (0.5, -0.25, 2.0)
 
 
+def test_the_page_s_target_is_marked_in_its_3d_view_until_the_page_drops_it():
+    """The Go here target lives in the page (picked on the 2D map or in the 3D view); the 3D view marks
+    what the page holds, and a click in the 3D view is marked before the page has heard of it."""
+    views = Views()
+    answer = views.apply("a" * 16, json.dumps({"type": "target", "x": 3.5, "y": -2}))
+    assert answer["target"] == [3.5, -2.0] and views.get("a" * 16).target == (3.5, -2.0)
+    version = views.get("a" * 16).version
+    views.set_target("a" * 16, (1.0, 1.0))  # a click in this viewer's 3D view
+    assert views.get("a" * 16).target == (1.0, 1.0) and views.get("a" * 16).version > version
+    views.apply("a" * 16, json.dumps({"type": "target", "x": None, "y": None}))  # reached, or dropped
+    assert views.get("a" * 16).target is None
+
+
 @pytest.mark.parametrize("text", [
     "", "not json", "[]", "null", json.dumps({"type": HOSTILE}),
     json.dumps({"type": "camera", "mode": HOSTILE}), json.dumps({"type": "camera", "action": HOSTILE}),
@@ -48,6 +61,9 @@ def test_good_requests_change_that_viewer_alone():
     json.dumps({"type": "camera", "mode": "x" * MAX_REQUEST}),
     json.dumps({"type": "zoom", "x": 0, "y": 10**400, "steps": 1}),  # no float: math.isfinite raised OverflowError
     json.dumps({"type": "layers", "layers": {}, "opacity": -(10**400)}),
+    json.dumps({"type": "target", "x": 1}), json.dumps({"type": "target", "x": None, "y": 2}),
+    json.dumps({"type": "target", "x": "1", "y": 2}), '{"type": "target", "x": NaN, "y": 0}',
+    json.dumps({"type": "target", "x": 1e7, "y": 0}), json.dumps({"type": "target", "x": True, "y": 0}),
 ])
 def test_bad_requests_are_refused_without_echo(text):
     views = Views()
@@ -55,7 +71,8 @@ def test_bad_requests_are_refused_without_echo(text):
         views.apply("a" * 16, text)
     assert HOSTILE not in str(refused.value) and "xxxx" not in str(refused.value)
     settings = views.get("a" * 16)
-    assert settings is None or (settings.mode, settings.sysid, settings.opacity) == ("orbit", None, 1.0)
+    assert settings is None or (settings.mode, settings.sysid, settings.opacity, settings.target) == \
+        ("orbit", None, 1.0, None)
 
 
 def test_parse_keeps_only_known_keys():

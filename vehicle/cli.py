@@ -242,6 +242,16 @@ def _radios(args: argparse.Namespace, scene, ids: list[int], homes: list[tuple[f
                   {sysid: (home[0], home[1]) for sysid, home in zip(ids, homes, strict=True)})
 
 
+def _warm_up(warm_up, who: str) -> None:
+    """Load (or, once after an install, compile: some 15 s) the simulation's loops, saying so first: a new
+    user saw a silent terminal and a page saying "No vehicles yet" and took the start for a hang."""
+    print(f"{who}: loading the simulation's compiled loops (the first start after an install compiles them, "
+          "about 15 s)", file=sys.stderr, flush=True)
+    warmed = warm_up()
+    if warmed > 1.0:
+        print(f"{who}: compiled the simulation's loops in {warmed:.1f} s (once after an install)", flush=True)
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     from vehicle.lab.experiment import warm_up
     from vehicle.lab.live import SimOptions, SimVehicle
@@ -262,10 +272,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     settings = settings_from(args, scene)
     if args.vehicles is not None:
         return _sim_team(args, scene, settings)
-    warmed = warm_up()  # before any link opens: compiling the loops on a fresh install takes a few seconds
-    if warmed > 1.0:
-        print(f"vehicle {args.sysid}: compiled the simulation's loops in {warmed:.1f} s (once after an install)",
-              flush=True)
+    _warm_up(warm_up, f"vehicle {args.sysid}")  # before any link opens
     datum = Datum.of_scene(scene.hints, args.datum)
     items = load_mission(args.waypoints) if args.waypoints else None
     waypoints = positions(items, datum) if items else (
@@ -358,9 +365,7 @@ def _sim_team(args: argparse.Namespace, scene, settings) -> int:
                    for k, start in enumerate(args.start or team_starts(scene, count))]
     team = Team(simulations, ids)
     stepper = TeamStepper(team, args.mission, settings, None, args.autostart) if args.mission else Autopilots(team)
-    warmed = warm_up()
-    if warmed > 1.0:
-        print(f"vehicle team: compiled the simulation's loops in {warmed:.1f} s (once after an install)", flush=True)
+    _warm_up(warm_up, "vehicle team")
     autopilot = args.role == "autopilot"
     per_vehicle = [SimOptions(own, sysid, args.speedup, args.failsafe_timeout, args.log if k == 0 else None,
                               sim_clock=autopilot, signing_key=args.signing_key)
