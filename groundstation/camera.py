@@ -13,6 +13,8 @@ level (the attitude indicator shows the roll).
 - top: straight down onto the vehicle (or the scene's centre), north up.
 - fit: an oblique view from the south-west of a box (the scene, the vehicles).
 - zoom_at: towards the point under the cursor, keeping it under the cursor.
+- recentre: the orbit camera slid across the ground (its angle kept) so that a vehicle that left the
+  view, or went under the page's 2D map, is back in the open part of it.
 """
 
 from __future__ import annotations
@@ -82,6 +84,48 @@ def ray(wxyz, fov: float, aspect: float, x: float, y: float) -> np.ndarray:
     local = np.array([x * half * aspect, -y * half, 1.0])
     direction = rotation(wxyz) @ local
     return direction / np.linalg.norm(direction)
+
+
+def project(wxyz, eye, fov: float, aspect: float, point) -> tuple[float, float] | None:
+    """Where ``point`` shows in the image (x, y from -1 to 1 at the edges, y up; ``ray``'s inverse), or None
+    when it is behind the camera."""
+    local = rotation(wxyz).T @ (np.asarray(point, dtype=float) - np.asarray(eye, dtype=float))
+    if local[2] <= 1e-6:
+        return None
+    half = math.tan(fov / 2)
+    return float(local[0] / local[2] / (half * aspect)), float(-local[1] / local[2] / half)
+
+
+Box = tuple[float, float, float, float]  # x0, y0, x1, y1 in image coordinates (as ``project``'s)
+EDGE = 0.9  # of the image's half-width: a vehicle further out is as good as gone
+
+
+def in_sight(spot: tuple[float, float] | None, covered: Box | None) -> bool:
+    """A point of the image the viewer sees: in front, inside the edges, not under the page's 2D map."""
+    if spot is None or abs(spot[0]) > EDGE or abs(spot[1]) > EDGE:
+        return False
+    return covered is None or not (covered[0] <= spot[0] <= covered[2] and covered[1] <= spot[1] <= covered[3])
+
+
+def open_middle(covered: Box | None) -> tuple[float, float]:
+    """Where in the image to bring a vehicle back to: the middle, or, with a corner under the 2D map, as far
+    from the map's corner as from the opposite edges (halfway between the map's edge and the image's)."""
+    if covered is None:
+        return 0.0, 0.0
+    x0, y0, x1, y1 = covered
+    x = (x1 + 1.0) / 2 if x0 <= -0.99 and x1 < 0.99 else (x0 - 1.0) / 2 if x1 >= 0.99 and x0 > -0.99 else 0.0
+    y = (y1 + 1.0) / 2 if y0 <= -0.99 and y1 < 0.99 else (y0 - 1.0) / 2 if y1 >= 0.99 and y0 > -0.99 else 0.0
+    return x, y
+
+
+def recentre(eye, target, wxyz, fov: float, aspect: float, point, spot: tuple[float, float]) -> Pose:
+    """The camera slid (not turned) so that ``point`` shows at ``spot`` of the image: level when the ray
+    through the spot comes down onto the point's height, else along the ray at the point's distance."""
+    eye, target, point = (np.asarray(v, dtype=float) for v in (eye, target, point))
+    direction = ray(wxyz, fov, aspect, *spot)
+    reach = (point[2] - eye[2]) / direction[2] if direction[2] < -1e-3 else float(np.linalg.norm(point - eye))
+    shift = point - (eye + direction * max(reach, NEAREST))
+    return eye + shift, target + shift
 
 
 def zoom_at(eye, target, point, factor: float) -> Pose:

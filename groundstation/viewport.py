@@ -32,6 +32,8 @@ TOP_HEIGHT = (30.0, 3.0, 500.0)  # m above the vehicle (top-down): default, lowe
 SELECTED = (255, 255, 255)
 TARGET_COLOUR = (255, 230, 0)
 WALL_MARGIN = 0.3  # m: the follow camera stops this far in front of a wall between it and the vehicle
+PAN_SECONDS = 0.6  # the orbit camera's slide that brings a vehicle that flew out of sight back into it
+STILL = 1e-3  # m: a camera that moved less than this since the last frame was left alone by its viewer
 
 
 def opacity_root(opacity: float) -> str:
@@ -113,6 +115,9 @@ class Viewport:
         self.heading: float | None = None
         self.follow_distance = FOLLOW_DISTANCE[0]
         self.top_height = TOP_HEIGHT[0]
+        self.covered: camera.Box | None = None  # the part of the view under the page's 2D map
+        self.seen: tuple | None = None  # the orbit camera's last pose, and whether the vehicle was in sight
+        self.pan: tuple | None = None  # a slide under way: from, to, seconds into it
 
     # ---- settings -------------------------------------------------------------------------------
     def apply(self, settings: ViewSettings | None, ground: Callable[[float, float], float]) -> None:
@@ -130,6 +135,7 @@ class Viewport:
         if settings.mode != self.mode:
             self.heading = None
         self.mode, self.sysid, self.opacity = settings.mode, settings.sysid, settings.opacity
+        self.covered = settings.covered
         for name, root in self.roots.items():
             root.visible = bool(settings.layers.get(name, True))
         for opacity, root in self.levels.items():
@@ -241,6 +247,34 @@ class Viewport:
             self._place(camera.onboard(target.position, target.yaw, target.pitch))
         elif self.mode == "top":
             self._place(camera.top(target.position, self.top_height))
+        elif self.mode == "orbit":
+            self._keep_in_sight(target, dt)
+
+    def _keep_in_sight(self, vehicle: Vehicle, dt: float) -> None:
+        """The orbit camera is the viewer's own, but a vehicle flying out of it (off the edge, behind the
+        page's 2D map) while the viewer left the camera alone slides the camera after it, its angle kept.
+        A viewer who turned the camera away from the vehicle is not followed back."""
+        try:
+            cam = self.client.camera
+            eye, look = np.array(cam.position, dtype=float), np.array(cam.look_at, dtype=float)
+            wxyz, fov, aspect = np.array(cam.wxyz, dtype=float), float(cam.fov), float(cam.aspect)
+        except (AssertionError, ZeroDivisionError):
+            return
+        if self.pan is not None:
+            start, end, spent = self.pan
+            spent += dt
+            self.pan = None if spent >= PAN_SECONDS else (start, end, spent)
+            eye, look = camera.blend(start, end, min(1.0, spent / PAN_SECONDS))
+            self._place((eye, look))
+        sighted = camera.in_sight(camera.project(wxyz, eye, fov, aspect, vehicle.position), self.covered)
+        before = self.seen
+        self.seen = (eye, look, sighted)
+        if self.pan is not None or before is None or sighted or not before[2]:
+            return
+        if np.linalg.norm(eye - before[0]) > STILL or np.linalg.norm(look - before[1]) > STILL:
+            return  # the viewer moved the camera off the vehicle: theirs to look where they like
+        end = camera.recentre(eye, look, wxyz, fov, aspect, vehicle.position, camera.open_middle(self.covered))
+        self.pan = ((eye, look), end, 0.0)
 
     @staticmethod
     def _fit_box(bounds, vehicles: list[Vehicle]) -> tuple[np.ndarray, np.ndarray]:

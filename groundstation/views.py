@@ -43,6 +43,7 @@ class ViewSettings:
     action: str | None = None  # a one-shot move not yet made
     zooms: list[Zoom] = field(default_factory=list)
     target: tuple[float, float] | None = None  # the Go here target the page holds, marked in this 3D view
+    covered: tuple[float, float, float, float] | None = None  # the part of the view under the page's 2D map
     version: int = 0  # bumped on each change, so the 3D view applies what changed once
 
 
@@ -108,6 +109,8 @@ class Views:
                     view.zooms.append(Zoom(request["x"], request["y"], request["steps"]))
             elif kind == "target":
                 view.target = request["point"]
+            elif kind == "covered":
+                view.covered = request["box"]
             view.version += 1
             return {"type": "view", "mode": view.mode, "sysid": view.sysid, "layers": dict(view.layers),
                     "opacity": view.opacity, "target": list(view.target) if view.target else None}
@@ -125,7 +128,7 @@ def parse(text: str | bytes) -> dict:
         raise ViewRequestError("a request is a JSON object")
     kind = request.get("type")
     allowed = {"camera": {"mode", "action"}, "select": {"sysid"}, "layers": {"layers", "opacity"},
-               "zoom": {"x", "y", "steps"}, "target": {"x", "y"}}
+               "zoom": {"x", "y", "steps"}, "target": {"x", "y"}, "covered": {"box"}}
     if not isinstance(kind, str) or kind not in allowed:
         raise ViewRequestError("unknown request type")
     if set(request) - {"type"} - allowed[kind]:
@@ -162,6 +165,17 @@ def parse(text: str | bytes) -> dict:
             out["point"] = (float(x), float(y))
         else:
             raise ViewRequestError(f"a target's x and y are numbers within {MAX_COORDINATE:g} m, or both null")
+    elif kind == "covered":  # the box of the view the page's 2D map lies over (image coordinates), or null
+        if "box" not in request:
+            raise ViewRequestError("a covered request needs a box (or null)")
+        box = request["box"]
+        if box is None:
+            out["box"] = None
+        elif isinstance(box, list) and len(box) == 4 and all(_is_number(v) and -1.0 <= v <= 1.0 for v in box) \
+                and box[0] < box[2] and box[1] < box[3]:
+            out["box"] = tuple(float(v) for v in box)
+        else:
+            raise ViewRequestError("a covered box is [x0, y0, x1, y1] from -1 to 1, x0 < x1 and y0 < y1, or null")
     else:
         for key, low, high in (("x", -1.0, 1.0), ("y", -1.0, 1.0), ("steps", -MAX_ZOOM_STEPS, MAX_ZOOM_STEPS)):
             value = request.get(key)

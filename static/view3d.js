@@ -17,6 +17,7 @@ const SLOW_VIEW_MS = 60000;  // and one that never connected since it loaded (sl
 const view = {
   send: null,            // the socket's send, while it is open
   target: null,          // [x, y]: the Go here target this page holds, marked in its 3D view
+  covered: "",           // the last box under the 2D map sent (as JSON), "" before any
   mode: "orbit",
   sysid: null,           // the selected vehicle (the page's selection, else the first vehicle)
   chosen: null,          // a vehicle the operator selected explicitly
@@ -81,11 +82,38 @@ function select() {
   renderVehicle();
 }
 
+const clamp = (v, low, high) => Math.min(high, Math.max(low, v));
+
 function sendAll() {
   send({ type: "camera", mode: view.mode });
   send({ type: "select", sysid: view.sysid });
   send({ type: "layers", layers: layers(), opacity: opacity() });
   if (view.target) send({ type: "target", x: view.target[0], y: view.target[1] });
+  view.covered = "";
+  sendCovered();
+}
+
+/** The part of the 3D view the 2D map lies over, in the view's image coordinates (-1..1, y up), or null when
+ * the map is swapped to the front (the 3D view is then the small picture above it): the orbit camera keeps a
+ * vehicle out from under it. Sent when it changes. */
+function sendCovered() {
+  const frame = $("#view").getBoundingClientRect();
+  const pane = $("#map2d-pane");
+  let box = null;
+  if (pane && frame.width > 0 && frame.height > 0 && !pane.closest(".map-first")) {
+    const r = pane.getBoundingClientRect();
+    const x0 = Math.max(r.left, frame.left), x1 = Math.min(r.right, frame.right);
+    const y0 = Math.max(r.top, frame.top), y1 = Math.min(r.bottom, frame.bottom);
+    if (x1 > x0 && y1 > y0) {
+      const x = (px) => clamp(((px - frame.left) / frame.width) * 2 - 1, -1, 1);
+      const y = (py) => clamp(1 - ((py - frame.top) / frame.height) * 2, -1, 1);
+      box = [x(x0), y(y1), x(x1), y(y0)].map((v) => Math.round(v * 1000) / 1000);
+    }
+  }
+  const key = JSON.stringify(box);
+  if (key === view.covered) return;
+  view.covered = key;
+  send({ type: "covered", box });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -126,7 +154,6 @@ function flushZoom() {
   const zoom = view.zoom;
   view.zoom = null;
   if (!zoom) return;
-  const clamp = (v, low, high) => Math.min(high, Math.max(low, v));
   send({ type: "zoom", x: clamp(zoom.x, -1, 1), y: clamp(zoom.y, -1, 1), steps: clamp(zoom.steps, -20, 20) });
 }
 
@@ -193,6 +220,9 @@ function main() {
   }
   $("#map-opacity").addEventListener("change", () => send({ type: "layers", opacity: opacity() }));
   window.addEventListener("keydown", onKey);
+  const watchCover = new ResizeObserver(() => sendCovered());  // the map folded, swapped, the window resized
+  watchCover.observe($("#view"));
+  if ($("#map2d-pane")) watchCover.observe($("#map2d-pane"));
 
   on(EVENTS.socket, ({ send: socketSend }) => {
     view.send = typeof socketSend === "function" ? socketSend : null;

@@ -198,6 +198,17 @@ def test_swap_puts_the_map_large_and_the_3d_view_in_its_corner_and_back(browser_
                              [box["x"] + box["width"] / 2, box["y"] + box["height"] / 2])
 
     assert view_box()["width"] > 0.9 * area["width"]
+    # the station knows what of this viewer's 3D view the map lies over (the orbit camera keeps vehicles out
+    # from under it): the lower left, in the view's image coordinates
+    viewer = page.eval_on_selector("#view", "f => f.src").rstrip("/").rsplit("/", 1)[-1]
+    views = station.station.view.views
+
+    def covered():
+        settings = views.get(viewer)
+        return settings.covered if settings is not None else "not yet"
+    wait_wall(lambda: covered() not in (None, "not yet"), 10, "the map's box told to the station")
+    x0, y0, x1, y1 = covered()
+    assert x0 < -0.9 and y0 < -0.9 and -0.5 < x1 < 0.2 and -0.4 < y1 < 0.6, covered()
     page.click("#map2d-grow")
     expect(page.locator("#map2d-grow")).to_have_attribute("aria-pressed", "true")
     pane, small = page.locator("#map2d-pane").bounding_box(), view_box()
@@ -205,6 +216,7 @@ def test_swap_puts_the_map_large_and_the_3d_view_in_its_corner_and_back(browser_
     assert small["width"] < 0.4 * area["width"] and small["height"] < 0.45 * area["height"], small
     assert small["x"] > area["x"] + area["width"] / 2 and small["y"] > area["y"] + area["height"] / 2, small
     assert on_top_at(small) == "view"  # above the map, not under it
+    wait_wall(lambda: covered() is None, 10, "nothing covers the small 3D view")
     page.screenshot(path=str(tmp_path / "swapped.png"))
     page.click("#map2d-toggle")  # the map hidden: the 3D view has the whole area again
     wait_wall(lambda: view_box()["width"] > 0.9 * area["width"], 5, "the 3D view large with the map hidden")

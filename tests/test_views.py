@@ -47,6 +47,14 @@ def test_the_page_s_target_is_marked_in_its_3d_view_until_the_page_drops_it():
     assert views.get("a" * 16).target is None
 
 
+def test_the_part_of_the_view_under_the_2d_map_is_that_viewer_s():
+    views = Views()
+    views.apply("a" * 16, json.dumps({"type": "covered", "box": [-1, -1, -0.2, 0.1]}))
+    assert views.get("a" * 16).covered == (-1.0, -1.0, -0.2, 0.1)
+    views.apply("a" * 16, json.dumps({"type": "covered", "box": None}))  # map folded or swapped
+    assert views.get("a" * 16).covered is None
+
+
 @pytest.mark.parametrize("text", [
     "", "not json", "[]", "null", json.dumps({"type": HOSTILE}),
     json.dumps({"type": "camera", "mode": HOSTILE}), json.dumps({"type": "camera", "action": HOSTILE}),
@@ -64,6 +72,9 @@ def test_the_page_s_target_is_marked_in_its_3d_view_until_the_page_drops_it():
     json.dumps({"type": "target", "x": 1}), json.dumps({"type": "target", "x": None, "y": 2}),
     json.dumps({"type": "target", "x": "1", "y": 2}), '{"type": "target", "x": NaN, "y": 0}',
     json.dumps({"type": "target", "x": 1e7, "y": 0}), json.dumps({"type": "target", "x": True, "y": 0}),
+    json.dumps({"type": "covered", "box": [0, 0, 1]}), json.dumps({"type": "covered", "box": [0.5, 0, 0.2, 1]}),
+    json.dumps({"type": "covered", "box": [-2, 0, 0, 1]}), json.dumps({"type": "covered", "box": "all"}),
+    json.dumps({"type": "covered"}),
 ])
 def test_bad_requests_are_refused_without_echo(text):
     views = Views()
