@@ -252,8 +252,8 @@ class Viewport:
 
     def _keep_in_sight(self, vehicle: Vehicle, dt: float) -> None:
         """The orbit camera is the viewer's own, but a vehicle flying out of it (off the edge, behind the
-        page's 2D map) while the viewer left the camera alone slides the camera after it, its angle kept, as
-        does a view that opens with it out of sight. A viewer who turned the camera away is not followed back."""
+        page's 2D map) while the viewer left the camera alone slides the camera after it, its angle kept.
+        A viewer who turned the camera away from the vehicle is not followed back."""
         try:
             cam = self.client.camera
             eye, look = np.array(cam.position, dtype=float), np.array(cam.look_at, dtype=float)
@@ -269,11 +269,10 @@ class Viewport:
         sighted = camera.in_sight(camera.project(wxyz, eye, fov, aspect, vehicle.position), self.covered)
         before = self.seen
         self.seen = (eye, look, sighted)
-        if self.pan is not None or sighted:
+        if self.pan is not None or before is None or sighted or not before[2]:
             return
-        if before is not None and (not before[2] or np.linalg.norm(eye - before[0]) > STILL
-                                   or np.linalg.norm(look - before[1]) > STILL):
-            return  # out of sight already, or the viewer moved the camera off it: theirs to look where they like
+        if np.linalg.norm(eye - before[0]) > STILL or np.linalg.norm(look - before[1]) > STILL:
+            return  # the viewer moved the camera off the vehicle: theirs to look where they like
         end = camera.recentre(eye, look, wxyz, fov, aspect, vehicle.position, camera.open_middle(self.covered))
         self.pan = ((eye, look), end, 0.0)
 
