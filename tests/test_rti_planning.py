@@ -121,3 +121,34 @@ def test_a_ring_with_no_room_is_refused():
         Planner(REGION, np.zeros((1, 2)))
     with pytest.raises(ValueError, match="unknown planner"):
         Planner(REGION, ring(REGION, 1.0, 1.0), "spiral")
+
+
+def line_distance(point, a, b) -> float:
+    """Distance from ``point`` to the straight line through a and b."""
+    (px, py), (ax, ay), (bx, by) = point, a, b
+    return abs((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / math.dist(a, b)
+
+
+def test_the_perimeter_plan_lays_lines_in_four_directions_evenly_spaced():
+    p = planner("perimeter", rounds=20)
+    here = [(0.0, -1.0), (0.0, 7.0)]
+    steps = [here := p.next_spots(here) for _ in range(20)]
+    angles = [round(math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))) % 180 for a, b in steps]
+    assert sorted(set(angles)) == [0, 45, 90, 135] and all(angles.count(a) == 5 for a in (0, 45, 90, 135)), angles
+    north_south = sorted(a[0] for a, b in steps if a[0] == b[0])
+    assert np.allclose(np.diff(north_south), 1.0)  # five strips of 1.2 m, snapped to the ring's 1 m spots
+    assert p.next_spots(here) == steps[0] or set(p.next_spots(steps[0])) == set(steps[1])  # then again
+
+
+def test_the_perimeter_plan_tells_two_targets_from_their_ghosts():
+    """Two targets 1.5 m apart on a diagonal: in a grid of north-south and east-west lines their ghosts (the
+    other two corners of the rectangle they span) lie on exactly the lines the targets do, so no measurement
+    tells them apart; lines in further directions pass a ghost and miss both targets."""
+    targets = [(2.5, 2.5), (3.56, 3.56)]
+    ghosts = [(2.5, 3.56), (3.56, 2.5)]
+    p = planner("perimeter", rounds=24)
+    here = [(0.0, -1.0), (0.0, 7.0)]
+    lines = [here := p.next_spots(here) for _ in range(24)]
+    telling = [line for line in lines if min(line_distance(g, *line) for g in ghosts) < 0.3
+               and min(line_distance(t, *line) for t in targets) > 0.6]
+    assert len(telling) >= 2, lines

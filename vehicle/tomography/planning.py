@@ -8,9 +8,11 @@ next step is the pair of candidate spots whose link w has the largest posterior 
 it brings, log(1 + w^T P w / noise), is largest), per second of flying there and dwelling; P then takes the
 rank-one update of that link, and the next step looks where the image is least sure of now.
 
-Perimeter (the obvious plan): the two radios on opposite sides of the region, stepping round it together: straight
-across first (north-south links, then east-west ones), then laps with the partner shifted along its side, for
-oblique links.
+Perimeter (the obvious plan, laid as in computed tomography): parallel lines across the region in ``FAMILIES``
+directions (north-south, east-west and the two diagonals), each family's lines evenly spaced across the region,
+the mission's rounds shared evenly among them; each line's two spots are the ring's spots nearest its ends. With
+two directions only (the plan before), two targets make four crossings that the lines cannot tell apart (the
+ghosts of a two-angle grid); every further direction sees the pair from a side where the ghosts lie off its lines.
 
 Candidate spots lie on a ring around the region (its bounds grown by ``offset``), every ``spacing`` metres, kept
 where the scene leaves room for a body; the two spots of a pair are at least ``apart`` metres from each other.
@@ -35,6 +37,7 @@ NOISE = 0.5  # a link's noise variance, in units of a pixel's prior variance
 CELL = 0.3  # m: the planner's pixel (coarser than an image's: the plan needs where, not detail) ...
 MAX_SIDE_PIXELS = 36  # ... and at most this many along the longer side: P holds pixels^2 numbers
 PLANNERS = ("uncertainty", "perimeter")
+FAMILIES = 4  # directions of the perimeter plan's lines: 0, 45, 90 and 135 degrees
 
 Point = tuple[float, float]
 
@@ -76,7 +79,8 @@ class Planner:
     the same next spots (see the module's docstring)."""
 
     def __init__(self, bounds: tuple[float, float, float, float], spots: np.ndarray, kind: str = "uncertainty",
-                 fixed: list[Point] | None = None, apart: float = 2.6, dwell: float = 5.0, speed: float = 2.5):
+                 fixed: list[Point] | None = None, apart: float = 2.6, dwell: float = 5.0, speed: float = 2.5,
+                 rounds: int = 40):
         if kind not in PLANNERS:
             raise ValueError(f"unknown planner {kind!r} (one of {', '.join(PLANNERS)})")
         if len(spots) < 2:
@@ -84,6 +88,7 @@ class Planner:
         self.kind, self.bounds, self.spots = kind, bounds, np.asarray(spots, float)
         self.fixed = [tuple(map(float, p)) for p in (fixed or [])]
         self.apart, self.dwell, self.speed = apart, dwell, speed
+        self.lines = perimeter_lines(bounds, self.spots, max(1, int(rounds)), apart) if kind == "perimeter" else []
         side = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
         self.grid = Grid(bounds, max(CELL, side / MAX_SIDE_PIXELS))
         self.weights = WeightCache(self.grid)
@@ -176,31 +181,61 @@ class Planner:
         return int(np.argmax(np.where(far, gain / (self.dwell + travel), -np.inf)))
 
     def _perimeter(self, count: int) -> list[int]:
-        """Step k: a spot on the south or east half of the ring, its partner across the region (shifted
-        along its side on later laps); further vehicles spread evenly between them."""
+        """Step k: the k-th line of the plan (again from the first when the mission goes on); further vehicles
+        spread evenly round the ring from its first spot."""
+        first, partner = self.lines[self.steps % len(self.lines)]
         n = len(self.spots)
-        half = n // 2
-        lap, along = divmod(self.steps, half)
-        shifts = [0, n // 8, -(n // 8), n // 16, -(n // 16)]
-        shift = shifts[lap % len(shifts)]
-        first = along
-        partner = self._across(first, shift)
-        chosen = [first, partner]
-        for k in range(2, count):
-            chosen.append((first + k * n // count) % n)
-        return chosen
+        return [first, partner, *((first + k * n // count) % n for k in range(2, count))]
 
-    def _across(self, index: int, shift: int) -> int:
-        """The spot straight across the region from spot ``index`` (mirrored through the region's centre
-        along one axis), moved ``shift`` spots along the ring, and at least ``apart`` from it."""
-        x, y = self.spots[index]
-        cx, cy = (self.bounds[0] + self.bounds[2]) / 2, (self.bounds[1] + self.bounds[3]) / 2
-        rx0, ry0 = self.spots.min(axis=0)
-        rx1, ry1 = self.spots.max(axis=0)
-        on_x_side = min(abs(y - ry0), abs(y - ry1)) <= min(abs(x - rx0), abs(x - rx1))
-        mirror = (x, 2 * cy - y) if on_x_side else (2 * cx - x, y)
-        target = int(np.argmin(np.linalg.norm(self.spots - mirror, axis=1)))
-        target = (target + shift) % len(self.spots)
-        while np.linalg.norm(self.spots[target] - self.spots[index]) < self.apart:
-            target = (target + 1) % len(self.spots)
-        return target
+
+def perimeter_lines(bounds, spots: np.ndarray, rounds: int, apart: float) -> list[tuple[int, int]]:
+    """The perimeter plan: ``rounds`` lines (pairs of spot indices), shared evenly among ``FAMILIES`` directions,
+    each family's lines evenly spaced across the region (the middles of equal strips), one family swept after
+    the other, each from the end nearer where the last one ended."""
+    x0, y0, x1, y1 = bounds
+    corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
+    centre = corners.mean(axis=0)
+    lines: list[tuple[int, int]] = []
+    for family in range(FAMILIES):
+        count = rounds // FAMILIES + (family < rounds % FAMILIES)
+        if not count:
+            continue
+        angle = math.pi * (0, 2, 1, 3)[family % 4] / 4 if FAMILIES == 4 else math.pi * family / FAMILIES
+        normal = np.array([math.cos(angle), math.sin(angle)])  # across the lines; 0: north-south lines
+        along = np.array([-normal[1], normal[0]])
+        across = (corners - centre) @ normal
+        low, high = across.min(), across.max()
+        family_lines = []
+        for k in range(count):
+            middle = centre + normal * (low + (k + 0.5) * (high - low) / count)
+            ends = [_nearest_on_ring(spots, middle, sign * along, normal) for sign in (-1, 1)]
+            family_lines.append(_apart(spots, *ends, apart))
+        if lines and _gap(spots, lines[-1], family_lines[-1]) < _gap(spots, lines[-1], family_lines[0]):
+            family_lines.reverse()
+        lines.extend(family_lines)
+    return lines
+
+
+def _nearest_on_ring(spots: np.ndarray, start: np.ndarray, direction: np.ndarray, normal: np.ndarray) -> int:
+    """The spot nearest where the ray from ``start`` (inside the ring) along ``direction`` leaves the ring: of the
+    spots ahead, the one nearest the line (the ring is convex, so the ray meets it once); of two as near, the one
+    on the ``-normal`` side, for both ends of a line alike, so that the line keeps its direction."""
+    offset = spots - start
+    side = offset @ normal
+    distance = np.where(offset @ direction > 0, np.round(np.abs(side), 6), np.inf)
+    return int(np.lexsort((side, distance))[0])
+
+
+def _apart(spots: np.ndarray, first: int, partner: int, apart: float) -> tuple[int, int]:
+    """The pair, its partner moved along the ring until the two are ``apart``."""
+    for _ in range(len(spots)):
+        if np.linalg.norm(spots[partner] - spots[first]) >= apart:
+            break
+        partner = (partner + 1) % len(spots)
+    return first, partner
+
+
+def _gap(spots: np.ndarray, a: tuple[int, int], b: tuple[int, int]) -> float:
+    """How far the two radios fly from line a to line b (each to the nearer end)."""
+    pa, pb = spots[list(a)], spots[list(b)]
+    return min(np.linalg.norm(pa - pb, axis=1).sum(), np.linalg.norm(pa - pb[::-1], axis=1).sum())

@@ -89,7 +89,8 @@ class Rti(Mission):
         kind = PLANNERS[round(settings.rti_planner)]
         apart = settings.separation + 2 * ctx.radius + CLEAR_EXTRA
         try:
-            self.planner = Planner(bounds, spots, kind, self.fixed, apart, settings.rti_dwell, settings.speed)
+            self.planner = Planner(bounds, spots, kind, self.fixed, apart, settings.rti_dwell, settings.speed,
+                                   round(settings.rti_rounds))
         except ValueError as error:
             self.reason = str(error)
             return
