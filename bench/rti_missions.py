@@ -10,7 +10,7 @@
 
 Every run flies the whole mission (``rti_rounds`` pairs), headless, faster than real time, and ends there (the
 way home and the landing are not flown).
-Run: python bench/rti_missions.py [--runs 50] [--pairs 10] [--building 5] [--rounds 24]
+Run: python bench/rti_missions.py [--runs 50] [--pairs 10] [--building 5] [--rounds 40]
                                   [--planners uncertainty,perimeter] [--parts one,two,building]
 (parts and planners split over processes run side by side on a loaded machine; each prints its own tables)
 """
@@ -116,7 +116,8 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=50, help="one-target runs per planner (default 50)")
     parser.add_argument("--pairs", type=int, default=10, help="two-target runs per planner (default 10)")
     parser.add_argument("--building", type=int, default=5, help="runs through the building per case (default 5)")
-    parser.add_argument("--rounds", type=int, default=24, help="pairs of spots per mission (default 24)")
+    parser.add_argument("--rounds", type=int, default=round(Settings().rti_rounds),
+                        help="pairs of spots per mission (default: rti_rounds' default, 40)")
     parser.add_argument("--planners", default=",".join(PLANNERS), help="comma-separated (default: both)")
     parser.add_argument("--parts", default="one,two,building", help="comma-separated (default: all three)")
     parser.add_argument("--first", type=int, default=0, help="the first one-target run (to split runs over processes)")
