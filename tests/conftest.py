@@ -115,8 +115,13 @@ def pytest_make_collect_report(collector):
 # cores (two workers, each test with two to four processes of its own) a starved process now and then makes
 # a vehicle hover seconds late or a page miss a frame, and a test fails that passes alone. Each of these gets
 # one more run; the summary still counts every rerun ("R"), and a test that fails twice fails the run.
-WALL_CLOCK_MODULES = ("test_sitl", "test_battery_failsafe_sitl", "test_companion", "test_team_mavlink",
-                      "test_hostile_web", "test_experiment_log")
+WALL_CLOCK_MODULES = (  # each runs a simulated vehicle at a speedup of the wall clock, ArduPilot, or a demo
+    "test_sitl", "test_battery_failsafe_sitl", "test_battery_failsafe", "test_companion", "test_team_mavlink",
+    "test_hostile_web", "test_hostile_mavlink", "test_hostile_exchanges", "test_experiment_log", "test_demo",
+    "test_command_ack", "test_groundstation_api", "test_links", "test_radio_stream", "test_recording_limits",
+    "test_recording_replay", "test_replay_hostile", "test_replay_scene", "test_rti_api", "test_vehicle_mavlink",
+    "test_view3d_poses", "test_wheel",
+)
 
 
 def pytest_collection_modifyitems(config, items):
