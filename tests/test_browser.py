@@ -82,9 +82,15 @@ def copters(scene, station):
     started: list[RunningSim] = []
 
     def start(sysid: int, start: tuple[float, float] | None = None, mission: str = "browse") -> RunningSim:
+        born = time.monotonic()
         copter = copter_for(station, scene, sysid, mission=mission, start=start)
         started.append(copter)
-        wait_wall(lambda: station.http.vehicle(sysid), 15, f"vehicle {sysid} is heard")
+
+        def heard_anew() -> bool:  # this copter, not one of the same id an earlier try of the test left behind
+            v = station.http.vehicle(sysid)
+            booted = v and v.get("time_boot_s")
+            return booted is not None and booted <= (time.monotonic() - born + 1.0) * SPEEDUP + 2.0
+        wait_wall(heard_anew, 15, f"vehicle {sysid} is heard")
         return copter
 
     yield start
