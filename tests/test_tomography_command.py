@@ -56,11 +56,19 @@ def test_the_command_writes_the_contract_json_and_a_picture(walk_file, tmp_path,
 
 def test_windows_give_frames_with_a_track(walk_file, tmp_path, capsys):
     out = tmp_path / "out.json"
-    code, _, err = run(capsys, walk_file, "--window", 1, "--json", out, "--peaks", 1)
+    code, _, err = run(capsys, walk_file, "--window", 1, "--json", out, "--peaks", 1, "--images")
     assert code == 0, err
-    frames = json.loads(out.read_text())["frames"]
+    result = json.loads(out.read_text())
+    frames = result["frames"]
     assert [f["t"] for f in frames] == pytest.approx(np.arange(10) * 1.0)
     assert all(len(f["peaks"]) <= 1 and "track" in f for f in frames)
+    nx, ny = result["grid"]
+    image = np.array(frames[-1]["image"])  # rows of values: the person's frame, brightest at its peak
+    assert image.shape == (ny, nx)
+    peak = frames[-1]["peaks"][0]
+    row, col = np.unravel_index(image.argmax(), image.shape)
+    cell = result["cell"]
+    assert abs((col + 0.5) * cell - peak["x"]) <= cell and abs((row + 0.5) * cell - peak["y"]) <= cell
 
 
 def test_bad_rows_are_skipped_counted_and_named(tmp_path, capsys):

@@ -161,7 +161,12 @@ class Result:
     info: dict = field(default_factory=dict)
 
     def to_json(self, images: bool = False) -> dict:
-        frames = self.frames if images else [{k: v for k, v in f.items() if k != "image"} for f in self.frames]
+        """The contract's JSON; with ``images``, each frame's image as rows of values (y up, 4 decimals)."""
+        frames = [{k: v for k, v in f.items() if k != "image"} for f in self.frames]
+        if images:
+            for frame, full in zip(frames, self.frames, strict=True):
+                if "image" in full:
+                    frame["image"] = np.round(full["image"], 4).tolist()
         return {"bounds": [round(v, 4) for v in self.grid.bounds], "cell": self.grid.cell, "window": self.window,
                 "grid": [self.grid.nx, self.grid.ny], **self.info, "frames": frames}
 
