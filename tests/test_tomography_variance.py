@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from vehicle.tomography.imaging import reconstruct
+from vehicle.tomography.imaging import above_floor, reconstruct
 from vehicle.tomography.links import link_table
 from vehicle.tomography.solvers import RegularisedLS, difference_prior_times, gradient_operators
 from vehicle.tomography.synthetic import Network, line_distance, square
@@ -127,3 +127,30 @@ def test_the_difference_prior_is_tikhonov_with_a_gradient_penalty():
     Q = (Dx.T @ Dx + Dy.T @ Dy).toarray() + np.eye(42) / reach ** 2
     expected = np.linalg.solve(W.T @ W + alpha * Q, W.T @ y)
     assert np.allclose(x, expected, atol=1e-8)
+
+
+
+def test_each_path_is_measured_above_its_own_kernel_floor():
+    """An unchanged path reads above zero by its own floor (a quiet path 0.02, a noisy one 0.3); a person's
+    rise on a path is measured from that path's floor, so the quiet and the noisy path read the same rise."""
+    rng = np.random.default_rng(4)
+    Y = np.column_stack([0.02 + rng.normal(0, 0.005, 40), 0.3 + rng.normal(0, 0.05, 40)])
+    Y[30:34] += 0.5  # someone crosses both paths in four of the forty frames
+    Y[5, 1] = np.nan  # a frame that did not hear the noisy path
+    above, floor = above_floor(Y)
+    assert floor == pytest.approx([0.02, 0.3], abs=0.03)
+    assert np.nanmedian(above, axis=0) == pytest.approx([0.0, 0.0], abs=1e-12)
+    assert above[30:34].mean(axis=0) == pytest.approx([0.5, 0.5], abs=0.06)
+    assert np.isnan(above[5, 1])
+
+
+def test_the_floor_is_taken_only_against_the_files_own_histogram_over_enough_frames(net):
+    """KRTI's premise (each path unchanged most of the time) holds for the file's own long-term histogram over
+    many windows; against an empty capture, or over a few windows, a person standing still would be the floor."""
+    calibration = net.sweeps(np.arange(8) * 0.5)
+    records = net.sweeps(TIMES, walker)
+    assert reconstruct(records, calibration, bounds=BOUNDS, cell=0.2, window=1.0).info["kernel_floor"] > 0
+    assert "kernel_floor" not in reconstruct(records, calibration, bounds=BOUNDS, cell=0.2, window=1.0,
+                                             reference="empty").info
+    short = net.sweeps(100 + np.arange(20) * 0.25, walker)  # 5 windows
+    assert "kernel_floor" not in reconstruct(short, calibration, bounds=BOUNDS, cell=0.2, window=1.0).info

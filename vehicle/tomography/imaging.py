@@ -52,6 +52,7 @@ MEASURES = ("mean", "kernel", "variance")
 PRIORS = ("exponential", "difference")
 REFERENCES = ("auto", "file", "empty")
 EMPTY_SOURCES = ("data", "model", "brief")
+FLOOR_FRAMES = 10  # frames: fewer, and a path's median could be the person's own (see above_floor)
 SMOOTH = 3  # windows: the centred moving average of each path's measurement (see smooth)
 
 
@@ -216,7 +217,23 @@ def kernel_measurements(records: Records, table: LinkTable, calibration: Records
     reference = reference_rows(records, table, empty, drifted[table.lc_path])
     width = kernel_width(*reference)
     per_lc = kernel_distances(records, table, reference, use, frame, frames, span, width)
-    return path_means(per_lc, table, weights), {"kernel_db": round(width, 3)}
+    Y, extra = path_means(per_lc, table, weights), {"kernel_db": round(width, 3)}
+    if empty is None and frames >= FLOOR_FRAMES:
+        Y, floor = above_floor(Y)
+        extra["kernel_floor"] = round(float(np.median(floor)), 4)
+    return Y, extra
+
+
+def above_floor(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each path's kernel distances less its floor, its median over the frames. A short-term histogram of a
+    few readings never matches the long-term one, so an unchanged path reads above zero, by how widely its
+    RSS spreads and how many packets it heard: on the basement walks the floor differs 30-fold between paths,
+    up to a quarter of what a person does to a path. Against the file's own histogram each path is unchanged
+    most of the time (KRTI's premise), so its median is that floor; a path's change is what rises above it."""
+    with np.errstate(all="ignore"):
+        floor = np.nanmedian(Y, axis=0)
+    floor = np.where(np.isfinite(floor), floor, 0.0)
+    return Y - floor[None, :], floor
 
 
 def reconstruct(records: Records, calibration: Records | None = None, calibration_seconds: float | None = None,
