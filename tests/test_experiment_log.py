@@ -109,7 +109,8 @@ def test_distance_sensor_readings_are_logged(messages):
     readings = messages["DISTANCE_SENSOR"]
     assert len(readings) > 100
     assert {m.type for _, m in readings} == {mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND}
-    assert len({m.orientation for _, m in readings}) == 3  # the three sonars of the default suite
+    # the default suite's three level sonars and a copter's overhead one (pitched: a custom orientation)
+    assert {m.orientation for _, m in readings} == {0, 1, 7, mavlink.MAV_SENSOR_ROTATION_CUSTOM}
     assert any(m.current_distance <= m.max_distance for _, m in readings)  # echoes
     assert all(m.current_distance <= m.max_distance + 1 for _, m in readings)
 

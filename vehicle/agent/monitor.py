@@ -13,6 +13,12 @@ meets its beam, so no echo there (or one from deeper than ``drop_depth``) is an
 edge, and one from ground rising more steeply than ``max_slope`` is a slope the
 vehicle cannot drive. Either is an obstacle: marked in the map and reported
 ahead like a wall. Its echoes off the ground itself are never walls.
+
+A sensor pitched up (``vehicle.world.suites.LOOKS_UP``) watches for overhangs: its
+echo is an obstacle like a wall's while the beam's centre meets it within the
+map's band above the sensor (the sensor's last 1 m, up to 7 m ahead for the
+copter's), and room overhead further out; its beam never marks free space, since
+it rises over what the level sensors see.
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from vehicle.agent.settings import Settings
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol.geodesy import heading_of
 from vehicle.protocol.rangefinder import Reading
-from vehicle.world.suites import LOOKS_DOWN
+from vehicle.world.suites import LOOKS_DOWN, LOOKS_UP
 
 RIDE_HEIGHT = 0.05  # m: a rover's body above the ground (the simulator's ground clearance)
 MIN_RUN = 0.05  # m between two echoes off risen ground to measure a slope between them
@@ -38,7 +44,7 @@ class Observation:
     """What the monitor saw in one period."""
 
     time: float
-    readings: list[Reading] = field(default_factory=list)  # readings kept this period
+    readings: list[Reading] = field(default_factory=list)  # the level sensors' readings kept this period
     nearest_ahead: float | None = None  # closest echo in the direction of travel, metres
     too_close: bool = False
     outside: bool = False  # the vehicle left the allowed space around home
@@ -179,7 +185,9 @@ class Monitor:
         # an echo off a team-mate is no wall: free space up to it, nothing known beyond (it moves on)
         readings = [r if r.vehicle is None or r.distance is None else replace(r, distance=None, max_range=r.distance)
                     for r in readings]
-        observation.readings = readings
+        # what a mission sweeps for open directions: the level sensors' (the ground's and the overhead ones'
+        # silence says nothing of walls)
+        observation.readings = [r for r in readings if LOOKS_DOWN < r.pitch < LOOKS_UP]
         if any(r.pitch <= LOOKS_DOWN for r in readings):  # the ground's sensors: never walls
             ground = [r for r in readings if r.pitch <= LOOKS_DOWN]
             readings = [r for r in readings if r.pitch > LOOKS_DOWN]
@@ -199,9 +207,9 @@ class Monitor:
                 max_ranges[i] = min(r.max_range, farness)
                 beams[i] = math.radians(r.beam_angle)
                 latest[r.sensor] = i
-            # free space from each sensor's latest reading of the period: the earlier ones only repeat it
+            # free space from each level sensor's latest reading of the period: the earlier ones only repeat it
             free = np.zeros(count, dtype=bool)
-            free[list(latest.values())] = True
+            free[[i for i in latest.values() if readings[i].pitch < LOOKS_UP]] = True
             self.map.add_readings(origins, directions, distances, max_ranges, beams, free)
             if travel is not None:
                 level = self._nearest_ahead(x, y, travel, readings, reach)

@@ -27,7 +27,7 @@ from vehicle.world.collision import Collider, Contact, TriangleGrid
 from vehicle.world.raycast import RayCaster
 from vehicle.world.scene import Scene
 from vehicle.world.sonar import Bodies, Sonar, SonarArray
-from vehicle.world.suites import DEFAULT_SUITE, LOOKS_DOWN, sensor_suite
+from vehicle.world.suites import DEFAULT_SUITE, LOOKS_DOWN, LOOKS_UP, sensor_suite
 
 DEFAULT_STEP = 0.05  # s
 SONAR_RATE = 10.0  # Hz: readings per second, as long-range ultrasonic sensors manage
@@ -202,8 +202,9 @@ class Simulation:
             ox, oy, oz = readings[0].origin.tolist()  # one origin for every sensor of a read
             for reading in readings:
                 distance = reading.distance
-                if reading.pitch <= LOOKS_DOWN:
-                    continue  # a sensor looking down echoes off the ground: no obstacle for the avoidance
+                if not LOOKS_DOWN < reading.pitch < LOOKS_UP:
+                    continue  # the ground's sensor and the overhead one: as ArduPilot's proximity library,
+                    # the avoidance takes level range finders only (it skips custom orientations)
                 if distance is not None and reading.vehicle is None:  # the team keeps apart by giving way: a
                     # team-mate held in the database of fixed obstacles would block the way after it left
                     dx, dy, dz = reading.direction.tolist()  # reading.hit, in plain floats
