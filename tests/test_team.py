@@ -155,3 +155,26 @@ def _to_world(pose):
     from vehicle.protocol.frames import body_to_world
 
     return body_to_world(pose).T
+
+
+@pytest.mark.parametrize("start, words", [
+    ((0.0, 0.0), None),  # 2.7 m from the wall: clear
+    ((2.5, 0.0), "would climb and land within 0.20 m of the scene"),  # beside a wall below the flight height
+    ((3.75, 0.0), "would climb and land within 0.15 m of the scene"),  # on its far side
+])
+def test_a_copter_start_whose_column_passes_a_wall_top_is_refused(make_scene, box, start, words):
+    """A copter climbs straight up from its start and lands back down the same column, as precisely as a
+    position hold (giving way moves it about): in a team run one landed 0.4 m off its spot onto the top of a
+    3 m wall its start was 0.03 m from. A start whose column passes within the padding of the scene above
+    the ground's reach is refused before anything flies."""
+    from tests.conftest import GROUND
+    from vehicle.agent.settings import Settings
+    from vehicle.lab.stepper import simulate_team
+
+    scene = make_scene(GROUND, box(3.15, 0, 1.5, 0.3, 4, 3))  # a wall 3 m high, its faces at x = 3.0 and 3.3
+    settings = Settings(altitude=4.0, padding=0.5)
+    if words is None:
+        assert simulate_team(scene, "search", 1, settings=settings, starts=[start]) is not None
+    else:
+        with pytest.raises(PlacementError, match=words):
+            simulate_team(scene, "search", 1, settings=settings, starts=[start])

@@ -180,19 +180,30 @@ def simulate_team(scene: Scene, mission: str, count: int, kind: str = "copter", 
     return TeamStepper(Team(simulations, ids), mission, settings, waypoints)
 
 
+COLUMN_STEP = 0.25  # m between the heights at which a copter's climb column is checked
+
+
 def _check_climb(simulation: Simulation, settings: Settings, vehicle: int) -> None:
     """A copter takes off straight up, its sonars looking sideways, and sets off at once: a start under a
     branch or a roof, or one whose flight altitude lies within ``padding`` of a tree's crown, would fly it
-    into it before it could see it. Such a start is refused before anything flies."""
+    into it before it could see it. It also lands back down that column, as precisely as a position hold
+    (giving way moves it about): a column within ``padding`` of a wall's top (above the ground's reach)
+    lands it on the wall. Such a start is refused before anything flies."""
     if simulation.kind.value != "copter":
         return
     x, y, z = simulation.pose.xyz()
     top = max(z, simulation.home[2] + settings.altitude)
+    radius = simulation.limits.radius
     where = f"vehicle {vehicle} at x={x:.2f} y={y:.2f}"
     contact = simulation.collider.sweep((x, y, z), (x, y, top))
     if contact is not None:
         raise PlacementError(f"{where} cannot climb to {settings.altitude:g} m: something is overhead at "
                              f"z={contact.point[2]:.2f}")
+    for height in np.arange(z + radius + settings.padding, top, COLUMN_STEP):
+        clear = simulation.collider.clearance((x, y, height)) - radius
+        if clear < settings.padding:
+            raise PlacementError(f"{where} would climb and land within {clear:.2f} m of the scene at z={height:.2f}"
+                                 f" (padding {settings.padding:g} m): start it further out")
     clear = simulation.collider.clearance((x, y, top)) - simulation.limits.radius
     if clear < settings.padding:
         raise PlacementError(f"{where} would fly within {clear:.2f} m of the scene at its altitude of "
