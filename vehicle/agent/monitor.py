@@ -44,7 +44,7 @@ class Observation:
     """What the monitor saw in one period."""
 
     time: float
-    readings: list[Reading] = field(default_factory=list)  # the level sensors' readings kept this period
+    readings: list[Reading] = field(default_factory=list)  # readings kept this period (not the overhead ones)
     nearest_ahead: float | None = None  # closest echo in the direction of travel, metres
     too_close: bool = False
     outside: bool = False  # the vehicle left the allowed space around home
@@ -185,9 +185,8 @@ class Monitor:
         # an echo off a team-mate is no wall: free space up to it, nothing known beyond (it moves on)
         readings = [r if r.vehicle is None or r.distance is None else replace(r, distance=None, max_range=r.distance)
                     for r in readings]
-        # what a mission sweeps for open directions: the level sensors' (the ground's and the overhead ones'
-        # silence says nothing of walls)
-        observation.readings = [r for r in readings if LOOKS_DOWN < r.pitch < LOOKS_UP]
+        # what a mission sweeps for open directions: not the overhead sensor's (its silence says nothing of walls)
+        observation.readings = [r for r in readings if r.pitch < LOOKS_UP]
         if any(r.pitch <= LOOKS_DOWN for r in readings):  # the ground's sensors: never walls
             ground = [r for r in readings if r.pitch <= LOOKS_DOWN]
             readings = [r for r in readings if r.pitch > LOOKS_DOWN]
