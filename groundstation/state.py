@@ -50,6 +50,7 @@ from vehicle.protocol.modes import FORCE_DISARM, commanded_mode, heartbeat_mode,
 from vehicle.protocol.radiostream import RADIO_LINKS, LinkLog, LinkReceiver, LinkRecord
 from vehicle.protocol.rangefinder import reading_from
 from vehicle.protocol.statustext import Reassembler
+from vehicle.world.suites import LOOKS_UP
 
 LINK_LOST_AFTER = 3.0  # s without a heartbeat
 TRAIL_POINTS = 2000
@@ -125,6 +126,7 @@ class Sonar:
     time: float
     yaw_offset: float = 0.0  # degrees clockwise of the nose
     beam: float = 0.0  # degrees, half-angle of the cone (0: not said)
+    pitch: float = 0.0  # degrees up of the mount (a copter's overhead sonar, a rover's ground one)
 
 
 @dataclass
@@ -612,7 +614,7 @@ class Fleet:
         if reading is None:
             return
         vehicle.sonar[m.id] = Sonar(reading.distance, pose.xyz(), tuple(reading.direction.tolist()),
-                                    reading.max_range, now, reading.yaw_offset, reading.beam_angle)
+                                    reading.max_range, now, reading.yaw_offset, reading.beam_angle, reading.pitch)
         if reading.distance is not None:
             vehicle.hits.append(tuple(reading.hit.tolist()))
         if vehicle.streams_map or vehicle.home is None or not self.own_maps:
@@ -625,7 +627,10 @@ class Fleet:
             vehicle.own_map = MemoryMap(vehicle.home, OWN_MAP_SPACE, OWN_MAP_RESOLUTION)
         while vehicle.unmapped:
             done = vehicle.unmapped.popleft()
-            vehicle.own_map.add_reading(done.origin, done.direction, done.distance, done.max_range)
+            # an overhead sensor's beam rises over the walls the level ones see: its echo marks, its beam never clears
+            vehicle.own_map.add_readings(done.origin[None], done.direction[None],
+                                         [np.nan if done.distance is None else done.distance], [done.max_range],
+                                         free=[done.pitch < LOOKS_UP])
 
     # ---- views --------------------------------------------------------------------------------
     def describe(self, v: VehicleState, now: float) -> dict:
@@ -665,6 +670,7 @@ class Fleet:
             "waypoints": [[_round(x), _round(y)] for x, y in v.waypoints[:MAX_WAYPOINTS_SHOWN]],
             "sonar": [{"id": ident, "distance": _round(s.distance), "max_range": _round(s.max_range),
                        "bearing": _round(s.yaw_offset % 360, 1), "beam": _round(s.beam, 1),
+                       "pitch": _round(s.pitch, 1),
                        "age": _round(max(0.0, now - s.time))} for ident, s in sorted(v.sonar.items())],
             "crash": None if v.crash is None else {"text": v.crash[1], "age": _round(now - v.crash[0], 1)},
             "other_gcs": None if v.other_gcs is None else {"sysid": v.other_gcs[0], "last": v.other_gcs[1],

@@ -114,6 +114,13 @@ function selected() {
   return vehicles.find((v) => v.sysid === window.selectedVehicle) || null;
 }
 
+/** A pitched sonar's mount beside its bearing (" up 8°", " down 10°"), so the overhead or ground sonar is not
+ * taken for the level one at the same bearing; nothing for a level one. */
+function mountPitch(pitch) {
+  if (!isNum(pitch) || Math.abs(pitch) < 0.5) return "";
+  return ` ${pitch > 0 ? "up" : "down"} ${Math.round(Math.abs(pitch))}°`;
+}
+
 function renderInstruments() {
   const v = selected();
   $("#instruments").hidden = !v;
@@ -130,8 +137,8 @@ function renderInstruments() {
   $("#readout-battery").textContent = batteryText(b) + (b && isNum(b.current) ? ` · ${fmt(b.current)} A` : "");
   const sonars = Array.isArray(v.sonar) ? v.sonar : [];
   $("#readout-sonar").textContent = sonars.length ? sonars.map((s) =>
-    `${Math.round(s.bearing ?? 0)}°: ${isNum(s.distance) && isNum(s.max_range) && s.distance < s.max_range
-      ? `${fmt(s.distance)} m` : "clear"}`).join(" · ") : "none heard";
+    `${Math.round(s.bearing ?? 0)}°${mountPitch(s.pitch)}: ${isNum(s.distance) && isNum(s.max_range)
+      && s.distance < s.max_range ? `${fmt(s.distance)} m` : "clear"}`).join(" · ") : "none heard";
   const att = v.attitude || {};
   $("#readout-attitude").textContent = isNum(att.roll) && isNum(att.pitch)
     ? `roll ${fmt(att.roll)}°, pitch ${fmt(att.pitch)}°` : "–";

@@ -135,6 +135,9 @@ def test_instruments_show_the_selected_vehicle(page, station):
     altitude = float(page.locator("#readout-altitude").inner_text().split()[0])
     assert altitude > 0.5, altitude  # the copter is flying (the page shows the live value, not a stale one)
     assert len(page.locator("#readout-sonar").inner_text().split(" · ")) == len(flying["sonar"])
+    # the overhead sonar is named by its mount, not taken for the level one at the same bearing
+    assert [s["pitch"] for s in flying["sonar"]] == [0.0, 0.0, 0.0, 8.0], flying["sonar"]
+    expect(page.locator("#readout-sonar")).to_contain_text(re.compile(r" · 0° up 8°: (clear|\d+\.\d m)$"))
 
     # the artificial horizon: sky above, ground below, once the copter flies near level (it leans to turn)
     seen = []

@@ -186,3 +186,25 @@ def test_a_command_naming_a_mode_still_shows_and_orders_it(fleet):
     events = fleet.history.of(SYSID).as_json()["events"]
     assert [e["text"] for e in events if e["kind"] == "command"] == ["sent DO_SET_MODE RTL"]
     assert fleet.get(SYSID).ordered == (1.0, 6)
+
+
+def test_an_overhead_sonar_is_shown_with_its_pitch_and_its_silence_clears_nothing_in_the_stations_map(fleet):
+    """A copter's overhead sonar (8 degrees up, a custom orientation with its mount in ``quaternion``): the API
+    gives its pitch (the page names it "0° up 8°"), and in a map the station builds itself its beam, which
+    rises over the walls, frees no cell; a level sonar's silence along the same bearing does."""
+    from vehicle.protocol.rangefinder import orientation_of
+
+    orientation, quaternion = orientation_of(0.0, 8.0)
+    overhead = mavlink.MAVLink_distance_sensor_message(1000, 2, 1200, 1201, mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND,
+                                                       3, orientation, 0, 0.1, 0.1, quaternion, 0)
+    hear(fleet, 0.0, autopilot(heartbeat()), autopilot(position()))
+    hear(fleet, OWN_MAP_AFTER + 0.1, autopilot(overhead))
+    vehicle = fleet.get(SYSID)
+    described = fleet.describe(vehicle, OWN_MAP_AFTER + 0.1)["sonar"]
+    assert [(s["id"], s["bearing"], s["pitch"]) for s in described] == [(3, 0.0, 8.0)]
+    ahead = [vehicle.own_map.cell_of(0.0, y) for y in (2.0, 4.0, 6.0)]
+    assert all(vehicle.own_map.grid[cell] == 0 for cell in ahead)
+    level = mavlink.MAVLink_distance_sensor_message(1000, 2, 1200, 1201, mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND,
+                                                    4, 0, 0, 0.1, 0.1, [0.0] * 4, 0)
+    hear(fleet, OWN_MAP_AFTER + 0.2, autopilot(level))
+    assert all(vehicle.own_map.grid[cell] < 0 for cell in ahead)
