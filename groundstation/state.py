@@ -628,9 +628,8 @@ class Fleet:
         while vehicle.unmapped:
             done = vehicle.unmapped.popleft()
             # an overhead sensor's beam rises over the walls the level ones see: its echo marks, its beam never clears
-            vehicle.own_map.add_readings(done.origin[None], done.direction[None],
-                                         [np.nan if done.distance is None else done.distance], [done.max_range],
-                                         free=[done.pitch < LOOKS_UP])
+            vehicle.own_map.add_reading(done.origin, done.direction, done.distance, done.max_range,
+                                        free=done.pitch < LOOKS_UP)
 
     # ---- views --------------------------------------------------------------------------------
     def describe(self, v: VehicleState, now: float) -> dict:

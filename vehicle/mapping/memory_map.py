@@ -130,10 +130,12 @@ class MemoryMap:
         return hits
 
     def add_reading(self, origin: np.ndarray, direction: np.ndarray, distance: float | None,
-                    max_range: float) -> bool:
-        """Project one reading (see ``add_readings``); True when it marked an obstacle."""
+                    max_range: float, free: bool = True) -> bool:
+        """Project one reading (see ``add_readings``; ``free`` False: its echo marks, its beam frees nothing);
+        True when it marked an obstacle."""
         return self.add_readings(np.asarray(origin)[None], np.asarray(direction)[None],
-                                 np.array([np.nan if distance is None else distance]), np.array([max_range])) > 0
+                                 np.array([np.nan if distance is None else distance]), np.array([max_range]),
+                                 free=np.array([free])) > 0
 
     def mark_body(self, x: float, y: float, radius: float) -> None:
         """The vehicle's body is here, so these cells are free, whatever the sonar said."""
