@@ -341,6 +341,18 @@ def test_goto_turns_first_then_moves(kind, flat_scene):
     assert world.body.speed > 1.0  # moving once it faces the target
 
 
+def test_the_nose_turns_the_way_short_hops_go_so_the_sonars_look_there(flat_scene):
+    """A copter facing north sent east in hops of 0.14 m, each once the last is reached (a path cell by cell
+    past a door frame): it turns as it goes, as ArduCopter's yaw follows its velocity; before, within 0.5 m of
+    a target it kept its heading, and flew sideways into a wall its sonars, looking north, never saw."""
+    world = vehicle(Kind.COPTER, flat_scene)
+    for hop in range(1, 11):
+        assert world.autopilot.goto(0.14 * hop, 0.0) == ACCEPTED
+        step_until(world, lambda: world.autopilot._target is None, limit=5.0)
+    assert world.pose.x == pytest.approx(1.4, abs=0.15)
+    assert abs(wrap_pi(world.pose.yaw - math.pi / 2)) < math.radians(20), math.degrees(world.pose.yaw)
+
+
 @pytest.mark.parametrize("kind", [Kind.COPTER, Kind.ROVER])
 def test_goto_reaches_the_target_and_holds(kind, flat_scene):
     world = vehicle(kind, flat_scene)

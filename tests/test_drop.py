@@ -73,6 +73,30 @@ def test_a_rover_stops_before_a_2_m_bank_and_never_falls(make_scene, suite):
         or memory.occupied_in(*_around(memory, 0.0, EDGE)).any()
 
 
+def test_a_rover_at_the_default_speed_slows_to_stop_short_of_an_edge_it_sees_late(make_scene):
+    """The down sonar sees an edge about 1.6 m ahead; from the default 2.5 m/s a rover needs more than that to
+    stop (two monitor periods and the braking), and in the castle one drove down a bank so. It now drives no
+    faster than it can stop within that sight, and says so."""
+    fall, northmost, arrived, stepper = drive(make_scene(PLATEAU, lower_ground(2.0)), speed=Settings().speed)
+    assert stepper.simulation.collision is None and fall < 0.05, f"fell {fall:.2f} m"
+    assert northmost < EDGE - 0.3, f"its centre came to y = {northmost:.2f}, over the edge at {EDGE}"
+    limit = stepper.agent.monitor.speed_limit
+    assert limit < Settings().speed and stepper.simulation.autopilot.speed == limit
+    assert any(text.startswith(f"Speed limited to {limit:.1f} m/s") for text in stepper.agent.messages)
+
+
+def test_the_speed_limit_stops_the_body_within_the_ground_sonars_sight():
+    mon, _ = ground_monitor()
+    assert mon.speed_limit == math.inf  # nothing seen of the ground yet
+    mon.collect([ground_echo(0.0)])
+    mon.observe(1.0, 0.0, 0.0, 0.0, speed=1.0)
+    sight = HEIGHT / math.tan(math.radians(12.0))  # where the cone's lower edge meets level ground
+    assert mon.ground_sight == pytest.approx(sight)
+    v, period = mon.speed_limit, mon.settings.monitor_period
+    stop = 2 * period * v + v * v / (2 * mon.brake)
+    assert stop <= sight - mon.radius < stop + 2 * period * 0.1 + 0.1 * v / mon.brake + 0.01  # to 0.1 m/s below
+
+
 def _around(memory, x, y, half=0.6):
     (r0, c0), (r1, c1) = memory.cell_of(x - half, y - half), memory.cell_of(x + half, y + half)
     return slice(r0, r1 + 1), slice(c0, c1 + 1)
@@ -106,6 +130,19 @@ def test_a_drop_deeper_than_drop_depth_is_an_obstacle_ahead_and_in_the_map(depth
     assert (memory.detections > 0) is obstacle
     if obstacle:
         assert memory.occupied_in(*_around(memory, 0.0, edge, 0.15)).any()
+
+
+def test_an_edge_seen_ahead_is_marked_either_side_of_the_beam_too():
+    """The 2 degree beam meets an edge at one point, but an edge is a line: marked 20 degrees either side too, a
+    rover's way planned along the rim keeps off it (in the castle one ran along a bank's rim and touched the
+    slope as it turned towards it)."""
+    mon, memory = ground_monitor()
+    mon.collect([ground_echo(None)])
+    mon.observe(1.0, 0.0, 0.0, 0.0, speed=1.0)
+    edge = HEIGHT / math.tan(math.radians(12.0))
+    for side in (-1, 1):
+        angle = math.radians(20.0) * side
+        assert memory.occupied_in(*_around(memory, edge * math.sin(angle), edge * math.cos(angle), 0.1)).any()
 
 
 def test_ground_echoes_are_never_walls():

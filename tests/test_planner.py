@@ -279,6 +279,18 @@ def clearance_along(path: list[tuple[float, float]], start: tuple[float, float],
             yield point, float(np.min(np.hypot(*(occupied - point).T)))
 
 
+def test_a_vehicle_boxed_in_closer_than_the_clearance_is_refused_with_the_reason_not_an_exception():
+    """Its own cell free, every cell round it occupied (a coarse map with a large padding, as a thesis sweep's
+    house runs made): no way out, and planning says so; before, the escape's NoPath escaped the planner."""
+    m = known_map()
+    r, c = m.cell_of(0.0, 0.0)
+    m.grid[r - 1:r + 2, c - 1:c + 2] = MemoryMap.OCCUPIED_AT
+    m.grid[r, c] = MemoryMap.FREE_AT
+    planner = MapPlanner(m, RADIUS, avoid_margin=0.1)
+    path, _ = planner.plan((0.0, 0.0), (5.0, 0.0), padding=0.5)
+    assert path is None and planner.reason == "the vehicle is boxed in by known obstacles, too close to them to move"
+
+
 def test_a_path_squeezed_through_a_doorway_keeps_the_wide_clearance_away_from_it():
     """A wall 5 m north with a 1.0 m doorway at x = 0, the vehicle 1 m from the wall 8 m west of it: the way
     through needs the doorway's tight clearance, but only near the doorway; the straight line to it would
@@ -300,6 +312,23 @@ def test_a_path_squeezed_through_a_doorway_keeps_the_wide_clearance_away_from_it
             assert clearance >= planner.margin_cells(0.0) / m.resolution - 0.05, point
             near_doorway += 1
     assert far > 100 and near_doorway > 10
+
+
+@pytest.mark.parametrize("start", [(-8.0, 4.0), (-3.0, 3.0), (0.5, 3.0)])
+def test_a_path_squeezed_through_a_doorway_passes_its_middle(start):
+    """The 1.0 m doorway of the test above, the padding 0.1 m (the wide clearance is 0.5 m, twice the
+    avoidance's margin, more than the doorway's half): the path keeps the most clearance the doorway has (its
+    middle, 0.5 m from both frames), not the least that fits (0.35 m, along one frame, where a door frame at a
+    sonar cone's edge stopped the vehicle), and the planner reports the clearance it kept."""
+    m = known_map()
+    wall(m, 5.0, None, -0.5)
+    wall(m, 5.0, 0.5, None)
+    planner = MapPlanner(m, RADIUS, avoid_margin=0.1)
+    path, level = planner.plan(start, (3.0, 7.0), padding=0.1)
+    assert path is not None and level > 0, planner.reason
+    near = [clearance for point, clearance in clearance_along(path, start, m) if math.dist(point, (0.0, 5.0)) < 1.5]
+    assert min(near) >= 0.45
+    assert planner.clearance == pytest.approx(0.45 - RADIUS)
 
 
 def test_a_map_coarser_than_the_body_plans_through_no_gap_it_has_not_seen():

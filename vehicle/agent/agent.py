@@ -16,6 +16,7 @@ planned on its map, refusing a target it knows to be inside an obstacle.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable
 from enum import StrEnum
@@ -85,6 +86,7 @@ class Agent:
         self._clear_below: float | None = None  # since when no team-mate is below a landing held for one
         self._relaunch: Phase | None = None  # the phase to go back to after taking off again on a resume
         self.give_way = GiveWay(self.ctx, self._after_giving_way)  # to team-mates (none alone)
+        self._speed_sent = settings.speed  # the autopilot's speed as last set (``Context.speed``)
 
     @property
     def done(self) -> bool:
@@ -266,6 +268,19 @@ class Agent:
     def _set_mode(self, mode: str) -> None:
         self.fc.set_mode(mode)
 
+    def set_speed(self) -> int:
+        """Travel at ``Context.speed``: the operator's speed setting just changed, or the ground's sight limits it."""
+        self._speed_sent = self.ctx.speed
+        return self.fc.set_speed(self._speed_sent)
+
+    def _limit_speed(self) -> None:
+        """Once the sensors looking down have reported, slow down to what lets the vehicle stop short of an edge
+        they see (a rover's 10 degree sonar sees one about 1.6 m ahead: from 2.5 m/s it needs 2 m)."""
+        if self.ctx.speed < self._speed_sent:
+            self.say(f"Speed limited to {self.ctx.speed:.1f} m/s: the ground is seen "
+                     f"{self.monitor.ground_sight:.1f} m ahead")
+            self.set_speed()
+
     # ---- the step -----------------------------------------------------------------------------
     def step(self) -> None:
         fc, ctx = self.fc, self.ctx
@@ -273,8 +288,12 @@ class Agent:
         self.monitor.collect(fc.readings())
         pose = fc.pose
         navigation = fc.navigation
-        observation = self.monitor.observe(now, pose.x, pose.y, navigation.heading, fc.speed, navigation.reach)
+        clearance = ctx.path_clearance if ctx.planned_path else math.inf  # less than the padding in a doorway
+        observation = self.monitor.observe(now, pose.x, pose.y, navigation.heading, fc.speed, navigation.reach,
+                                           clearance)
         ctx.observation = observation
+        if self.monitor.ground_sight is not None:
+            self._limit_speed()
         taken = fc.took_over()
         if self._errand is not None:
             if taken is not None:  # someone else took over on the way
@@ -391,7 +410,7 @@ class Agent:
 
     def _time_home(self) -> float:
         reserve = min(RESERVE, self.settings.time_limit / 6)
-        return 2.0 * self.ctx.distance_to(self.ctx.home) / self.settings.speed + reserve
+        return 2.0 * self.ctx.distance_to(self.ctx.home) / self.ctx.speed + reserve
 
     def _end_mission(self, status: Status, reason: str) -> None:
         self.outcome = "finished" if status is Status.DONE else "stopped"

@@ -197,5 +197,5 @@ class Companion:
             if refused:
                 return [*statustexts(refused, mavlink.MAV_SEVERITY_WARNING, 0), self.params.message(index)]
             if param_id == "SCN_SPEED":  # over MAVLink sent by the controller's next pump: no waiting here
-                self.agent.fc.set_speed(self.params.value(param_id))
+                self.agent.set_speed()
         return [self.params.message(index)]

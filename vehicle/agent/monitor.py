@@ -37,6 +37,7 @@ from vehicle.world.suites import LOOKS_DOWN, LOOKS_UP
 RIDE_HEIGHT = 0.05  # m: a rover's body above the ground (the simulator's ground clearance)
 MIN_RUN = 0.05  # m between two echoes off risen ground to measure a slope between them
 RISE_NOISE = 0.05  # m: ground this little above the vehicle's is flat (the cone's edge echoes a little short)
+EDGE_SPREAD, EDGE_STEP = 20, 5  # degrees either side of a ground sensor's beam an edge it sees is marked, and apart
 
 
 @dataclass
@@ -70,13 +71,36 @@ class Monitor:
         self.say = say
         self._ground_said: str | None = None
         self._risen: dict[int, tuple[float, float, float]] = {}  # each ground sensor's last echo off risen ground
+        self.ground_sight: float | None = None  # m ahead at which the sensors looking down first see an edge
+
+    @property
+    def speed_limit(self) -> float:
+        """The fastest the vehicle may go and still stop short of an edge its sensors looking down see only
+        ``ground_sight`` ahead (inf while none has reported), to 0.1 m/s below: the body's front must stop
+        before the edge, after up to two monitor periods (the reading's and the monitor's) at that speed and
+        the braking distance."""
+        if self.ground_sight is None:
+            return math.inf
+        period, room = self.settings.monitor_period, max(self.ground_sight - self.radius, 0.0)
+        return math.floor(10 * self.brake * (-2 * period + math.sqrt(4 * period * period + 2 * room / self.brake))) / 10
 
     def _nearest_ahead(self, x: float, y: float, travel: float, readings: list[Reading],
-                       reach: float) -> float | None:
+                       reach: float, clearance: float = math.inf) -> float | None:
         """Distance ahead of the nearest echo inside the corridor the body sweeps along ``travel``,
-        as far as ``reach`` metres."""
+        as far as ``reach`` metres.
+
+        An echo comes from somewhere on its cone's arc at that range. Where the map already holds obstacles on
+        the arc (a door frame at the cone's edge), they explain it, as the map itself takes them to
+        (``MemoryMap.add_readings``): the echo is ahead only if one of them lies in the corridor. Else it
+        counts where the beam's centre meets it. Call before the period's readings go into the map."""
         ux, uy = math.sin(travel), math.cos(travel)
-        corridor = self.radius + self.settings.padding
+        corridor = self.radius + min(self.settings.padding, clearance)
+
+        def in_corridor(px: float, py: float) -> float | None:
+            dx, dy = px - x, py - y
+            ahead = dx * ux + dy * uy
+            return ahead if 0 < ahead < reach + corridor and abs(dx * uy - dy * ux) < corridor else None
+
         nearest = None
         for reading in readings:  # a handful per period: plain floats beat a dozen numpy calls
             if reading.distance is None:
@@ -86,11 +110,32 @@ class Monitor:
             hx, hy, hz = ox + rx * reading.distance, oy + ry * reading.distance, oz + rz * reading.distance
             if abs(hz - oz) > self.map.band:
                 continue  # ground or ceiling
-            dx, dy = hx - x, hy - y
-            ahead = dx * ux + dy * uy
-            if 0 < ahead < reach + corridor and abs(dx * uy - dy * ux) < corridor:
+            ahead = in_corridor(hx, hy)
+            if ahead is None:
+                continue
+            known = self._known_on_arc(ox, oy, rx, ry, reading.distance, math.radians(reading.beam_angle))
+            if known:
+                ahead = min((a for a in map(lambda p: in_corridor(*p), known) if a is not None), default=None)
+            if ahead is not None:
                 nearest = ahead if nearest is None else min(nearest, ahead)
         return nearest
+
+    def _known_on_arc(self, ox: float, oy: float, rx: float, ry: float, distance: float,
+                      beam: float) -> list[tuple[float, float]]:
+        """The centres of the occupied map cells on a cone's arc at ``distance`` (sampled every half cell)."""
+        level = math.hypot(rx, ry)
+        if level < 1e-9:
+            return []
+        rx, ry, arc = rx / level, ry / level, distance * level
+        samples = 1 + 2 * int(beam * arc * self.map.resolution + 0.5)
+        grid, cells = self.map.grid, {}
+        for k in range(samples):
+            angle = beam * (2.0 * k / (samples - 1) - 1.0) if samples > 1 else 0.0
+            c, s = math.cos(angle), math.sin(angle)
+            cell = self.map.cell_of(ox + (rx * c - ry * s) * arc, oy + (ry * c + rx * s) * arc)
+            if cell is not None and grid[cell] >= self.map.OCCUPIED_AT:
+                cells[cell] = self.map.center_of(*cell)
+        return list(cells.values())
 
     def _ground_ahead(self, x: float, y: float, travel: float | None,
                       readings: list[Reading]) -> tuple[float | None, str | None]:
@@ -100,6 +145,8 @@ class Monitor:
         corridor = self.radius + self.settings.padding
         max_slope = math.radians(self.settings.max_slope)
         for reading in readings:
+            sight = self.height / math.tan(math.radians(reading.beam_angle - reading.pitch))  # on level ground
+            self.ground_sight = sight if self.ground_sight is None else min(self.ground_sight, sight)
             ox, oy, oz = reading.origin.tolist()
             dx, dy, dz = reading.direction.tolist()
             level = math.hypot(dx, dy)
@@ -127,7 +174,15 @@ class Monitor:
                 else:
                     continue
             ux, uy = dx / level, dy / level
-            self.map.add_reading(np.array([ox, oy, oz]), np.array([ux, uy, 0.0]), reach, reach + 1.0)
+            # an edge is a line the narrow beam meets at one point: mark it either side too, as far as
+            # EDGE_SPREAD, so a way planned along it keeps off (a rover ran along a bank's rim it had seen
+            # only ahead, and its body touched the slope as it turned); a slope up is only climbed, not fallen
+            spread = EDGE_SPREAD if kind == "drops away" else 0
+            turns = np.radians(np.arange(-spread, spread + 1, EDGE_STEP))
+            directions = np.column_stack([ux * np.cos(turns) + uy * np.sin(turns),
+                                          uy * np.cos(turns) - ux * np.sin(turns), np.zeros(len(turns))])
+            self.map.add_readings(np.tile([ox, oy, oz], (len(turns), 1)), directions, np.full(len(turns), reach),
+                                  np.full(len(turns), reach + 1.0))
             if travel is None:
                 continue
             ex, ey = ox + ux * reach - x, oy + uy * reach - y
@@ -160,7 +215,7 @@ class Monitor:
         self._pending.extend(readings)
 
     def observe(self, time: float, x: float, y: float, travel: float | None, speed: float = 0.0,
-                reach: float = math.inf) -> Observation:
+                reach: float = math.inf, clearance: float = math.inf) -> Observation:
         """Run one monitor period on the readings collected since the last one.
 
         ``travel`` is the compass heading (rad) the vehicle wants to move in, None when it
@@ -168,7 +223,9 @@ class Monitor:
         body sweeps along that heading (body radius plus padding either side). It is
         too close when the vehicle, moving at ``speed``, could not stop within
         ``closeness`` of it: one more period of travel plus the braking distance.
-        Echoes beyond ``reach`` (where the vehicle will stop or turn) are not in the way.
+        Echoes beyond ``reach`` (where the vehicle will stop or turn) are not in the way. ``clearance``: what
+        the path being flown keeps beyond the body where it passes closest, when that is less than the padding
+        (through a doorway): the corridor is that narrow, or the frame it was planned past would stop it.
         """
         observation = Observation(time)
         if self._last_xy is not None:
@@ -209,11 +266,10 @@ class Monitor:
             # free space from each level sensor's latest reading of the period: the earlier ones only repeat it
             free = np.zeros(count, dtype=bool)
             free[[i for i in latest.values() if readings[i].pitch < LOOKS_UP]] = True
+            level = None if travel is None else self._nearest_ahead(x, y, travel, readings, reach, clearance)
+            if level is not None and (observation.nearest_ahead is None or level < observation.nearest_ahead):
+                observation.nearest_ahead = level
             self.map.add_readings(origins, directions, distances, max_ranges, beams, free)
-            if travel is not None:
-                level = self._nearest_ahead(x, y, travel, readings, reach)
-                if level is not None and (observation.nearest_ahead is None or level < observation.nearest_ahead):
-                    observation.nearest_ahead = level
         self._pending = []
         stopping = speed * self.settings.monitor_period + speed * speed / (2 * self.brake)
         observation.too_close = (observation.nearest_ahead is not None

@@ -190,7 +190,7 @@ class GiveWay:
         distance = math.hypot(dx, dy)
         if distance < DETOUR_REACHED:
             return 0.0, 0.0
-        speed = self.ctx.settings.speed
+        speed = self.ctx.speed
         return speed * dx / distance, speed * dy / distance
 
     def _margin(self, other: Traffic) -> float:
@@ -201,7 +201,7 @@ class GiveWay:
         navigation = self.ctx.fc.navigation
         if navigation.heading is None:
             return 0.0, 0.0
-        speed = self.ctx.settings.speed
+        speed = self.ctx.speed
         return speed * math.sin(navigation.heading), speed * math.cos(navigation.heading)
 
     def _conflict(self, wanted: tuple[float, float], other: Traffic) -> bool:

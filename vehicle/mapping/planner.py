@@ -22,6 +22,7 @@ PLAN_MARGINS = (15.0, 40.0)  # m around start and goal that planning searches, t
 UNSEEN_EXTENT = 1.0  # m: unknown cells this close to an obstacle are presumed to be more of it
 DOORWAY_CLEARANCE = 0.05  # m between the body and an obstacle's cell when nothing wider gets through
 SQUEEZE_REACH = 1.0  # m around a doorway within which a path keeps only that clearance
+SQUEEZE_STEP = 0.5  # cells: the clearances tried through a doorway, widest first, step by step
 
 Point = tuple[float, float]
 
@@ -32,6 +33,7 @@ class MapPlanner:
         self.radius = radius  # of the vehicle body, m
         self.avoid_margin = avoid_margin  # m the autopilot's avoidance keeps from echoes
         self.reason = ""  # why the last plan found no path
+        self.clearance = 0.0  # m beyond the body the last path keeps where it passes closest (a doorway)
 
     def plan(self, start: Point, goal: Point, padding: float, relax: bool = False,
              level: int = 0) -> tuple[list[Point] | None, int]:
@@ -47,6 +49,7 @@ class MapPlanner:
         it, to start from next time.
         """
         self.reason = ""
+        self.clearance = max(padding, 2 * self.avoid_margin)
         start_cell = self.map.cell_of(*start)
         goal_cell = self.map.cell_of(*goal)
         if goal_cell is None:
@@ -70,7 +73,8 @@ class MapPlanner:
                         continue  # a wider window may find a way round
                     break  # start or goal inside the margin: try with less
                 if index > 0:  # squeezed through somewhere: keep the wide clearance everywhere else
-                    cells = self._widen(cells, start_cell, goal_cell, window, presume, attempts[0][0], margin)
+                    cells, margin = self._widen(cells, start_cell, goal_cell, window, presume, attempts[0][0], margin)
+                self.clearance = margin / self.map.resolution - self.radius
                 points = [self.map.center_of(r, c) for r, c in cells[1:]]
                 if points:
                     points[-1] = goal
@@ -78,15 +82,20 @@ class MapPlanner:
         self.reason = self._why_not(start_cell, goal_cell, attempts[-1][0])
         return None, level
 
-    def _widen(self, cells: np.ndarray, start, goal, window, presume: bool, wide: float, tight: float) -> np.ndarray:
-        """The path planned again with the tight clearance allowed only within ``SQUEEZE_REACH`` of where the
-        tight path had to pass closer than the wide clearance (a doorway), and the wide one everywhere else:
-        a path squeezed through one doorway must not hug every wall on its way. The tight path if none.
+    def _widen(self, cells: np.ndarray, start, goal, window, presume: bool, wide: float,
+               tight: float) -> tuple[np.ndarray, float]:
+        """The path planned again with less than the wide clearance allowed only within ``SQUEEZE_REACH`` of
+        where the tight path had to pass closer than the wide clearance (a doorway), and the wide one
+        everywhere else: a path squeezed through one doorway must not hug every wall on its way. There it keeps
+        the widest clearance that gets through, tried from the wide one down in steps of ``SQUEEZE_STEP``: the
+        middle of the doorway, not along its frame. Returns the path and that clearance (cells); the tight
+        path and clearance if none.
 
-        Had to: no cell with the wide clearance lies within the difference of the two clearances of it (beside
-        a wall, one step aside gives the wide clearance; in a doorway none does); and at its start and end.
-        The wide clearance presumes the unseen surroundings of seen walls to be more wall, as the first
-        attempt does: a sonar sees no wall it meets at a glancing angle, so a path must not graze one."""
+        Had to: no cell with the wide clearance lies within the difference of the two clearances (the wide
+        one and the one tried) of it (beside a wall, one step aside gives the wide clearance; in a doorway
+        none does); and at its start and end. The wide clearance presumes the unseen surroundings of seen walls
+        to be more wall, as the first attempt does: a sonar sees no wall it meets at a glancing angle, so a
+        path must not graze one."""
         obstacles, offset = self.blocked_in(*window, presume), np.array((window[0].start, window[1].start))
         wide_zone = planning.inflate(self.blocked_in(*window, True), wide)  # unseen walls presumed, as at first
         tight_zone = planning.inflate(obstacles, tight)
@@ -94,21 +103,23 @@ class MapPlanner:
         legs = [np.rint(np.linspace(a, b, int(np.abs(b - a).max()) + 1)).astype(int)
                 for a, b in zip(local[:-1], local[1:], strict=True)]
         walk = np.concatenate(legs) if legs else local
-        bottleneck = wide_zone & ~planning.inflate(~wide_zone, wide - tight + 1.0)
-        squeezed = np.zeros_like(obstacles)
-        on_walk = bottleneck[walk[:, 0], walk[:, 1]]
-        squeezed[walk[on_walk, 0], walk[on_walk, 1]] = True
-        squeezed[tuple(local[0])] = squeezed[tuple(local[-1])] = True  # leaving a wall, reaching a goal by one
-        allowed = planning.inflate(squeezed, SQUEEZE_REACH * self.map.resolution) | squeezed
-        grid = (wide_zone & ~allowed) | tight_zone
         local_start, local_goal = tuple(int(v) for v in start - offset), tuple(int(v) for v in goal - offset)
-        if grid[local_start] or grid[local_goal]:
-            return cells
-        try:
-            path = planning.smooth(planning.astar(grid, local_start, local_goal), grid)
-        except planning.NoPath:
-            return cells
-        return path + offset
+        for margin in np.arange(wide - SQUEEZE_STEP, tight, -SQUEEZE_STEP).tolist() + [tight]:
+            # the widest clearance that still gets through: the middle of the doorway, not along one frame
+            bottleneck = wide_zone & ~planning.inflate(~wide_zone, wide - margin + 1.0)
+            squeezed = np.zeros_like(obstacles)
+            on_walk = bottleneck[walk[:, 0], walk[:, 1]]
+            squeezed[walk[on_walk, 0], walk[on_walk, 1]] = True
+            squeezed[tuple(local[0])] = squeezed[tuple(local[-1])] = True  # leaving a wall, reaching a goal by one
+            allowed = planning.inflate(squeezed, SQUEEZE_REACH * self.map.resolution) | squeezed
+            grid = (wide_zone & ~allowed) | (planning.inflate(obstacles, margin) if margin > tight else tight_zone)
+            if grid[local_start] or grid[local_goal]:
+                continue
+            try:
+                return planning.smooth(planning.astar(grid, local_start, local_goal), grid) + offset, margin
+            except planning.NoPath:
+                continue
+        return cells, tight
 
     def _windows(self, a: tuple[int, int], b: tuple[int, int]):
         """The windows planning searches, smallest first, the whole map last (each once)."""
@@ -132,9 +143,12 @@ class MapPlanner:
             return f"the target is within {margin / self.map.resolution:.2f} m of a known obstacle"
         labels, _ = ndimage.label(~inflated, structure=np.ones((3, 3)))
         if labels[start] == 0:  # the body is within the clearance: where it can escape to
-            escape = planning._escape(occupied, inflated, start)[-1] if not occupied[start] else None
-            if escape is None:
+            if occupied[start]:
                 return "the vehicle is inside a known obstacle"
+            try:
+                escape = planning._escape(occupied, inflated, start)[-1]
+            except planning.NoPath:
+                return "the vehicle is boxed in by known obstacles, too close to them to move"
             start = (int(escape[0]), int(escape[1]))
         if labels[start] == labels[goal]:
             return "no path (only through a gap where a corner is cut)"
@@ -206,6 +220,7 @@ class MapPlanner:
         Only the first ``horizon`` metres are checked: that is where new obstacles
         matter now, and the rest is checked again as the vehicle gets there.
         """
+        margin = self.margin_cells(padding)
         chain = [start]
         length = 0.0
         for point in points:
@@ -220,11 +235,11 @@ class MapPlanner:
             return False
         rows = [c[0] for c in cells]
         cols = [c[1] for c in cells]
-        pad = int(math.ceil(self.margin_cells(padding))) + 1
+        pad = int(math.ceil(margin)) + 1
         r0, r1 = max(0, min(rows) - pad), min(self.map.size, max(rows) + pad + 1)
         c0, c1 = max(0, min(cols) - pad), min(self.map.size, max(cols) + pad + 1)
         obstacles = self.blocked_in(slice(r0, r1), slice(c0, c1))
-        blocked = planning.inflate(obstacles, self.margin_cells(padding))
+        blocked = planning.inflate(obstacles, margin)
         local = [(r - r0, c - c0) for r, c in cells]
         if blocked[local[0]]:
             # the vehicle is already within the margin of an obstacle (it stopped near a wall):

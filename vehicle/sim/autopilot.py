@@ -461,7 +461,10 @@ class Autopilot:
         wanted = min(cruise, math.sqrt(2 * self.body.limits.accel * distance) * 0.9, distance / dt)
         if self.kind is Kind.ROVER and distance <= 0.5 and abs(wrap_pi(heading - pose.yaw)) > math.pi / 2:
             return 0.0, 0.0, 0.0, None, True  # close enough: a rover cannot back up onto the point
-        return wanted * dx / distance, wanted * dy / distance, vz, heading if distance > 0.5 else None, False
+        # a copter's nose follows the way it goes, however short the hop, as ArduCopter's yaw follows its velocity
+        # (it holds its heading once within ARRIVED, above, where the way flips as it arrives)
+        yaw = heading if copter or distance > 0.5 else None
+        return wanted * dx / distance, wanted * dy / distance, vz, yaw, False
 
     def _return_home(self, dt):
         hx, hy, _ = self.home

@@ -44,6 +44,7 @@ class Context:
     observation: Observation | None = None
     say: Callable[[str], None] = print
     planned_path: list[tuple[float, float]] = field(default_factory=list)  # for display
+    path_clearance: float = math.inf  # m beyond the body ``planned_path`` keeps where it passes closest
     scene: Scene | None = None  # the world the agent was given (--scene), for missions that plan round its objects
     planner: MapPlanner = field(init=False)
 
@@ -54,6 +55,12 @@ class Context:
     @property
     def kind(self) -> Kind:
         return self.fc.kind
+
+    @property
+    def speed(self) -> float:
+        """What the vehicle travels at, m/s: the ``speed`` setting, or less where its sensors looking down see the
+        ground too little ahead to stop short of an edge at that (``Monitor.speed_limit``)."""
+        return min(self.settings.speed, self.monitor.speed_limit)
 
     @property
     def radius(self) -> float:

@@ -143,6 +143,7 @@ class Travel:
             return Status.DONE
         if self.path is None or not self._still_clear():
             self.path, self.level = ctx.plan(self.goal, self.relax, self.level)
+            ctx.path_clearance = ctx.planner.clearance
             self.replans += 1
             self._sent = None
             self._checked = (ctx.map.occupied_version, len(self.path or ()))

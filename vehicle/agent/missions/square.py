@@ -38,7 +38,7 @@ class Square(Mission):
         items = [home_item(datum, *ctx.home)]
         if ctx.kind is Kind.COPTER:
             items.append(MissionItem(NAV_TAKEOFF, alt=ctx.settings.altitude))
-        items.append(MissionItem(DO_CHANGE_SPEED, param1=1, param2=ctx.settings.speed))
+        items.append(MissionItem(DO_CHANGE_SPEED, param1=1, param2=ctx.speed))
         for x, y in self.corners:
             lat, lon = datum.to_global(x, y)
             items.append(MissionItem(NAV_WAYPOINT, lat, lon, ctx.settings.altitude, param2=ctx.settings.closeness))
