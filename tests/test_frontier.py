@@ -67,6 +67,30 @@ def test_a_frontier_reached_only_through_a_gap_too_narrow_for_the_body_is_approa
     assert found[0].goal[0] == 4 and abs(found[0].goal[1] - 4) <= 1  # short of the gap, where the body fits
 
 
+def test_a_frontier_looked_at_from_its_roomy_goal_is_approached_closer():
+    """A doorway (column 4) into a corridor whose sides stay unknown from the room: the goal with known-free
+    space all round (clearance 1.5 cells) is in the room; once the room is looked from, the frontier's goal is
+    the reachable cell nearest it, through the doorway, from where the corridor is seen. Before,
+    a frontier whose roomy goal was looked from was dropped, and Search in three of the apartment's rooms
+    ended in under a minute with 13 % of the floor known."""
+    free, unknown, occupied = grid("""
+???.???
+###.###
+.......
+.......
+.......
+...S...
+""")
+    start = (5, 3)
+    passable = free
+    roomy_goal = frontier.reachable_frontiers(free, unknown, passable, start, clearance=1.5)[0].goal
+    assert roomy_goal[0] >= 2
+    looked = np.zeros_like(free)
+    looked[2:, :] = True  # the whole room looked from
+    found = frontier.reachable_frontiers(free, unknown, passable, start, clearance=1.5, looked=looked)
+    assert [f.goal for f in found] == [(0, 3)]  # the frontier's own cell, at the corridor, reachable
+
+
 def test_search_in_a_closed_room_ends_only_when_no_reachable_frontier_is_left():
     """A room 8 m across with a side room through a 1.9 m doorway: Search sees both and ends saying why."""
     walls = [*enclosure(0, 0, 8), wall(2.5, -1, 0.2, 6.2)]  # a wall across, its doorway at the north end

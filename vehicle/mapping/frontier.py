@@ -85,13 +85,17 @@ def path_lengths(passable: np.ndarray, start: tuple[int, int]) -> tuple[np.ndarr
 
 
 def reachable_frontiers(free: np.ndarray, unknown: np.ndarray, passable: np.ndarray, start: tuple[int, int],
-                        min_cells: int = 1, narrow: np.ndarray | None = None, clearance: float = 0.0) -> list[Frontier]:
+                        min_cells: int = 1, narrow: np.ndarray | None = None, clearance: float = 0.0,
+                        looked: np.ndarray | None = None) -> list[Frontier]:
     """The frontiers (of at least ``min_cells`` cells) the vehicle can get to from ``start`` over passable
     cells, nearest first by path length.
 
     Each one's goal is the reachable cell nearest by path that lies more than ``clearance`` cells from every
     unknown cell and within ``REACH`` times that (and a cell) of the frontier: a frontier along a wall the sonar has
-    not seen yet lies right on the wall, so the goal is where the body has known-free space all round.
+    not seen yet lies right on the wall, so the goal is where the body has known-free space all round. Cells
+    ``looked`` (around spots already looked from) are no goal: a frontier whose every such goal was looked
+    from comes after those, its goal the reachable cell nearest the frontier itself (the corridor's sides
+    beyond a doorway stay unknown from the room; from the doorway they are seen).
     ``narrow`` (cells a thinner body would fit in): a frontier reached only through those (a doorway the map
     draws narrower than it is, as a sonar's first look at its frame does) comes after the others, its goal
     the last such cell on the way to it, from where a closer look may open the way."""
@@ -105,13 +109,13 @@ def reachable_frontiers(free: np.ndarray, unknown: np.ndarray, passable: np.ndar
     gap, (rows, cols) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
     nearest = labels[rows, cols]  # the frontier each cell is nearest to
     roomy = ndimage.distance_transform_edt(~unknown) > clearance
-    good = np.isfinite(lengths) & roomy & (gap <= REACH * clearance + 1)
-    best = np.full(len(groups) + 1, np.inf)
-    np.minimum.at(best, nearest[good], lengths[good])
-    goal_of = {}
-    for r, c in zip(*np.nonzero(good & (lengths == best[nearest])), strict=True):
-        goal_of.setdefault(int(nearest[r, c]), (int(r), int(c)))
+    fresh = np.isfinite(lengths) if looked is None else np.isfinite(lengths) & ~looked
+    within = gap <= REACH * clearance + 1
+    goal_of = _goals(fresh & roomy & within, nearest, lengths, len(groups))
     near = [Frontier(groups[k - 1], goal, float(lengths[goal])) for k, goal in goal_of.items()]
+    closer = _goals(fresh & within, nearest, gap, len(groups))  # the rest: as near the frontier as the body gets
+    again = [Frontier(groups[k - 1], goal, float(lengths[goal])) for k, goal in closer.items() if k not in goal_of]
+    goal_of.update(closer)
     far = []
     if narrow is not None:
         loose, parents = path_lengths(narrow | passable, start)
@@ -125,7 +129,18 @@ def reachable_frontiers(free: np.ndarray, unknown: np.ndarray, passable: np.ndar
                 cell = int(parents.flat[cell])  # back along the way to where the body fits in known-free space
             goal = tuple(int(v) for v in np.unravel_index(cell, free.shape))
             far.append(Frontier(cells, goal, float(lengths[goal]), narrow=True))
-    return sorted(near, key=lambda f: f.distance) + sorted(far, key=lambda f: f.distance)
+    return sorted(near, key=lambda f: f.distance) + sorted(again, key=lambda f: f.distance) + \
+        sorted(far, key=lambda f: f.distance)
+
+
+def _goals(candidates: np.ndarray, nearest: np.ndarray, cost: np.ndarray, count: int) -> dict[int, tuple[int, int]]:
+    """For each frontier (1 ... count) with candidate cells nearest it, its candidate of least ``cost``."""
+    best = np.full(count + 1, np.inf)
+    np.minimum.at(best, nearest[candidates], cost[candidates])
+    goal_of = {}
+    for r, c in zip(*np.nonzero(candidates & (cost == best[nearest])), strict=True):
+        goal_of.setdefault(int(nearest[r, c]), (int(r), int(c)))
+    return goal_of
 
 
 def on_map(memory_map: MemoryMap, position: tuple[float, float], clearance: float, min_cells: int,
@@ -163,7 +178,7 @@ def on_map(memory_map: MemoryMap, position: tuple[float, float], clearance: floa
         cells = [(int((y - m.origin[1]) * m.resolution) - r0, int((x - m.origin[0]) * m.resolution) - c0)
                  for x, y in done]
         looked = _disc_mask(free.shape, cells, done_radius * m.resolution)
-    found = reachable_frontiers(free & ~looked, unknown, passable, start, min_cells, narrow, clearance)
+    found = reachable_frontiers(free & ~looked, unknown, passable, start, min_cells, narrow, clearance, looked)
     return [Frontier(f.cells + (r0, c0), (f.goal[0] + r0, f.goal[1] + c0), f.distance, f.narrow)
             for f in found if not looked[f.goal]]
 
