@@ -249,6 +249,18 @@ def test_pathfind_flies_the_waypoints_it_is_given(scene_of):
     assert reached == ["Pathfind: reached waypoint 1", "Pathfind: reached waypoint 2"]
 
 
+@pytest.mark.parametrize("vehicle", ["copter", "rover"])
+def test_a_waypoint_closer_than_the_autopilot_stops_is_reached_not_waited_for(scene_of, vehicle):
+    """A waypoint 0.12 m from the start, ``closeness`` 0.1 m: the autopilot holds a target within 0.15 m as
+    reached and does not move, and the vehicle at rest there has reached it. Before, it waited there until the
+    time ran out (a thesis sweep's Search in the trees, ``closeness`` 0.1, hovered 121 s 0.12 m from its goal)."""
+    result = fly(scene_of(), "pathfind", vehicle=vehicle, waypoints=[(0.12, 0.0), (3.0, 0.0)], closeness=0.1)
+    assert result["outcome"] == "finished", result["reason"]
+    assert [m for m in result["messages"] if "reached waypoint" in m] == [
+        "Pathfind: reached waypoint 1", "Pathfind: reached waypoint 2"]
+    assert result["sim_time_s"] < 60
+
+
 def test_bug1_pathfind_livelocks_at_a_wall_end():
     # a 4 m wall between home and a waypoint 14 m north; closeness 1 m. Straightforward detour, yet
     # the copter stops/scans/replans at (2.2, 4.15) every ~9.5 s until its time budget runs out

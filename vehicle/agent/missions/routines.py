@@ -12,6 +12,8 @@ from vehicle.protocol.rangefinder import Reading
 
 YAW_REACHED = math.radians(2)
 PATH_POINT_REACHED = 0.5  # m: intermediate path points count as passed this close
+GOAL_HELD = 0.3  # m: an autopilot at rest this near its goal holds it as reached (ArduPilot: its arrival radius)
+GOAL_SETTLED = 0.1  # m/s: slower than this counts as at rest
 PATH_CHECK_PERIOD = 1.0  # s between checks of the path ahead against new obstacles
 STUCK_RADIUS = 1.0  # m: stopped again this close to the last stop counts as no progress
 STUCK_TRIES = 3  # stops without progress before giving up
@@ -138,7 +140,7 @@ class Travel:
                 return Status.RUNNING
             self.scan = None
             self.path = None
-        if ctx.distance_to(self.goal) <= self.tolerance:
+        if ctx.distance_to(self.goal) <= self.tolerance or self._held_at_goal():
             ctx.planned_path = []
             return Status.DONE
         if self.path is None or not self._still_clear():
@@ -162,6 +164,14 @@ class Travel:
             ctx.goto(target)
             self._sent = target
         return Status.RUNNING
+
+    def _held_at_goal(self) -> bool:
+        """The goal sent, and the vehicle at rest within ``GOAL_HELD`` of it: an autopilot stops short of a
+        target by as much as its own arrival radius, so a tolerance below that (``closeness`` 0.1 m) would
+        wait for ever (it hovered 121 s 0.12 m from its goal)."""
+        ctx = self.ctx
+        return (self._sent == self.goal and ctx.fc.speed < GOAL_SETTLED
+                and ctx.distance_to(self.goal) <= GOAL_HELD)
 
     def resume(self) -> None:
         """Plan afresh and send the target again (an operator's mode change dropped it)."""
