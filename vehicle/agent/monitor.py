@@ -114,8 +114,8 @@ class Monitor:
             if ahead is None:
                 continue
             known = self._known_on_arc(ox, oy, rx, ry, reading.distance, math.radians(reading.beam_angle))
-            if known:
-                ahead = min((a for a in map(lambda p: in_corridor(*p), known) if a is not None), default=None)
+            if known:  # the known obstacles explain it: ahead only where one of them is
+                ahead = min((a for a in (in_corridor(*point) for point in known) if a is not None), default=None)
             if ahead is not None:
                 nearest = ahead if nearest is None else min(nearest, ahead)
         return nearest
