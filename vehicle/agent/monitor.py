@@ -127,7 +127,7 @@ class Monitor:
         if level < 1e-9:
             return []
         rx, ry, arc = rx / level, ry / level, distance * level
-        samples = 1 + 2 * int(beam * arc * self.map.resolution + 0.5)
+        samples = 1 + 2 * int(2.0 * beam * arc * self.map.resolution + 0.5)  # as the map's tracing samples it
         grid, cells = self.map.grid, {}
         for k in range(samples):
             angle = beam * (2.0 * k / (samples - 1) - 1.0) if samples > 1 else 0.0

@@ -115,14 +115,14 @@ def reachable_frontiers(free: np.ndarray, unknown: np.ndarray, passable: np.ndar
     near = [Frontier(groups[k - 1], goal, float(lengths[goal])) for k, goal in goal_of.items()]
     closer = _goals(fresh & within, nearest, gap, len(groups))  # the rest: as near the frontier as the body gets
     again = [Frontier(groups[k - 1], goal, float(lengths[goal])) for k, goal in closer.items() if k not in goal_of]
-    goal_of.update(closer)
+    with_goal = goal_of.keys() | closer.keys()
     far = []
     if narrow is not None:
         loose, parents = path_lengths(narrow | passable, start)
         for k, cells in enumerate(groups, 1):
             along = loose[cells[:, 0], cells[:, 1]]
             first = int(np.argmin(along))
-            if k in goal_of or not np.isfinite(along[first]):
+            if k in with_goal or not np.isfinite(along[first]):
                 continue
             cell = int(np.ravel_multi_index(cells[first], free.shape))
             while not (np.isfinite(lengths.flat[cell]) and roomy.flat[cell]) and parents.flat[cell] >= 0:

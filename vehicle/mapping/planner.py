@@ -98,7 +98,6 @@ class MapPlanner:
         path must not graze one."""
         obstacles, offset = self.blocked_in(*window, presume), np.array((window[0].start, window[1].start))
         wide_zone = planning.inflate(self.blocked_in(*window, True), wide)  # unseen walls presumed, as at first
-        tight_zone = planning.inflate(obstacles, tight)
         local = cells - offset
         legs = [np.rint(np.linspace(a, b, int(np.abs(b - a).max()) + 1)).astype(int)
                 for a, b in zip(local[:-1], local[1:], strict=True)]
@@ -112,7 +111,7 @@ class MapPlanner:
             squeezed[walk[on_walk, 0], walk[on_walk, 1]] = True
             squeezed[tuple(local[0])] = squeezed[tuple(local[-1])] = True  # leaving a wall, reaching a goal by one
             allowed = planning.inflate(squeezed, SQUEEZE_REACH * self.map.resolution) | squeezed
-            grid = (wide_zone & ~allowed) | (planning.inflate(obstacles, margin) if margin > tight else tight_zone)
+            grid = (wide_zone & ~allowed) | planning.inflate(obstacles, margin)
             if grid[local_start] or grid[local_goal]:
                 continue
             try:
