@@ -695,6 +695,27 @@ def speed_set(speed: float):
     return mavlink.MAVLink_param_set_message(1, 191, b"SCN_SPEED", speed, mavlink.MAV_PARAM_TYPE_REAL32)
 
 
+def test_the_speed_is_sent_again_after_the_first_target_that_follows_a_take_off_or_a_stop():
+    """ArduCopter flies at its own WPNAV_SPEED again whenever GUIDED starts flying to a position from another
+    kind of target: the take-off, or the zero velocity that stops it. Sent only once per GUIDED session, the
+    speed was lost at the first target, and SITL's copters flew a 1 m/s team mission at up to 4 m/s (two of
+    them met head on). It follows the first target after each; the targets between do not repeat it."""
+    reposition, change_speed = mavlink.MAV_CMD_DO_REPOSITION, mavlink.MAV_CMD_DO_CHANGE_SPEED
+    with controller() as (fc, fake):
+        fc.connect(10)
+        fc.prefer_speed(1.5)
+        assert fc.set_mode("GUIDED") == 0  # sends it: a mode change resets the speed
+        assert fc.takeoff(4.0) == 0
+        for x in (5.0, 6.0):
+            assert fc.goto(x, 0.0, 4.0) == 0
+        assert fc.hold() == 0
+        assert fc.goto(7.0, 0.0, 4.0) == 0
+        order = [m.command for m in list(fake.received) if m.get_type() in ("COMMAND_LONG", "COMMAND_INT")
+                 and m.command in (reposition, change_speed)]
+        assert order == [change_speed, reposition, change_speed, reposition, reposition, change_speed]
+        assert [m.param2 for m in fake.sent(change_speed)] == pytest.approx([1.5] * 3)
+
+
 def test_a_flood_of_param_sets_is_each_answered_and_the_speed_sent_once_from_the_main_loop():
     """A PARAM_SET of SCN_SPEED sent DO_CHANGE_SPEED from inside its handler and waited there for the ACK, and
     that wait took in and answered the next PARAM_SET, which waited in turn: 150 queued nested 150 deep and the

@@ -238,11 +238,12 @@ def test_two_ardupilot_copters_with_an_agent_each_keep_apart_flying_head_on(tmp_
                      "--sensors", "scene", "--gcs", f"udpout:127.0.0.1:{gcs_port}", "--set", f"speed={SITL_SPEED}",
                      "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
-            closest, when = math.inf, None
+            closest, when, fastest = math.inf, None, 0.0
 
             def both_done() -> bool:
-                nonlocal closest, when
+                nonlocal closest, when, fastest
                 found = {v["sysid"]: v for v in api.get("/api/vehicles").json()}
+                fastest = max([fastest, *(v["speed"] or 0.0 for v in found.values())])
                 if all(found.get(s) and found[s]["position"] for s in (1, 2)):
                     a, b = (found[s]["position"] for s in (1, 2))
                     apart = math.dist((a["x"], a["y"], a["alt"]), (b["x"], b["y"], b["alt"]))
@@ -261,10 +262,12 @@ def test_two_ardupilot_copters_with_an_agent_each_keep_apart_flying_head_on(tmp_
         assert result["outcome"] == "finished", (sysid, result["reason"], result["messages"][-10:], err)
     said = [m for result, _ in results.values() for m in result["messages"] if m.startswith("Traffic:")]
     assert said, "they met: one gave way, waited or went round, and said so"
-    # they never touch (two 0.3 m bodies). The margin, 2 m between the bodies (2.6 m between centres), is not
-    # always kept: alone they came to 1.7-3.3 m (centres) in nine runs, and to 1.37 m (at 1.5 times) and 0.76 m (in
-    # CI) while homing or passing; the station sees each copter a relay's lag late
-    assert closest > 0.6, (f"closest approach {closest:.2f} m (centres), when (phase, mode, position) {when}",
+    # they fly at the agent's speed: ArduCopter goes back to its own (up to 4 m/s here) at the first target after
+    # the take-off or a stop unless the agent sends it again (they met head on at 0.08 m, centres, before it did)
+    assert fastest < 1.3 * SITL_SPEED, f"flew at {fastest:.2f} m/s, set {SITL_SPEED}"
+    # they keep apart. The margin, 2 m between the bodies (2.6 m between centres), is not a promise: the station
+    # sees each copter a relay's lag late. With two busy cores beside them they came to 2.79-3.07 m in five runs
+    assert closest > 1.5, (f"closest approach {closest:.2f} m (centres), when (phase, mode, position) {when}",
                            [result["messages"] for result, _ in results.values()])
 
 

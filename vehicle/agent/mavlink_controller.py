@@ -614,6 +614,7 @@ class MavlinkController:
             self.send(mavlink.MAVLink_set_position_target_local_ned_message(
                 int(self._time * 1000) & 0xFFFFFFFF, self.sysid, AUTOPILOT, mavlink.MAV_FRAME_LOCAL_NED,
                 IGNORE_ALL_BUT_VELOCITY, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0))
+            self._speed_applied = False  # the next position target starts the autopilot's own speed again
 
     # ---- acting -------------------------------------------------------------------------------------
     def arm(self) -> int:
@@ -623,6 +624,7 @@ class MavlinkController:
         result = self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude)
         if result == ACCEPTED:
             self._takeoff_to = altitude
+            self._speed_applied = False  # the first target after it starts the autopilot's own speed again
         return result
 
     def set_mode(self, name: str) -> int:
@@ -639,8 +641,11 @@ class MavlinkController:
         return result
 
     def _apply_speed(self) -> None:
-        """The wanted speed, once per GUIDED session. Rover takes it only once it has a target (before, it says
-        FAILED), so a refusal here is no problem: it is tried again after the next target."""
+        """The wanted speed, sent after a target once per GUIDED session, and again after the first target that
+        follows a take-off or a stop: ArduCopter goes back to its own WPNAV_SPEED whenever GUIDED starts flying
+        to a position from another kind of target (SITL's copters flew a 1 m/s mission at up to 4 m/s). Rover
+        takes it only once it has a target (before, it says FAILED), so a refusal here is no problem: it is tried
+        again after the next target."""
         if self._speed_wanted is not None and not self._speed_applied:
             result = self.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1, self._speed_wanted, -1, report=False)
             self._speed_applied = result == ACCEPTED
