@@ -36,42 +36,44 @@ SCENES = [DEFAULT_SCENE, ROOT / "scenes" / "trees.wrl", ROOT / "scenes" / "house
 def speed(scene, seconds: float, repeats: int = 3) -> list[list[object]]:
     """Simulated seconds per wall second of a lone vehicle and of teams, each flying Search for ``seconds``;
     also per CPU second of this process, which others' load on a shared machine sways less. Each the best of
-    ``repeats`` fresh runs (the same flight each time): a lone run takes a fraction of a second, which a busy
-    machine's hiccup can halve."""
+    ``repeats`` fresh runs (the same flight each time), taken in turns (the lone vehicle, then each team, then
+    again): a lone run takes a fraction of a second, which a busy machine's hiccup can halve, and a shared
+    machine's speed drifts over a minute, so each is timed in every stretch of it."""
     settings = Settings().updated({"time_limit": seconds + 60})
 
     def fly_lone():
         lone = simulate(scene, "search", "copter", settings)
         return lambda: lone.run(seconds)
 
-    lone_rate, lone_cpu = _rates(seconds, fly_lone, repeats)
-    rows = [["lone vehicle", f"{lone_rate:.0f}x", "1.00", f"{lone_cpu:.0f}x", "1.00", "-"]]
-    for count in (1, 2, 4, 8):
-        def fly_team(count=count):
+    def fly_team(count):
+        def ready():
             stepper = simulate_team(scene, "search", count, settings=settings)
 
             def fly():
                 while stepper.team.time < seconds - 1e-9:
                     stepper.step()
             return fly
+        return ready
 
-        rate, cpu = _rates(seconds, fly_team, repeats)
-        goal = 0.95 if count == 1 else 1 / count
-        rows.append([f"team of {count}", f"{rate:.0f}x", f"{rate / lone_rate:.2f}", f"{cpu:.0f}x",
-                     f"{cpu / lone_cpu:.2f}", f">= {goal:.2f} {'met' if rate / lone_rate >= goal else 'MISSED'}"])
-    return rows
-
-
-def _rates(seconds: float, ready, repeats: int) -> tuple[float, float]:
-    """The best simulated seconds per wall second and per CPU second of this process over ``repeats`` flights,
-    each ``ready()`` (set up, not timed) returning the flight to time."""
-    wall = cpu = math.inf
+    who = {"lone vehicle": fly_lone, **{f"team of {count}": fly_team(count) for count in (1, 2, 4, 8)}}
+    wall = dict.fromkeys(who, math.inf)
+    cpu = dict.fromkeys(who, math.inf)
     for _ in range(repeats):
-        fly = ready()
-        started, used = time.perf_counter(), time.process_time()
-        fly()
-        wall, cpu = min(wall, time.perf_counter() - started), min(cpu, time.process_time() - used)
-    return seconds / wall, seconds / cpu
+        for name, ready in who.items():
+            fly = ready()  # set up, not timed
+            started, used = time.perf_counter(), time.process_time()
+            fly()
+            wall[name] = min(wall[name], time.perf_counter() - started)
+            cpu[name] = min(cpu[name], time.process_time() - used)
+    lone_rate, lone_cpu = seconds / wall["lone vehicle"], seconds / cpu["lone vehicle"]
+    rows = [["lone vehicle", f"{lone_rate:.0f}x", "1.00", f"{lone_cpu:.0f}x", "1.00", "-"]]
+    for count in (1, 2, 4, 8):
+        name = f"team of {count}"
+        rate, per_cpu = seconds / wall[name], seconds / cpu[name]
+        goal = 0.95 if count == 1 else 1 / count
+        rows.append([name, f"{rate:.0f}x", f"{rate / lone_rate:.2f}", f"{per_cpu:.0f}x", f"{per_cpu / lone_cpu:.2f}",
+                     f">= {goal:.2f} {'met' if rate / lone_rate >= goal else 'MISSED'}"])
+    return rows
 
 
 def many_runs(runs: int, seconds: float, seed: int = 1) -> tuple[list[list[object]], dict]:

@@ -4,6 +4,7 @@ and Search exploring until no reachable frontier is left, in the real simulator.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from tests.test_missions import Track, enclosure, fly, scene, wall
 from vehicle.mapping import frontier
@@ -42,12 +43,48 @@ def test_the_nearest_reachable_frontier_wins_over_a_nearer_one_behind_a_wall():
 """)
     start = (3, 8)
     passable = free & ~occupied
-    found = frontier.reachable_frontiers(free, unknown, passable, start)
+    found = list(frontier.reachable_frontiers(free, unknown, passable, start))
     left_of_wall = [f for f in found if f.goal[1] < 2]
     assert not left_of_wall  # the column left of the wall is 6 cells away, and unreachable
     assert found[0].distance == min(f.distance for f in found)
     lengths, _ = frontier.path_lengths(passable, start)
     assert np.isinf(lengths[3, 0]) and np.isfinite(lengths[3, 13])
+
+
+def test_path_lengths_are_scipys_dijkstra_over_the_same_graph_and_each_predecessor_is_a_step_back():
+    """Our compiled Dijkstra against scipy's over the grid built as a sparse graph (each step once, a diagonal
+    only between two open cells), on random grids: the same lengths, and every predecessor one step back."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    generator = np.random.default_rng(7)
+    for _ in range(20):
+        passable = generator.random((23, 31)) < 0.7
+        start = tuple(int(v) for v in np.argwhere(passable)[generator.integers(passable.sum())])
+        rows, cols = passable.shape
+        padded = np.pad(passable, 1)
+        heads, tails, weights = [], [], []
+        for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            ok = passable & padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
+            if dr and dc:
+                ok &= padded[1 + dr:1 + dr + rows, 1:1 + cols] & padded[1:1 + rows, 1 + dc:1 + dc + cols]
+            here = np.flatnonzero(ok)
+            heads.append(here)
+            tails.append(here + dr * cols + dc)
+            weights.append(np.full(len(here), np.hypot(dr, dc)))
+        graph = coo_matrix((np.concatenate(weights), (np.concatenate(heads), np.concatenate(tails))),
+                           shape=(passable.size, passable.size)).tocsr()
+        expected = dijkstra(graph, directed=False, indices=start[0] * cols + start[1]).reshape(passable.shape)
+        lengths, parents = frontier.path_lengths(passable, start)
+        np.testing.assert_allclose(lengths, expected, rtol=0, atol=1e-9)
+        for cell in zip(*np.nonzero(np.isfinite(lengths) & (lengths > 0)), strict=True):
+            back = np.unravel_index(parents[cell], passable.shape)
+            assert max(abs(back[0] - cell[0]), abs(back[1] - cell[1])) == 1
+            assert lengths[back] + np.hypot(back[0] - cell[0], back[1] - cell[1]) == pytest.approx(lengths[cell])
+        assert parents[start] < 0 and lengths[start] == 0
+        blocked = passable.copy()
+        blocked[start] = False
+        assert np.isinf(frontier.path_lengths(blocked, start)[0]).all()  # from a blocked cell: nowhere
 
 
 def test_a_frontier_reached_only_through_a_gap_too_narrow_for_the_body_is_approached_but_not_entered():
@@ -61,8 +98,8 @@ def test_a_frontier_reached_only_through_a_gap_too_narrow_for_the_body_is_approa
 """)
     start = (5, 5)
     passable = free & (np.arange(6) >= 4)[:, None]  # the body fits only a row clear of the wall
-    assert not frontier.reachable_frontiers(free, unknown, passable, start)
-    found = frontier.reachable_frontiers(free, unknown, passable, start, narrow=free)
+    assert not list(frontier.reachable_frontiers(free, unknown, passable, start))
+    found = list(frontier.reachable_frontiers(free, unknown, passable, start, narrow=free))
     assert len(found) == 1 and found[0].narrow
     assert found[0].goal[0] == 4 and abs(found[0].goal[1] - 4) <= 1  # short of the gap, where the body fits
 
@@ -83,11 +120,11 @@ def test_a_frontier_looked_at_from_its_roomy_goal_is_approached_closer():
 """)
     start = (5, 3)
     passable = free
-    roomy_goal = frontier.reachable_frontiers(free, unknown, passable, start, clearance=1.5)[0].goal
+    roomy_goal = next(frontier.reachable_frontiers(free, unknown, passable, start, clearance=1.5)).goal
     assert roomy_goal[0] >= 2
     looked = np.zeros_like(free)
     looked[2:, :] = True  # the whole room looked from
-    found = frontier.reachable_frontiers(free, unknown, passable, start, clearance=1.5, looked=looked)
+    found = list(frontier.reachable_frontiers(free, unknown, passable, start, clearance=1.5, looked=looked))
     assert [f.goal for f in found] == [(0, 3)]  # the frontier's own cell, at the corridor, reachable
 
 

@@ -11,17 +11,22 @@ in (free, and further than the clearance from every occupied cell), run from
 the vehicle's cell: it gives the path length to every frontier cell at once,
 and a frontier behind a wall is simply never reached. Steps are 8-connected
 (1 or sqrt 2 cells long) and a diagonal step needs both cells beside it open,
-as the planner's A* does.
+as the planner's A* does. The Dijkstra is our own, over the grid's neighbours
+and compiled with numba: scipy's (``csgraph.dijkstra``) gives the same lengths
+but needs the grid rebuilt as a sparse graph at every call, which cost more
+than the search, and a team's vehicles, each turned away from its team-mates'
+shares, look for frontiers several times a minute (a third of a team's time).
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.mapping.planning import inflate
@@ -30,6 +35,7 @@ EIGHT = np.ones((3, 3), dtype=bool)
 NARROW = 0.5  # share of the clearance a way through a gap the body does not fit must keep, to be worth a look
 REACH = 4.0  # times the clearance: how far from its frontier a goal may lie
 FOUR = ndimage.generate_binary_structure(2, 1)
+SQRT2 = math.sqrt(2.0)
 
 
 @dataclass(frozen=True)
@@ -57,38 +63,102 @@ def frontiers(free: np.ndarray, unknown: np.ndarray, min_cells: int = 1) -> list
     return [np.column_stack(np.unravel_index(g, labels.shape)) for g in groups if len(g) >= min_cells]
 
 
-def path_lengths(passable: np.ndarray, start: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+def path_lengths(passable: np.ndarray, start: tuple[int, int],
+                 limit: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
     """Length in cells of the shortest 8-connected path from ``start`` to every cell over passable cells
-    (inf where there is none, and everywhere if ``start`` itself is not passable), and each cell's
-    predecessor on it (a flat index, negative where there is none)."""
-    rows, cols = passable.shape
+    (inf where there is none or it is longer than ``limit``, and everywhere if ``start`` itself is not
+    passable), and each cell's predecessor on it (a flat index, negative where there is none)."""
     if not passable[start]:
         return np.full(passable.shape, np.inf), np.full(passable.shape, -1)
-    padded = np.pad(passable, 1)
-
-    def beside(dr: int, dc: int) -> np.ndarray:  # whether the cell (dr, dc) away is on the grid and passable
-        return padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
-
-    heads, tails, weights = [], [], []
-    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):  # each undirected step once
-        ok = passable & beside(dr, dc)
-        if dr and dc:  # no squeezing between two blocked cells touching at a corner
-            ok &= beside(dr, 0) & beside(0, dc)
-        here = np.flatnonzero(ok)
-        heads.append(here)
-        tails.append(here + dr * cols + dc)
-        weights.append(np.full(len(here), np.hypot(dr, dc)))
-    graph = coo_matrix((np.concatenate(weights), (np.concatenate(heads), np.concatenate(tails))),
-                       shape=(passable.size, passable.size)).tocsr()
-    lengths, parents = dijkstra(graph, directed=False, indices=start[0] * cols + start[1], return_predecessors=True)
+    lengths, parents = _dijkstra(np.ascontiguousarray(passable, dtype=np.bool_), int(start[0]), int(start[1]),
+                                 float(limit))
     return lengths.reshape(passable.shape), parents.reshape(passable.shape)
+
+
+@numba.njit(cache=True)
+def _dijkstra(passable, start_row, start_col, limit):
+    """Dijkstra from one cell over the passable cells of a grid, 8-connected, a diagonal step only between
+    two open cells beside it, no further than ``limit``; flat lengths and predecessors (-1: none). Its queue
+    is a binary heap in two arrays (a length, a cell), a cell pushed again whenever a shorter way to it is
+    found. Equal lengths go in the cells' order, which a window cut from a bigger grid keeps: sums of 1 and
+    sqrt 2 taken in another order can differ in the last bit, and the near and the whole map must give the
+    same goals."""
+    rows, cols = passable.shape
+    lengths = np.full(rows * cols, np.inf)
+    parents = np.full(rows * cols, -1, dtype=np.int64)
+    settled = np.zeros(rows * cols, dtype=np.bool_)
+    keys = np.empty(8 * rows * cols + 1)  # a cell is pushed at most once per neighbour settled before it
+    cells = np.empty(8 * rows * cols + 1, dtype=np.int64)
+    first = start_row * cols + start_col
+    lengths[first] = 0.0
+    keys[0], cells[0], size = 0.0, first, 1
+    while size > 0:
+        length, cell = keys[0], cells[0]
+        size -= 1
+        _sift_down(keys, cells, size)
+        if settled[cell]:
+            continue
+        settled[cell] = True
+        row, col = cell // cols, cell % cols
+        for dr in range(-1, 2):
+            for dc in range(-1, 2):
+                r, c = row + dr, col + dc
+                if (dr == 0 and dc == 0) or r < 0 or r >= rows or c < 0 or c >= cols or not passable[r, c]:
+                    continue
+                if dr != 0 and dc != 0:
+                    if not (passable[row + dr, col] and passable[row, col + dc]):
+                        continue
+                    step = SQRT2
+                else:
+                    step = 1.0
+                there = r * cols + c
+                if length + step < lengths[there] and length + step <= limit:
+                    lengths[there] = length + step
+                    parents[there] = cell
+                    _push(keys, cells, size, length + step, there)
+                    size += 1
+    return lengths, parents
+
+
+@numba.njit(cache=True)
+def _push(keys, cells, size, key, cell):
+    """Put (key, cell) into the heap of ``size`` entries."""
+    i = size
+    while i > 0:
+        parent = (i - 1) // 2
+        if keys[parent] < key or (keys[parent] == key and cells[parent] < cell):
+            break
+        keys[i], cells[i] = keys[parent], cells[parent]
+        i = parent
+    keys[i], cells[i] = key, cell
+
+
+@numba.njit(cache=True)
+def _sift_down(keys, cells, size):
+    """After the root was taken: move the last entry (at ``size``) down from the root to its place."""
+    if size == 0:
+        return
+    key, cell = keys[size], cells[size]
+    i = 0
+    while True:
+        child = 2 * i + 1
+        if child >= size:
+            break
+        if child + 1 < size and (keys[child + 1] < keys[child] or
+                                 (keys[child + 1] == keys[child] and cells[child + 1] < cells[child])):
+            child += 1
+        if keys[child] > key or (keys[child] == key and cells[child] > cell):
+            break
+        keys[i], cells[i] = keys[child], cells[child]
+        i = child
+    keys[i], cells[i] = key, cell
 
 
 def reachable_frontiers(free: np.ndarray, unknown: np.ndarray, passable: np.ndarray, start: tuple[int, int],
                         min_cells: int = 1, narrow: np.ndarray | None = None, clearance: float = 0.0,
-                        looked: np.ndarray | None = None) -> list[Frontier]:
+                        looked: np.ndarray | None = None, limit: float = math.inf) -> Iterator[Frontier]:
     """The frontiers (of at least ``min_cells`` cells) the vehicle can get to from ``start`` over passable
-    cells, nearest first by path length.
+    cells, nearest first by path length, as the caller takes them.
 
     Each one's goal is the reachable cell nearest by path that lies more than ``clearance`` cells from every
     unknown cell and within ``REACH`` times that (and a cell) of the frontier: a frontier along a wall the sonar has
@@ -98,69 +168,79 @@ def reachable_frontiers(free: np.ndarray, unknown: np.ndarray, passable: np.ndar
     beyond a doorway stay unknown from the room; from the doorway they are seen).
     ``narrow`` (cells a thinner body would fit in): a frontier reached only through those (a doorway the map
     draws narrower than it is, as a sonar's first look at its frame does) comes after the others, its goal
-    the last such cell on the way to it, from where a closer look may open the way."""
-    lengths, _ = path_lengths(passable, start)
+    the last such cell on the way to it, from where a closer look may open the way. Those are looked for only
+    once the caller has turned the others down (a second Dijkstra, half the time).
+    ``limit`` (cells): only the frontiers whose goal with known-free space all round lies within it by path,
+    in the same order; whether any other comes before the rest takes every length, which the caller then
+    looks for without a limit. The search stops there: a fraction of the time near the vehicle."""
+    lengths, _ = path_lengths(passable, start, limit)
     groups = frontiers(free, unknown, min_cells)
     if not groups:
-        return []
+        return
     labels = np.zeros(free.shape, dtype=np.int64)
     for k, cells in enumerate(groups, 1):
         labels[cells[:, 0], cells[:, 1]] = k
     gap, (rows, cols) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
     nearest = labels[rows, cols]  # the frontier each cell is nearest to
-    roomy = ndimage.distance_transform_edt(~unknown) > clearance
+    roomy = ~inflate(unknown, clearance)  # further than the clearance from every unknown cell
     fresh = np.isfinite(lengths) if looked is None else np.isfinite(lengths) & ~looked
     within = gap <= REACH * clearance + 1
     goal_of = _goals(fresh & roomy & within, nearest, lengths, len(groups))
     near = [Frontier(groups[k - 1], goal, float(lengths[goal])) for k, goal in goal_of.items()]
     closer = _goals(fresh & within, nearest, gap, len(groups))  # the rest: as near the frontier as the body gets
     again = [Frontier(groups[k - 1], goal, float(lengths[goal])) for k, goal in closer.items() if k not in goal_of]
+    yield from sorted(near, key=lambda f: f.distance)
+    if math.isfinite(limit):
+        return
+    yield from sorted(again, key=lambda f: f.distance)
     with_goal = goal_of.keys() | closer.keys()
+    if narrow is None or len(with_goal) == len(groups):
+        return
     far = []
-    if narrow is not None:
-        loose, parents = path_lengths(narrow | passable, start)
-        for k, cells in enumerate(groups, 1):
-            along = loose[cells[:, 0], cells[:, 1]]
-            first = int(np.argmin(along))
-            if k in with_goal or not np.isfinite(along[first]):
-                continue
-            cell = int(np.ravel_multi_index(cells[first], free.shape))
-            while not (np.isfinite(lengths.flat[cell]) and roomy.flat[cell]) and parents.flat[cell] >= 0:
-                cell = int(parents.flat[cell])  # back along the way to where the body fits in known-free space
-            goal = tuple(int(v) for v in np.unravel_index(cell, free.shape))
-            far.append(Frontier(cells, goal, float(lengths[goal]), narrow=True))
-    return sorted(near, key=lambda f: f.distance) + sorted(again, key=lambda f: f.distance) + \
-        sorted(far, key=lambda f: f.distance)
+    loose, parents = path_lengths(narrow | passable, start)
+    for k, cells in enumerate(groups, 1):
+        along = loose[cells[:, 0], cells[:, 1]]
+        first = int(np.argmin(along))
+        if k in with_goal or not np.isfinite(along[first]):
+            continue
+        cell = int(np.ravel_multi_index(cells[first], free.shape))
+        while not (np.isfinite(lengths.flat[cell]) and roomy.flat[cell]) and parents.flat[cell] >= 0:
+            cell = int(parents.flat[cell])  # back along the way to where the body fits in known-free space
+        goal = tuple(int(v) for v in np.unravel_index(cell, free.shape))
+        far.append(Frontier(cells, goal, float(lengths[goal]), narrow=True))
+    yield from sorted(far, key=lambda f: f.distance)
 
 
 def _goals(candidates: np.ndarray, nearest: np.ndarray, cost: np.ndarray, count: int) -> dict[int, tuple[int, int]]:
     """For each frontier (1 ... count) with candidate cells nearest it, its candidate of least ``cost``."""
     best = np.full(count + 1, np.inf)
     np.minimum.at(best, nearest[candidates], cost[candidates])
-    goal_of = {}
-    for r, c in zip(*np.nonzero(candidates & (cost == best[nearest])), strict=True):
-        goal_of.setdefault(int(nearest[r, c]), (int(r), int(c)))
-    return goal_of
+    rows, cols = np.nonzero(candidates & (cost == best[nearest]))
+    _, first = np.unique(nearest[rows, cols], return_index=True)  # each frontier's first cell in row order
+    first.sort()  # the frontiers in that order too: equally near ones keep it when sorted by distance
+    return {int(nearest[rows[i], cols[i]]): (int(rows[i]), int(cols[i])) for i in first}
 
 
 def on_map(memory_map: MemoryMap, position: tuple[float, float], clearance: float, min_cells: int,
            box: tuple[float, float, float, float], done: list[tuple[float, float]] = (),
-           done_radius: float = 0.0) -> list[Frontier]:
-    """The reachable frontiers of a memory map from ``position``, nearest first, in map cells.
+           done_radius: float = 0.0, limit: float = math.inf) -> Iterator[Frontier]:
+    """The reachable frontiers of a memory map from ``position``, nearest first, in map cells, as the caller
+    takes them.
 
     The body fits in free cells further than ``clearance`` cells from every occupied one (and where it is
     now). Only cells inside ``box`` (x0, y0, x1, y1: the allowed space) count, so exploration stops at its
     edge. Frontier cells within ``done_radius`` m of a point of ``done`` (spots already looked around from,
-    goals given up on) no longer count: what stays unknown from right beside it, the sonar cannot see."""
+    goals given up on) no longer count: what stays unknown from right beside it, the sonar cannot see.
+    ``limit``: as for ``reachable_frontiers``."""
     m = memory_map
     here = m.cell_of(*position)
     if here is None:
-        return []
+        return
     low, high = m.cell_of(*np.maximum(box[:2], m.origin)), m.cell_of(*np.minimum(box[2:], _far_corner(m)))
     known = m.grid[low[0]:high[0] + 1, low[1]:high[1] + 1] != 0
     rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
     if not len(rows):
-        return []
+        return
     pad = int(np.ceil(clearance)) + 2  # the known part, and room for the unknown beside it and the inflation
     r0, r1 = max(low[0], low[0] + rows[0] - pad, 0), min(high[0] + 1, low[0] + rows[-1] + pad + 1)
     c0, c1 = max(low[1], low[1] + cols[0] - pad, 0), min(high[1] + 1, low[1] + cols[-1] + pad + 1)
@@ -178,9 +258,10 @@ def on_map(memory_map: MemoryMap, position: tuple[float, float], clearance: floa
         cells = [(int((y - m.origin[1]) * m.resolution) - r0, int((x - m.origin[0]) * m.resolution) - c0)
                  for x, y in done]
         looked = _disc_mask(free.shape, cells, done_radius * m.resolution)
-    found = reachable_frontiers(free & ~looked, unknown, passable, start, min_cells, narrow, clearance, looked)
-    return [Frontier(f.cells + (r0, c0), (f.goal[0] + r0, f.goal[1] + c0), f.distance, f.narrow)
-            for f in found if not looked[f.goal]]
+    found = reachable_frontiers(free & ~looked, unknown, passable, start, min_cells, narrow, clearance, looked, limit)
+    for f in found:
+        if not looked[f.goal]:
+            yield Frontier(f.cells + (r0, c0), (f.goal[0] + r0, f.goal[1] + c0), f.distance, f.narrow)
 
 
 def _far_corner(m: MemoryMap) -> np.ndarray:

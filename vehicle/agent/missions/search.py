@@ -134,12 +134,11 @@ class Search(Mission):
         # first around the vehicle (a path no longer than NEAR_FRONTIER stays within it, and the margin holds
         # what decides a frontier's goal there: the walls a body keeps clear of, the unknown beside it, the rest
         # of the frontier), then the whole map: a team's shared map is the team's whole area, and the search
-        # over it was half of a team's time
+        # over it was half of a team's time. Near, only the frontiers whose roomy goal lies within that reach
+        # are looked at; for any other (goals looked from, gaps) the whole map decides
         for area, within in ((near, NEAR_FRONTIER * m.resolution), (box, math.inf)):
             for found in frontier.on_map(m, ctx.position, ctx.planner.margin_cells(0.0), min_cells, area,
-                                         self.looked, done):
-                if math.isfinite(within) and (found.narrow or found.distance > within):
-                    break  # beyond the square's exact reach, or behind a gap: the whole map decides
+                                         self.looked, done, limit=within):
                 goal = m.center_of(*found.goal)
                 if not someone_elses(ctx, goal):
                     return goal
