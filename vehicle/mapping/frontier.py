@@ -87,8 +87,8 @@ def _dijkstra(passable, start_row, start_col, limit):
     lengths = np.full(rows * cols, np.inf)
     parents = np.full(rows * cols, -1, dtype=np.int64)
     settled = np.zeros(rows * cols, dtype=np.bool_)
-    keys = np.empty(8 * rows * cols + 1)  # a cell is pushed at most once per neighbour settled before it
-    cells = np.empty(8 * rows * cols + 1, dtype=np.int64)
+    room = 4 * (rows + cols) + 64  # about a wavefront's cells; doubled when full (a cell may be in it 8 times)
+    keys, cells = np.empty(room), np.empty(room, dtype=np.int64)
     first = start_row * cols + start_col
     lengths[first] = 0.0
     keys[0], cells[0], size = 0.0, first, 1
@@ -115,6 +115,8 @@ def _dijkstra(passable, start_row, start_col, limit):
                 if length + step < lengths[there] and length + step <= limit:
                     lengths[there] = length + step
                     parents[there] = cell
+                    if size == len(keys):
+                        keys, cells = np.concatenate((keys, np.empty(size))), np.concatenate((cells, cells))
                     _push(keys, cells, size, length + step, there)
                     size += 1
     return lengths, parents
