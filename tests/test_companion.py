@@ -24,6 +24,7 @@ import pytest
 from harness import SCENE_TEXT, RunningStation, command_ok, free_udp_port, small_scene, wait_sim, wait_wall
 from mavlink_peer import Peer, command, gcs_heartbeat, vehicle_heartbeat
 
+from vehicle.agent import agent as agent_module
 from vehicle.agent import mavlink_controller
 from vehicle.agent.agent import Agent
 from vehicle.agent.companion import Companion
@@ -959,6 +960,7 @@ def test_an_agent_whose_mission_never_started_exits_non_zero_saying_why(monkeypa
     from vehicle.agent import process
 
     port = free_udp_port()
+    monkeypatch.setattr(agent_module, "PREFLIGHT_TRIES", 1)  # the first refusal pauses it (retries: their own test)
     if ending == "deadline":
         monkeypatch.setattr(process, "START_TIMEOUT", 4.0)
         extra, why = ("--duration", "60"), "the mission did not start within 4 s: "

@@ -23,6 +23,7 @@ from vehicle.lab.experiment import Experiment, _fly, run_experiment
 from vehicle.lab.stepper import simulate
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.mapping.planner import UNSEEN_EXTENT
+from vehicle.protocol.mav import mavlink
 from vehicle.protocol.modes import DISARMED
 from vehicle.sim.onboard import SimController
 from vehicle.sim.physics import Limits
@@ -448,19 +449,43 @@ def test_a_new_go_here_drops_the_path_to_the_last_one_at_once(scene_of):
 def test_a_take_off_the_autopilot_refuses_pauses_the_agent_and_a_resume_asks_again(scene_of):
     """A copter bigger than the default rests higher, and its autopilot refuses a take-off to 0.5 m, which would
     not leave the ground. The agent waited for ever in silence; it now pauses, saying why, and asks again when
-    resumed: once the operator has raised the altitude (as PARAM_SET SCN_ALTITUDE does), it takes off."""
+    resumed: once the operator has raised the altitude (as PARAM_SET SCN_ALTITUDE does), it takes off. Before it
+    pauses it asks twice more, 2 s apart, saying so."""
     settings = Settings(**{**SMALL, "altitude": 0.5})
     stepper = simulate(scene_of(), "browse", "copter", settings, limits=Limits(radius=0.6))
     agent = stepper.agent
-    assert stepper.run(5, until=lambda: agent.paused)
+    assert stepper.run(10, until=lambda: agent.paused)
     assert agent.pause_reason == "flight controller: nav_takeoff failed"
+    asked_again = "Preflight: flight controller: nav_takeoff failed; asking again in 2 s"
+    assert list(agent.messages).count(asked_again) == 2 and 4.0 <= stepper.simulation.autopilot.time < 5.0
     assert "Agent: paused, flight controller: nav_takeoff failed" in agent.messages
     assert agent.resume()
-    assert stepper.run(5, until=lambda: agent.paused)  # refused again: paused again, not waiting in silence
+    assert stepper.run(10, until=lambda: agent.paused)  # refused again: paused again, not waiting in silence
+    assert list(agent.messages).count(asked_again) == 4
     agent.settings.altitude = 1.5
     assert agent.resume()
     assert stepper.run(10, until=lambda: agent.phase is Phase.MISSION)
     assert stepper.simulation.autopilot.flying and not agent.paused
+
+
+def test_a_copter_the_autopilot_disarmed_before_its_take_off_is_armed_again_and_flies(scene_of):
+    """Against two ArduCopter SITL instances on a loaded machine, an agent's take-off failed: the copter was not
+    armed (ArduCopter disarms one left idle on the ground, and a loaded one's pre-arm checks flicker). One refusal
+    paused the agent for good, and the mission never started. Now it arms and asks again, and flies."""
+    stepper = simulate(scene_of(), "browse", "copter", Settings(**SMALL))
+    autopilot, agent = stepper.simulation.autopilot, stepper.agent
+    takeoff, refused = autopilot.takeoff, []
+
+    def disarmed_first(altitude):
+        if not refused:
+            autopilot.disarm()
+        refused.append(result := takeoff(altitude))
+        return result
+    autopilot.takeoff = disarmed_first
+    assert stepper.run(20, until=lambda: agent.phase is Phase.MISSION)
+    assert refused[0] != mavlink.MAV_RESULT_ACCEPTED and refused[-1] == mavlink.MAV_RESULT_ACCEPTED
+    assert "Preflight: flight controller: nav_takeoff temporarily rejected; asking again in 2 s" in agent.messages
+    assert autopilot.flying and not agent.paused
 
 
 def test_resumed_after_an_operator_stopped_its_climb_the_agent_takes_over_in_guided(scene_of):
@@ -480,7 +505,7 @@ def test_a_headless_run_that_times_out_paused_says_why_it_paused(scene_of):
     """Nobody resumes an agent in a headless run: its outcome names the pause, not only the phase."""
     settings = Settings(**{**SMALL, "altitude": 0.5, "time_limit": 20})
     stepper = simulate(scene_of(), "browse", "copter", settings, limits=Limits(radius=0.6))
-    assert _fly(stepper, None) == ("timeout", "time limit of 20 s reached in phase takeoff, the agent paused "
+    assert _fly(stepper, None) == ("timeout", "time limit of 20 s reached in phase preflight, the agent paused "
                                               "(flight controller: nav_takeoff failed)")
 
 

@@ -29,7 +29,7 @@ from vehicle.agent.monitor import RIDE_HEIGHT, Monitor
 from vehicle.agent.settings import Settings
 from vehicle.agent.traffic import CLEAR_FOR, GiveWay, column
 from vehicle.mapping.memory_map import MemoryMap
-from vehicle.protocol.mav import mavlink
+from vehicle.protocol.mav import ACCEPTED, mavlink, refusal
 from vehicle.protocol.modes import Kind
 
 HOME_TOLERANCE = 0.5  # m
@@ -38,6 +38,11 @@ SETTLE_OVER_HOME = 10.0  # s a copter waits at most to come to rest over home be
 BLOCKED_FOR = 1.0  # s held back by avoidance before the monitor treats it as an obstacle too close
 RESERVE = 60.0  # s kept for scans, detours and landing on the way home (at most a sixth of the time limit)
 MESSAGES_KEPT = 200
+# An arming or a take-off the autopilot refuses is asked for again, PREFLIGHT_RETRY s (its clock) later, up to
+# PREFLIGHT_TRIES times before the agent pauses: one refusal is not an autopilot's last word (a loaded ArduCopter's
+# pre-arm checks flicker, and it disarms a copter left idle on the ground, after which it fails the take-off)
+PREFLIGHT_TRIES = 3
+PREFLIGHT_RETRY = 2.0
 
 
 class Phase(StrEnum):
@@ -87,6 +92,9 @@ class Agent:
         self._relaunch: Phase | None = None  # the phase to go back to after taking off again on a resume
         self.give_way = GiveWay(self.ctx, self._after_giving_way)  # to team-mates (none alone)
         self._speed_sent = settings.speed  # the autopilot's speed as last set (``Context.speed``)
+        self._refusals = 0  # of the arming or the take-off, since the preflight began
+        self.refused = ""  # the last of them, in words, while the agent asks again
+        self._ask_again_at = -math.inf  # when to ask for them again after a refusal
 
     @property
     def done(self) -> bool:
@@ -174,7 +182,7 @@ class Agent:
             self._relaunch = self.phase
             self.phase = Phase.PREFLIGHT
             return
-        if self.phase is Phase.TAKEOFF:  # the take-off was refused or cut short: from the start (GUIDED, arm, climb)
+        if self.phase is Phase.TAKEOFF:  # the take-off was cut short: from the start (GUIDED, arm, climb)
             self.phase = Phase.PREFLIGHT
             return
         if own_mode and (self.phase is Phase.HOMING
@@ -358,9 +366,13 @@ class Agent:
                 self.phase = Phase.MISSION
                 self.mission_began = True
             return
+        if now < self._ask_again_at:
+            return
         self._set_mode("GUIDED")
-        fc.arm()
+        if not self._granted(now, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, fc.arm(report=False)):
+            return
         if fc.kind is Kind.ROVER or (fc.flying and not fc.taking_off):
+            self._refusals, self.refused = 0, ""
             self._carry_on()
             return
         if not fc.taking_off:
@@ -368,8 +380,25 @@ class Agent:
             if above is not None:  # it would climb into a team-mate: wait on the ground
                 self._say_once(f"Traffic: waiting to take off: vehicle {above.vehicle} is above")
                 return
-            fc.takeoff(self.settings.altitude)
+            if not self._granted(now, mavlink.MAV_CMD_NAV_TAKEOFF, fc.takeoff(self.settings.altitude, report=False)):
+                return
+        self._refusals, self.refused = 0, ""
         self.phase = Phase.TAKEOFF
+
+    def _granted(self, now: float, command: int, result: int) -> bool:
+        """The autopilot accepted a preflight command. A refusal is said and asked again (``PREFLIGHT_TRIES``);
+        the last one pauses the agent, saying why, as any refused command does."""
+        if result == ACCEPTED:
+            return True
+        self._refusals += 1
+        why = self.refused = refusal(command, result)
+        if self._refusals < PREFLIGHT_TRIES:
+            self.say(f"Preflight: {why}; asking again in {PREFLIGHT_RETRY:g} s", mavlink.MAV_SEVERITY_WARNING)
+            self._ask_again_at = now + PREFLIGHT_RETRY
+        else:
+            self._refusals, self.refused = 0, ""  # a resume asks again, as often
+            self.pause(why)
+        return False
 
     def _takeoff(self, now: float) -> None:
         if self.fc.flying and not self.fc.taking_off:

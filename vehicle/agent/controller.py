@@ -85,10 +85,11 @@ class FlightController(Protocol):
         heartbeat, which ends by itself, is the process's to handle: ``vehicle.agent.process``.)"""
 
     # ---- act (each returns a MAV_RESULT) ------------------------------------------------------------
-    def arm(self) -> int: ...
+    def arm(self, report: bool = True) -> int:
+        """Arm. A refusal is news (``took_over``) unless ``report`` is False: the caller deals with it."""
 
-    def takeoff(self, altitude: float) -> int:
-        """Climb to ``altitude`` m above home (GUIDED, armed copter)."""
+    def takeoff(self, altitude: float, report: bool = True) -> int:
+        """Climb to ``altitude`` m above home (GUIDED, armed copter); ``report`` as for ``arm``."""
 
     def set_mode(self, name: str) -> int: ...
 

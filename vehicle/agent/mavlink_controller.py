@@ -49,7 +49,7 @@ from collections.abc import Callable
 from vehicle.protocol import mission as mission_protocol
 from vehicle.protocol.frames import Navigation, Pose
 from vehicle.protocol.geodesy import Datum, heading_of, on_earth, wrap_pi
-from vehicle.protocol.mav import ACCEPTED, AUTOPILOT, COMMAND_NAMES, RESULT_WORDS, UNSUPPORTED, mavlink
+from vehicle.protocol.mav import ACCEPTED, AUTOPILOT, NO_ANSWER, UNSUPPORTED, mavlink, refusal
 from vehicle.protocol.mav import COMPANION as COMPONENT
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import DISARMED, Kind, name_of, number_of
@@ -57,7 +57,6 @@ from vehicle.protocol.radiostream import RADIO_LINKS, LinkReceiver, LinkRecord
 from vehicle.protocol.rangefinder import Reading, Servo, reading_from, readings_from_obstacles
 from vehicle.protocol.traffic import Traffic
 
-NO_ANSWER = -1  # what a command returns when the autopilot never acknowledged it
 HEARTBEAT_LOST = 2.0  # wall s without the autopilot's heartbeat before the agent stops commanding until it is back
 FAILSAFE_NEWS = 3.0  # wall s: a mode change this soon after the autopilot said "failsafe" is the failsafe's
 LINK_LOST_AFTER = 3.0  # wall s the autopilot's heartbeat is silent where it came from before it is heard elsewhere
@@ -85,7 +84,6 @@ FACING = math.radians(12)  # a vehicle at rest not yet facing its target is stil
 BLOCKED_SPEED = 0.1  # m/s: slower than this, short of its target and not turning, the vehicle is held back
 IGNORE_ALL_BUT_VELOCITY = 0x0DC7  # type masks ArduPilot documents for GUIDED targets
 IGNORE_ALL_BUT_YAW = 0x09FF
-RESULTS = {**RESULT_WORDS, NO_ANSWER: "no answer"}
 
 
 class FlightControllerError(Exception):
@@ -583,7 +581,7 @@ class MavlinkController:
         if result == NO_ANSWER and gap:
             return result
         if report and result not in (ACCEPTED, UNSUPPORTED) and not self._refused_for_a_takeover(result):
-            self._problem(f"flight controller: {COMMAND_NAMES.get(command, command)} {RESULTS.get(result, result)}")
+            self._problem(refusal(command, result))
         return result
 
     def _refused_for_a_takeover(self, result: int) -> bool:
@@ -617,11 +615,11 @@ class MavlinkController:
             self._speed_applied = False  # the next position target starts the autopilot's own speed again
 
     # ---- acting -------------------------------------------------------------------------------------
-    def arm(self) -> int:
-        return self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    def arm(self, report: bool = True) -> int:
+        return self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1, report=report)
 
-    def takeoff(self, altitude: float) -> int:
-        result = self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude)
+    def takeoff(self, altitude: float, report: bool = True) -> int:
+        result = self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude, report=report)
         if result == ACCEPTED:
             self._takeoff_to = altitude
             self._speed_applied = False  # the first target after it starts the autopilot's own speed again

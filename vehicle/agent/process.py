@@ -220,6 +220,8 @@ class OnboardAgent:
             if fc.mode != "GUIDED":
                 return f"the flight controller stayed in {fc.mode}, not GUIDED"
             return "the flight controller's pre-arm checks never passed"
+        if agent.phase is Phase.PREFLIGHT and agent.refused:
+            return f"{agent.refused}, asking again"
         if agent.phase is Phase.TAKEOFF:
             return f"the take-off did not reach {self.options.settings.altitude:g} m"
         return f"still in {agent.phase.value}"

@@ -40,6 +40,13 @@ RESULT_WORDS = {  # a COMMAND_ACK's result as the operator reads it (every MAV_R
 }
 COMMAND_NAMES = {value: name.removeprefix("MAV_CMD_").lower() for name, value in vars(mavlink).items()
                  if name.startswith("MAV_CMD_") and isinstance(value, int)}  # 22: "nav_takeoff"
+NO_ANSWER = -1  # what a command returns when the autopilot never acknowledged it
+
+
+def refusal(command: int, result: int) -> str:
+    """A command the flight controller refused (or never answered), as the operator reads it."""
+    words = "no answer" if result == NO_ANSWER else RESULT_WORDS.get(result, result)
+    return f"flight controller: {COMMAND_NAMES.get(command, command)} {words}"
 
 
 def __getattr__(name: str):

@@ -15,7 +15,7 @@ import math
 
 from vehicle.protocol.frames import Navigation, Pose
 from vehicle.protocol.geodesy import heading_of
-from vehicle.protocol.mav import COMMAND_NAMES, RESULT_WORDS, mavlink
+from vehicle.protocol.mav import mavlink, refusal
 from vehicle.protocol.mission import MissionItem, MissionProgress
 from vehicle.protocol.modes import DISARMED
 from vehicle.protocol.rangefinder import Reading
@@ -128,18 +128,19 @@ class SimController:
         what, self._refused = what or self._refused, None
         return what
 
-    def _answer(self, command: int, result: int) -> int:
-        """Pass the autopilot's answer on; a refusal is news, as over MAVLink (where unsupported is not)."""
-        if result not in (mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_UNSUPPORTED):
-            self._refused = f"flight controller: {COMMAND_NAMES[command]} {RESULT_WORDS.get(result, result)}"
+    def _answer(self, command: int, result: int, report: bool = True) -> int:
+        """Pass the autopilot's answer on; a refusal is news (``report``), as over MAVLink (where unsupported is
+        not)."""
+        if report and result not in (mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_UNSUPPORTED):
+            self._refused = refusal(command, result)
         return result
 
     # ---- act --------------------------------------------------------------------------------------
-    def arm(self) -> int:
-        return self._answer(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, self.autopilot.arm())
+    def arm(self, report: bool = True) -> int:
+        return self._answer(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, self.autopilot.arm(), report)
 
-    def takeoff(self, altitude: float) -> int:
-        return self._answer(mavlink.MAV_CMD_NAV_TAKEOFF, self.autopilot.takeoff(altitude))
+    def takeoff(self, altitude: float, report: bool = True) -> int:
+        return self._answer(mavlink.MAV_CMD_NAV_TAKEOFF, self.autopilot.takeoff(altitude), report)
 
     def set_mode(self, name: str) -> int:
         result = self.autopilot.set_mode(name, source=SOURCE)
