@@ -81,6 +81,13 @@ class TriangleGrid:
 
     def candidates(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Indices of triangles whose bounding box overlaps the box [lo, hi]."""
+        ids = self.near(lo, hi)
+        overlap = np.all((self._lo[ids] <= hi) & (self._hi[ids] >= lo), axis=1)
+        return ids[overlap]
+
+    def near(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Indices of the triangles binned in the grid cells the box [lo, hi] covers on the ground plane (and
+        the large ones): every triangle whose bounding box overlaps the box, and some more."""
         size = self.cell_size
         block = (math.floor(lo[0] / size), math.floor(lo[1] / size), math.floor(hi[0] / size),
                  math.floor(hi[1] / size))
@@ -94,8 +101,7 @@ class TriangleGrid:
             if len(self._blocks) >= 4096:
                 self._blocks.clear()
             self._blocks[block] = ids
-        overlap = np.all((self._lo[ids] <= hi) & (self._hi[ids] >= lo), axis=1)
-        return ids[overlap]
+        return ids
 
 
 class Collider:
@@ -115,10 +121,9 @@ class Collider:
     def clearance(self, point: np.ndarray) -> float:
         """Distance from ``point`` to the nearest triangle, or ``search`` if none is that close."""
         point = np.asarray(point, dtype=np.float64)
-        ids = self.grid.candidates(point - self.search, point + self.search)
-        if len(ids) == 0:
-            return self.search
-        return min(self.search, float(point_triangle_distance(point, self._triangles[ids]).min()))
+        # a triangle binned near but not overlapping the box lies further than ``search``: the cap hides it
+        return _nearest(point, self._triangles, self.grid.near(point - self.search, point + self.search),
+                        self.search)
 
     def sweep(self, p0, p1) -> Contact | None:
         """First contact of the body moving in a straight line from p0 to p1 (x, y, z), or None."""
@@ -174,6 +179,21 @@ def _point_triangle_distance(p, tri):
         c = (tri[k, 2, 0], tri[k, 2, 1], tri[k, 2, 2])
         out[k] = math.sqrt(_squared_distance(point, a, b, c))
     return out
+
+
+@numba.njit(cache=True)
+def _nearest(p, tri, ids, cap):
+    """min(cap, the distance from p to the nearest of the triangles ``ids``), in one compiled call: the
+    clearance is measured every few steps of every vehicle, and numpy's gathering of the triangles cost more
+    than measuring them."""
+    point = (p[0], p[1], p[2])
+    best = cap * cap
+    for k in ids:
+        a = (tri[k, 0, 0], tri[k, 0, 1], tri[k, 0, 2])
+        b = (tri[k, 1, 0], tri[k, 1, 1], tri[k, 1, 2])
+        c = (tri[k, 2, 0], tri[k, 2, 1], tri[k, 2, 2])
+        best = min(best, _squared_distance(point, a, b, c))
+    return math.sqrt(best)
 
 
 @numba.njit(cache=True)
