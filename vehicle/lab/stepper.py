@@ -114,7 +114,7 @@ class TeamStepper:
     Each step moves the whole world one step and hands every vehicle's readings to its own controller;
     every ``monitor_period`` each agent still flying steps, and (``share_maps``) once a second each map takes
     in the cells the others' maps changed since, as the map stream would carry them (batched: each share costs
-    a few array calls per pair of vehicles, whatever it carries). A wreck's agent steps no more; the
+    a few array calls per vehicle, whatever it carries). A wreck's agent steps no more; the
     others fly on.
     """
 
@@ -153,9 +153,7 @@ class TeamStepper:
         maps = [agent.map for agent in self.agents]
         changes = [Changes.of(m, m.take_changes(in_order=False)) for m in maps]  # each source read once
         for target in maps:
-            for source in changes:
-                if source.source is not target:
-                    self.cells_shared += apply(target, source)
+            self.cells_shared += apply(target, changes)
 
 
 def simulate_team(scene: Scene, mission: str, count: int, kind: str = "copter", settings: Settings | None = None,

@@ -8,14 +8,16 @@ origins (each centred on its vehicle's home) may differ by whole cells or less
 changes, so they do not travel back again.
 
 A source's changes are read once (``Changes.of``: only the cells it holds
-occupied or free, the rest can change nothing) and then applied to every
-team-mate's map (``apply``), so a team of N reads N sets, not N x (N - 1).
+occupied or free, the rest can change nothing), and each map takes all its
+team-mates' at once (``apply``): a team of N makes N reads and N applies, not
+N x (N - 1) of each.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from vehicle.mapping.memory_map import MemoryMap
@@ -39,32 +41,44 @@ class Changes:
         return cls(source, rows, cols, values[telling])
 
 
-def take_in(target: MemoryMap, source: MemoryMap, cells: np.ndarray) -> int:
-    """Take ``source``'s values of ``cells`` (flat indices of it, e.g. its ``take_changes()``) into ``target``;
-    returns how many of its cells changed."""
-    return apply(target, Changes.of(source, cells))
+def apply(target: MemoryMap, changes: list[Changes]) -> int:
+    """Take team-mates' ``changes`` into ``target``, one team-mate after another (its own change nothing);
+    returns how many times one of its cells changed."""
+    parts = [c for c in changes if c.source is not target and c.source.resolution == target.resolution]
+    if not parts:
+        return 0
+    rows = np.concatenate([c.rows + round((c.source.origin[1] - target.origin[1]) * target.resolution)
+                           for c in parts])
+    cols = np.concatenate([c.cols + round((c.source.origin[0] - target.origin[0]) * target.resolution)
+                           for c in parts])
+    values = np.concatenate([c.values for c in parts])
+    changed, crossed = _take(target.grid, target.ever_hit, rows, cols, values, target.FREE_AT, target.OCCUPIED_AT)
+    if changed:
+        target.version += 1
+        target.occupied_version += crossed
+    return changed
 
 
-def apply(target: MemoryMap, changes: Changes) -> int:
-    """Take a team-mate's ``changes`` into ``target``; returns how many of its cells changed."""
-    source = changes.source
-    if not len(changes.values) or target.resolution != source.resolution:
-        return 0
-    rows = changes.rows + round((source.origin[1] - target.origin[1]) * target.resolution)
-    cols = changes.cols + round((source.origin[0] - target.origin[0]) * target.resolution)
-    inside = (rows >= 0) & (rows < target.size) & (cols >= 0) & (cols < target.size)
-    values = changes.values[inside]
-    where = rows[inside] * target.size + cols[inside]
-    flat = target.grid.reshape(-1)
-    old = flat[where]
-    occupied = values >= target.OCCUPIED_AT
-    unknown = (old > target.FREE_AT) & (old < target.OCCUPIED_AT)
-    new = np.where(occupied, np.maximum(old, values), np.where(unknown, values, old))  # the rest hold free
-    changed = new != old
-    if not changed.any():
-        return 0
-    flat[where[changed]] = new[changed]
-    target.ever_hit.reshape(-1)[where[changed & occupied]] = True
-    target.version += 1
-    target.occupied_version += int(np.count_nonzero((old >= target.OCCUPIED_AT) != (new >= target.OCCUPIED_AT)))
-    return int(np.count_nonzero(changed))
+@numba.njit(cache=True)
+def _take(grid, ever_hit, rows, cols, values, free_at, occupied_at):
+    """The rule, cell by cell in the team-mates' order: an occupied value raises the cell to it, a free one
+    fills an unknown cell (the nearest cell; those outside the grid are left out). Returns the changes made
+    and how many made a cell occupied. Compiled: a share carries thousands of cells from each team-mate, and
+    numpy took a dozen calls per pair of vehicles, a tenth of a team of eight's time."""
+    size = grid.shape[0]
+    changed = crossed = 0
+    for k in range(len(values)):
+        row, col, value = rows[k], cols[k], values[k]
+        if not (0 <= row < size and 0 <= col < size):
+            continue
+        old = grid[row, col]
+        if value >= occupied_at:
+            if value > old:
+                grid[row, col] = value
+                ever_hit[row, col] = True
+                changed += 1
+                crossed += old < occupied_at
+        elif free_at < old < occupied_at:
+            grid[row, col] = value
+            changed += 1
+    return changed, crossed
