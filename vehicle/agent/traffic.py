@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+import numba
 import numpy as np
 
 from vehicle.agent.missions.base import Context
@@ -214,11 +215,9 @@ class GiveWay:
                 margin + (speed + math.hypot(other.vx, other.vy)) * HORIZON):
             return False  # too far apart to meet within the horizon: no array work
         reach = self.ctx.fc.navigation.reach
-        mine = np.minimum(_TIMES, reach / speed) if speed > 0 and math.isfinite(reach) else _TIMES
-        dx = (pose.x + wanted[0] * mine) - (other.x + other.vx * _TIMES)
-        dy = (pose.y + wanted[1] * mine) - (other.y + other.vy * _TIMES)
-        dz = pose.z - other.z
-        return bool((dx * dx + dy * dy + dz * dz).min() < margin * margin)
+        until = reach / speed if speed > 0 and math.isfinite(reach) else math.inf
+        return _meet(pose.x, pose.y, wanted[0], wanted[1], until, other.x, other.y, other.vx, other.vy,
+                     pose.z - other.z, margin * margin)
 
     def _closing_in(self, wanted: tuple[float, float], others: list[Traffic]) -> Traffic | None:
         """The nearest team-mate this vehicle would come within the margin of before it could stop, flying
@@ -319,6 +318,20 @@ def _to_segment(point: tuple[float, float], a: tuple[float, float], b: tuple[flo
 
 def _stands(other: Traffic) -> bool:
     return math.hypot(other.vx, other.vy) <= MOVING
+
+
+@numba.njit(cache=True)
+def _meet(x, y, vx, vy, until, other_x, other_y, other_vx, other_vy, gz, reach2):
+    """Whether this vehicle (at x, y, flying vx, vy for ``until`` s, then still) and a team-mate (at other_x,
+    other_y, flying other_vx, other_vy) come closer than sqrt(reach2) at any of the ``_TIMES`` looked at (gz:
+    their height apart). A compiled loop: every agent asks it of every team-mate near enough at every step."""
+    for t in _TIMES:
+        mine = min(t, until)
+        dx = (x + vx * mine) - (other_x + other_vx * t)
+        dy = (y + vy * mine) - (other_y + other_vy * t)
+        if dx * dx + dy * dy + gz * gz < reach2:
+            return True
+    return False
 
 
 def team_mates(fc) -> list[Traffic]:
