@@ -725,3 +725,19 @@ def test_a_copter_comes_to_rest_over_home_before_it_lands(scene_of):
     flight.run(60, until=lambda: not flight.world.autopilot.armed)
     assert not flight.world.autopilot.armed
     assert math.dist(flight.xy, flight.world.home[:2]) < 0.15, (flight.xy, flight.world.home)
+
+
+def test_a_copter_at_rest_off_home_flies_over_it_before_it_lands(scene_of, monkeypatch):
+    """LAND descends where it begins. A copter whose way home ended at rest off home (it had given way to a
+    team-mate there, within the way home's 0.5 m) landed where it rested: 0.3 m from home, on a bed's edge,
+    in a team run in the house. It now flies over home first. Here the way home ends about 5 m out (its reach
+    widened to 8 m), after a Pathfind to 6 m east of home."""
+    from vehicle.agent import agent as agent_module
+
+    monkeypatch.setattr(agent_module, "HOME_TOLERANCE", 8.0)
+    stepper = simulate(scene_of(), "pathfind", "copter", Settings(**SMALL), waypoints=[(6.0, 0.0)])
+    autopilot = stepper.simulation.autopilot
+    assert stepper.run(120, until=lambda: stepper.agent.done)
+    assert stepper.agent.outcome == "finished" and not autopilot.armed
+    home = stepper.simulation.home
+    assert math.dist(stepper.simulation.pose.xyz()[:2], home[:2]) < agent_module.OVER_HOME

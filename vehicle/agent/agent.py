@@ -35,6 +35,7 @@ from vehicle.protocol.modes import Kind
 HOME_TOLERANCE = 0.5  # m
 SETTLED = 0.1  # m/s: slower than this counts as at rest
 SETTLE_OVER_HOME = 10.0  # s a copter waits at most to come to rest over home before it lands (a gusty day)
+OVER_HOME = 0.15  # m from home within which a copter at rest counts as over it
 BLOCKED_FOR = 1.0  # s held back by avoidance before the monitor treats it as an obstacle too close
 RESERVE = 60.0  # s kept for scans, detours and landing on the way home (at most a sixth of the time limit)
 MESSAGES_KEPT = 200
@@ -475,7 +476,10 @@ class Agent:
             if self._over_home is None:
                 self._over_home = now
                 self.ctx.goto(self.ctx.home)
-            if self.fc.speed > SETTLED and now - self._over_home < SETTLE_OVER_HOME:
+            # at rest is not enough: one that gave way to a team-mate near home rests off it (a copter landed
+            # 0.3 m from home, on a bed's edge)
+            away = self.ctx.distance_to(self.ctx.home) > OVER_HOME
+            if (self.fc.speed > SETTLED or away) and now - self._over_home < SETTLE_OVER_HOME:
                 return
             self._set_mode("LAND")
             self.phase = Phase.LANDING

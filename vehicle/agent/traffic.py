@@ -71,6 +71,8 @@ class GiveWay:
         busy = self.giving_way_to is not None
         if not others and not busy:
             return False
+        if busy and self._sent is not None and ctx.observation.too_close:
+            self._held_back()
         wanted = self._wanted if busy else self._intent()
         me = getattr(fc, "system_id", 1)
         conflicts = [o for o in others if self._conflict(wanted, o)]
@@ -132,6 +134,25 @@ class GiveWay:
             self.ctx.say(f"Traffic: {what.format(other.vehicle)} at ({x:.1f}, {y:.1f})")
             self._said = key
         self.giving_way_to = other.vehicle
+
+    def _held_back(self) -> None:
+        """On its way aside or round, something too close ahead (the autopilot's avoidance holds it back, or
+        the sonar sees it) that the map does not block: a pine crown's rim just above the sonars' plane, whose
+        echo the autopilot then forgot, once let a copter fly on into it. The obstacle goes into the map where
+        it was met, so no way aside or round goes through it again, and the vehicle holds for now."""
+        ctx = self.ctx
+        x, y = ctx.position
+        dx, dy = self._sent[0] - x, self._sent[1] - y
+        distance = math.hypot(dx, dy)
+        if distance > 1e-6:
+            ahead = ctx.observation.nearest_ahead
+            reach = ahead if ahead is not None else ctx.radius + 1.0 / ctx.map.resolution
+            ctx.map.add_reading(np.array([x, y, ctx.fc.pose.z]), np.array([dx / distance, dy / distance, 0.0]),
+                                reach, reach + 1.0, free=False)
+            ctx.say(f"Traffic: held back on the way at ({x:.1f}, {y:.1f}): an obstacle {reach:.1f} m ahead; "
+                    "holding")
+        self._detour = None
+        self._hold()
 
     def _hold(self) -> None:
         self._send(self.ctx.position)
