@@ -951,6 +951,26 @@ def test_an_operators_mode_change_during_or_after_a_gap_pauses_the_agent_for_goo
         assert errors.said("agent: resuming mission")
 
 
+def test_an_arming_refused_once_over_mavlink_is_asked_again_and_is_no_problem(capsys):
+    """An autopilot that refuses the first arming (a pre-arm check that flickers) and accepts the second: the
+    agent says so, asks again 2 s later and takes off; the refusal is no flight-controller problem and no
+    pause."""
+    from vehicle import cli
+
+    port = free_udp_port()
+    with ScriptedAutopilot(port) as fake:
+        fake.base_mode = 217 & ~mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        fake.answer[mavlink.MAV_CMD_COMPONENT_ARM_DISARM] = [mavlink.MAV_RESULT_DENIED, mavlink.MAV_RESULT_ACCEPTED]
+        cli.main(["agent", "--connect", f"udpin:127.0.0.1:{port}", "--mission", "browse", "--json",
+                  "--duration", "6"])
+        arms, takeoffs = fake.sent(mavlink.MAV_CMD_COMPONENT_ARM_DISARM), fake.sent(mavlink.MAV_CMD_NAV_TAKEOFF)
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert "Preflight: flight controller: component_arm_disarm denied; asking again in 2 s" in result["messages"]
+    assert len(arms) == 2 and len(takeoffs) >= 1
+    assert result["flight_controller_problems"] == 0
+    assert not any("paused" in m for m in result["messages"])
+
+
 @pytest.mark.parametrize("ending", ["deadline", "duration"])
 def test_an_agent_whose_mission_never_started_exits_non_zero_saying_why(monkeypatch, capsys, ending):
     """Against ArduCopter SITL an agent ended with exit code 0, its copter never off the ground. An autopilot that

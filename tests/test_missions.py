@@ -468,6 +468,20 @@ def test_a_take_off_the_autopilot_refuses_pauses_the_agent_and_a_resume_asks_aga
     assert stepper.simulation.autopilot.flying and not agent.paused
 
 
+def test_the_preflight_asks_as_often_again_after_an_operators_pause(scene_of):
+    """A refusal counted before an operator paused the agent does not count after the resume: the operator's
+    resume asks as often as the start did (three times, then it pauses, saying why)."""
+    settings = Settings(**{**SMALL, "altitude": 0.5})  # a take-off its autopilot refuses (see above)
+    stepper = simulate(scene_of(), "browse", "copter", settings, limits=Limits(radius=0.6))
+    agent = stepper.agent
+    asked_again = "Preflight: flight controller: nav_takeoff failed; asking again in 2 s"
+    assert stepper.run(5, until=lambda: asked_again in agent.messages)
+    assert agent.hold_for_operator(control=False) is None and agent.resume()
+    assert stepper.run(10, until=lambda: agent.paused)
+    assert agent.pause_reason == "flight controller: nav_takeoff failed"
+    assert list(agent.messages).count(asked_again) == 3  # one before the pause, two after
+
+
 def test_a_copter_the_autopilot_disarmed_before_its_take_off_is_armed_again_and_flies(scene_of):
     """Against two ArduCopter SITL instances on a loaded machine, an agent's take-off failed: the copter was not
     armed (ArduCopter disarms one left idle on the ground, and a loaded one's pre-arm checks flicker). One refusal

@@ -48,7 +48,10 @@ def test_all_team_mates_changes_at_once_are_those_taken_one_after_another():
         for copy, m in zip(reference, maps, strict=True):
             copy.grid[:] = m.grid
         for k, m in enumerate(maps):
+            occupied, version = np.count_nonzero(m.grid >= m.OCCUPIED_AT), m.occupied_version
             changed = apply(m, changes)
             assert changed == _one_after_another(reference[k], maps, read, cells) > 0
+            became = np.count_nonzero(m.grid >= m.OCCUPIED_AT) - occupied  # cells never cease to be occupied
+            assert m.occupied_version - version == became
             assert np.array_equal(m.grid, reference[k].grid), trial
             assert np.array_equal(m.ever_hit, reference[k].ever_hit), trial

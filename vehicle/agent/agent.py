@@ -124,6 +124,7 @@ class Agent:
         self._paused_since = None
         self.ctx.started = self.ctx.time = self.fc.time
         self.phase = Phase.PREFLIGHT
+        self._ask_afresh()
         self.fc.took_over()  # what the operator did to get here (GUIDED, arm) is no takeover
         return True
 
@@ -178,6 +179,7 @@ class Agent:
         self.pause_reason = ""
         self._until = None
         self._restart_clock()
+        self._ask_afresh()
         self.say(said)
         if self._down_meanwhile():  # an operator's RTL, LAND or kill brought it down or disarmed it: up again first
             self._relaunch = self.phase
@@ -345,6 +347,8 @@ class Agent:
             self.mission.resume()
         if self._travel is not None:
             self._travel.resume()
+        if self.phase is Phase.HOMING:
+            self._over_home = None  # it may have given way while coming to rest over home: over home again
 
     def _note_blocked(self, now: float, observation) -> None:
         """Held back by the autopilot's avoidance for BLOCKED_FOR counts as an obstacle too close."""
@@ -373,7 +377,7 @@ class Agent:
         if not self._granted(now, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, fc.arm(report=False)):
             return
         if fc.kind is Kind.ROVER or (fc.flying and not fc.taking_off):
-            self._refusals, self.refused = 0, ""
+            self._ask_afresh()
             self._carry_on()
             return
         if not fc.taking_off:
@@ -383,13 +387,14 @@ class Agent:
                 return
             if not self._granted(now, mavlink.MAV_CMD_NAV_TAKEOFF, fc.takeoff(self.settings.altitude, report=False)):
                 return
-        self._refusals, self.refused = 0, ""
+        self._ask_afresh()
         self.phase = Phase.TAKEOFF
 
     def _granted(self, now: float, command: int, result: int) -> bool:
-        """The autopilot accepted a preflight command. A refusal is said and asked again (``PREFLIGHT_TRIES``);
+        """The autopilot accepted a preflight command (or does not know it, which is no refusal either). A
+        refusal is said and asked again (``PREFLIGHT_TRIES`` in all, the arming's and the take-off's together);
         the last one pauses the agent, saying why, as any refused command does."""
-        if result == ACCEPTED:
+        if result in (ACCEPTED, mavlink.MAV_RESULT_UNSUPPORTED):
             return True
         self._refusals += 1
         why = self.refused = refusal(command, result)
@@ -397,9 +402,14 @@ class Agent:
             self.say(f"Preflight: {why}; asking again in {PREFLIGHT_RETRY:g} s", mavlink.MAV_SEVERITY_WARNING)
             self._ask_again_at = now + PREFLIGHT_RETRY
         else:
-            self._refusals, self.refused = 0, ""  # a resume asks again, as often
+            self._ask_afresh()
             self.pause(why)
         return False
+
+    def _ask_afresh(self) -> None:
+        """The preflight's refusals counted from none, and nothing to wait for: a start, a resume (an
+        autopilot rebooted meanwhile counts its time from zero again), or the last refusal."""
+        self._refusals, self.refused, self._ask_again_at = 0, "", -math.inf
 
     def _takeoff(self, now: float) -> None:
         if self.fc.flying and not self.fc.taking_off:

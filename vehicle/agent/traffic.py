@@ -71,7 +71,8 @@ class GiveWay:
         busy = self.giving_way_to is not None
         if not others and not busy:
             return False
-        if busy and self._sent is not None and ctx.observation.too_close:
+        if (busy and self._sent is not None and ctx.observation.too_close
+                and ctx.distance_to(self._sent) > DETOUR_REACHED):  # held back on its way somewhere
             self._held_back()
         wanted = self._wanted if busy else self._intent()
         me = getattr(fc, "system_id", 1)
@@ -144,14 +145,17 @@ class GiveWay:
         x, y = ctx.position
         dx, dy = self._sent[0] - x, self._sent[1] - y
         distance = math.hypot(dx, dy)
-        if distance > 1e-6:
+        pose = ctx.fc.pose
+        near = any(math.dist((pose.x, pose.y, pose.z), (o.x, o.y, o.z)) < self._margin(o) for o in self._others)
+        if not near:  # a team-mate within the margin may be what holds it back: no wall
             ahead = ctx.observation.nearest_ahead
             reach = ahead if ahead is not None else ctx.radius + 1.0 / ctx.map.resolution
-            ctx.map.add_reading(np.array([x, y, ctx.fc.pose.z]), np.array([dx / distance, dy / distance, 0.0]),
+            ctx.map.add_reading(np.array([x, y, pose.z]), np.array([dx / distance, dy / distance, 0.0]),
                                 reach, reach + 1.0, free=False)
             ctx.say(f"Traffic: held back on the way at ({x:.1f}, {y:.1f}): an obstacle {reach:.1f} m ahead; "
                     "holding")
         self._detour = None
+        self._sent = None  # hold here, even within half a metre of where it was sent
         self._hold()
 
     def _hold(self) -> None:

@@ -130,7 +130,7 @@ class TeamStepper:
         self.period = max(1, round(self.settings.monitor_period / team.simulations[0].dt))
         self.share_every = self.period * max(1, round(SHARE_PERIOD / self.settings.monitor_period))
         self.share_maps = self.settings.share_maps >= 0.5
-        self.cells_shared = 0
+        self.cells_shared = 0  # changes made to a map by a team-mate's (a cell two of them changed counts twice)
 
     @property
     def monitor_due(self) -> bool:
