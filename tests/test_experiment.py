@@ -262,9 +262,12 @@ from vehicle.sim import avoidance
 from vehicle.world import sonar as sensors
 from vehicle.world import collision
 from vehicle.lab.experiment import warm_up
+from vehicle.agent import traffic
+from vehicle.mapping import sharing
 warm_up()
 loops = [tracing.project, tracing.free_cells, sensors._nearest_echoes, avoidance._nearest_and_ahead,
-         planning._supercover_is_clear, collision._point_triangle_distance]
+         planning._supercover_is_clear, collision._nearest, collision._point_triangle_distance, traffic._meet,
+         sharing._take]
 print([loop.__name__ for loop in loops if not loop.signatures])
 """
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
