@@ -75,6 +75,20 @@ def test_the_same_arguments_and_seed_give_the_same_json_but_for_wall_time(scene_
     assert json.loads(first)["seed"] == 7
 
 
+def test_a_ctrl_c_while_a_compiled_loop_runs_ends_the_run_as_a_ctrl_c(scene_file):
+    """Ctrl-C inside a numba loop surfaces as a SystemError ("returned a result with an exception set") caused by
+    the KeyboardInterrupt. The run reported it as its error, with exit code 1 and no log's closing line, where a
+    Ctrl-C anywhere else ends it with 130."""
+    def interrupted(stepper, readings):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as ctrl_c:
+            raise SystemError("CPUDispatcher(<function project>) returned a result with an exception set") from ctrl_c
+
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(Experiment(str(scene_file), "browse", settings=SMALL), on_step=interrupted)
+
+
 def test_a_start_inside_an_obstacle_is_an_error_with_a_reason(scene_file):
     result = run(scene_file, start=(0.0, 3.75))  # the body (0.3 m) would poke into the wall face at y = 3.9
     assert result["outcome"] == "error"

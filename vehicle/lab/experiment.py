@@ -69,6 +69,7 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
                            datum=Datum.of_scene(scene.hints, experiment.datum))
         outcome, reason = _fly(stepper, trail or on_step)
     except Exception as error:  # noqa: BLE001 - any failure is an outcome of the run, reported, not raised
+        _raise_ctrl_c(error)
         outcome, reason = "error", f"{type(error).__name__}: {error}"
     result.update(outcome=outcome, reason=reason)
     agent = stepper.agent if stepper is not None else None
@@ -219,6 +220,7 @@ def run_team(experiment: Experiment, stepper: TeamStepper,
                 break
         error = None
     except Exception as failure:  # noqa: BLE001 - a failure is an outcome of the run, reported, not raised
+        _raise_ctrl_c(failure)
         error = f"{type(failure).__name__}: {failure}"
     vehicles = [_vehicle_result(stepper, index, limit, error) for index in range(len(team))]
     outcomes = [v["outcome"] for v in vehicles]
@@ -232,6 +234,17 @@ def run_team(experiment: Experiment, stepper: TeamStepper,
                   cells_shared=stepper.cells_shared)
     result["wall_time_s"] = round(time.perf_counter() - started, 3)
     return result
+
+
+def _raise_ctrl_c(error: Exception) -> None:
+    """A Ctrl-C that came while a compiled loop ran surfaces as a SystemError ("returned a result with an
+    exception set") caused by the KeyboardInterrupt: it is the user's Ctrl-C, not a failure of the run."""
+    cause, seen = error, set()
+    while cause is not None and id(cause) not in seen:  # a chain may loop
+        if isinstance(cause, KeyboardInterrupt):
+            raise cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
 
 
 def _vehicle_result(stepper: TeamStepper, index: int, limit: float, error: str | None) -> dict:
