@@ -168,3 +168,24 @@ def test_held_back_on_the_way_round_a_team_mate_the_vehicle_goes_no_further_that
     result = run_team(Experiment("trees.wrl", "pathfind", settings=settings, seed=26), stepper)
     assert [v["reason"] for v in result["vehicles"] if v["outcome"] == "collision"] == []
     assert said(stepper.agents[2], "Traffic: held back on the way at (-11.")
+
+
+def test_a_vehicle_with_no_way_round_a_standing_team_mate_says_it_waits(make_scene):
+    """Vehicle 1 turns in place (browse) in a corridor 5 m wide that vehicle 2 flies along: neither side leaves
+    room to go round it, so vehicle 2 holds. It said "going round vehicle 1" all the while; it now says that it
+    waits, and why."""
+    from conftest import GROUND, vrml_box
+
+    from vehicle.agent.agent import Agent
+
+    scene = make_scene(GROUND, vrml_box(-2.6, 0, 2, 0.2, 40, 4), vrml_box(2.6, 0, 2, 0.2, 40, 4))
+    stepper = simulate_team(scene, "browse", 2, settings=Settings().updated({"time_limit": 200}),
+                            starts=[(0.0, 0.0), (0.0, -12.0)])
+    stepper.agents[1] = Agent(stepper.controllers[1], "pathfind", stepper.settings, [(0.0, 12.0)])
+    waiting = "waiting: no way round vehicle 1, which stands in the way"
+    while stepper.team.time < 120 and not said(stepper.agents[1], waiting):
+        stepper.step()
+    assert said(stepper.agents[1], waiting)
+    assert not said(stepper.agents[1], "going round vehicle 1")
+    assert all(s.collision is None for s in stepper.team.simulations)
+    assert stepper.team.closest_gap >= 2.0

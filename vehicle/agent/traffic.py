@@ -47,6 +47,7 @@ DETOUR_FOR = 20.0  # s at most spent going round one
 GUARD_EXTRA = 0.5  # s looked ahead by the guard beyond the time to stop
 COLUMN_AHEAD = 3.0  # s looked ahead for a team-mate coming into the column a vehicle climbs or descends through
 _TIMES = np.linspace(0.0, HORIZON, SAMPLES)
+CLOSE_AHEAD = "going round vehicle {}, which stands close ahead"
 
 
 class GiveWay:
@@ -85,8 +86,7 @@ class GiveWay:
         if close is not None:
             self._detour = None
             if _stands(close):  # whatever its id: one that stands moves for no one, so it is gone round
-                self._begin(close, wanted, "going round vehicle {}, which stands close ahead")
-                self._go_round(close, wanted)
+                self._go_round(close, wanted, CLOSE_AHEAD)
             elif close.vehicle < me:
                 self._begin(close, wanted, "giving way to vehicle {} (lower system id), which is close")
                 self._keep_out_of(close)
@@ -103,9 +103,8 @@ class GiveWay:
             return True
         if standing:  # a team-mate that stands in the way (scanning, holding, landed): go round it
             other = min(standing, key=lambda o: math.hypot(o.x - fc.pose.x, o.y - fc.pose.y))
-            if self._said != (other.vehicle, "going round vehicle {}, which stands close ahead"):
-                self._begin(other, wanted, "going round vehicle {}, which stands in the way")
-            self._go_round(other, wanted)
+            said_close = self._said == (other.vehicle, CLOSE_AHEAD)
+            self._go_round(other, wanted, None if said_close else "going round vehicle {}, which stands in the way")
             return True
         other = self._too_close_ahead(wanted, others)
         if other is not None:
@@ -169,11 +168,12 @@ class GiveWay:
             self.ctx.goto(target)
             self._sent = target
 
-    def _go_round(self, other: Traffic, wanted: tuple[float, float]) -> None:
+    def _go_round(self, other: Traffic, wanted: tuple[float, float], what: str | None) -> None:
         """Step sideways off the way it wants to go, to the margin and a metre from the team-mate's line, on
         the side it is already on, then fly level with the team-mate: two legs that never come closer to it
         (one straight leg to beside it cuts into its margin when it is near). The mission plans on from there.
-        Two vehicles going round each other head on both turn to their right, away from each other."""
+        Two vehicles going round each other head on both turn to their right, away from each other. Says ``what``
+        it does (None: said already), or that it waits when neither side is clear."""
         ctx = self.ctx
         x, y = ctx.position
         speed = math.hypot(*wanted)
@@ -189,9 +189,12 @@ class GiveWay:
             aside = (beside[0] + along * ux, beside[1] + along * uy)  # level with here
             legs = [aside, beside] if along < 0 else [aside]  # once level with it or past, stepping aside does
             if self._safe(legs):
+                if what is not None:
+                    self._begin(other, wanted, what)
                 self._detour = (legs, ctx.time + DETOUR_FOR)
                 self._send(legs[0])
                 return
+        self._begin(other, wanted, "waiting: no way round vehicle {}, which stands in the way")
         self._hold()
 
     def _detouring(self) -> bool:
