@@ -288,3 +288,21 @@ print([loop.__name__ for loop in loops if not loop.signatures])
                           cwd=Path(__file__).resolve().parents[1])
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def test_only_a_ctrl_c_behind_an_error_is_raised_again_and_a_looping_chain_ends():
+    """``reraise_ctrl_c`` (used by runs and by the agent's loop): the KeyboardInterrupt two causes deep is raised;
+    an error with none behind it, even in a chain that loops, is left to the caller."""
+    from vehicle.ctrl_c import reraise_ctrl_c
+
+    inner = KeyboardInterrupt()
+    middle = RuntimeError("middle")
+    middle.__cause__ = inner
+    outer = SystemError("returned a result with an exception set")
+    outer.__cause__ = middle
+    with pytest.raises(KeyboardInterrupt) as raised:
+        reraise_ctrl_c(outer)
+    assert raised.value is inner
+    first, second = ValueError("a"), ValueError("b")
+    first.__context__, second.__context__ = second, first
+    assert reraise_ctrl_c(first) is None

@@ -42,6 +42,7 @@ from vehicle.agent.agent import Agent, Phase
 from vehicle.agent.companion import COMPONENT, Companion
 from vehicle.agent.mavlink_controller import HEARTBEAT_LOST, FlightControllerError, MavlinkController
 from vehicle.agent.settings import Settings
+from vehicle.ctrl_c import reraise_ctrl_c
 from vehicle.protocol import links
 from vehicle.protocol.frames import Pose
 from vehicle.protocol.geodesy import Datum
@@ -170,6 +171,7 @@ class OnboardAgent:
                     if agent.done and not options.stay:
                         outcome, reason = agent.outcome, agent.reason
             except Exception as error:  # noqa: BLE001 - a bug in the agent: the vehicle must not fly on unwatched
+                reraise_ctrl_c(error)
                 outcome, reason = "error", self._failed(error, say)
                 break
             self._broadcast(self.companion.tick(now), now)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from vehicle import __version__
 from vehicle.agent.settings import Settings
+from vehicle.ctrl_c import reraise_ctrl_c
 from vehicle.lab.stepper import Stepper, TeamStepper, simulate
 from vehicle.protocol.geodesy import Datum
 from vehicle.protocol.rangefinder import Reading
@@ -69,7 +70,7 @@ def run_experiment(experiment: Experiment, scene: Scene | None = None, map_out: 
                            datum=Datum.of_scene(scene.hints, experiment.datum))
         outcome, reason = _fly(stepper, trail or on_step)
     except Exception as error:  # noqa: BLE001 - any failure is an outcome of the run, reported, not raised
-        _raise_ctrl_c(error)
+        reraise_ctrl_c(error)
         outcome, reason = "error", f"{type(error).__name__}: {error}"
     result.update(outcome=outcome, reason=reason)
     agent = stepper.agent if stepper is not None else None
@@ -220,7 +221,7 @@ def run_team(experiment: Experiment, stepper: TeamStepper,
                 break
         error = None
     except Exception as failure:  # noqa: BLE001 - a failure is an outcome of the run, reported, not raised
-        _raise_ctrl_c(failure)
+        reraise_ctrl_c(failure)
         error = f"{type(failure).__name__}: {failure}"
     vehicles = [_vehicle_result(stepper, index, limit, error) for index in range(len(team))]
     outcomes = [v["outcome"] for v in vehicles]
@@ -234,17 +235,6 @@ def run_team(experiment: Experiment, stepper: TeamStepper,
                   cells_shared=stepper.cells_shared)
     result["wall_time_s"] = round(time.perf_counter() - started, 3)
     return result
-
-
-def _raise_ctrl_c(error: Exception) -> None:
-    """A Ctrl-C that came while a compiled loop ran surfaces as a SystemError ("returned a result with an
-    exception set") caused by the KeyboardInterrupt: it is the user's Ctrl-C, not a failure of the run."""
-    cause, seen = error, set()
-    while cause is not None and id(cause) not in seen:  # a chain may loop
-        if isinstance(cause, KeyboardInterrupt):
-            raise cause
-        seen.add(id(cause))
-        cause = cause.__cause__ or cause.__context__
 
 
 def _vehicle_result(stepper: TeamStepper, index: int, limit: float, error: str | None) -> dict:
