@@ -6,6 +6,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
+from vehicle.protocol.mav import mavlink as mav
 from vehicle.protocol.modes import Kind
 from vehicle.sim.simulation import PlacementError, Simulation
 from vehicle.world.collision import Collider, point_triangle_distance, segment_triangle_distance
@@ -533,6 +534,17 @@ def test_nothing_moves_after_a_collision(wall_scene):
     assert world.pose.xyz() == pose
     assert world.steps == steps + 50  # the wreck lies still while the clock goes on
     assert world.collision is contact
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_a_wreck_refuses_to_arm_and_says_why(wall_scene, force):
+    """An operator's Continue after a crash armed the wreck, and the agent flew its mission on in a body that
+    lay still."""
+    world = fly_into_the_wall(wall_scene)
+    assert world.autopilot.arm(force=force) != 0
+    assert not world.autopilot.armed
+    told = [(event.text, event.severity) for event in world.autopilot.events if event.kind == "text"]
+    assert ("Arm: vehicle crashed", mav.MAV_SEVERITY_CRITICAL) in told
 
 
 def test_stepping_towards_a_wall_finds_contact_at_wall_minus_radius_despite_the_clear_zone_shortcut(wall_scene):

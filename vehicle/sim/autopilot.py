@@ -69,6 +69,7 @@ class Autopilot:
         self.avoidance = avoidance
         self.rtl_altitude = rtl_altitude
         self.armed = False
+        self.wrecked = False  # a body that crashed never flies again (see ``crashed``)
         self.mode = "GUIDED" if kind is Kind.COPTER else "HOLD"
         self.mode_source = "boot"
         self.mode_changes = 0
@@ -150,7 +151,19 @@ class Autopilot:
         self.set_mode(action, source="failsafe")
 
     # ---- requests (each returns a MAV_RESULT) ------------------------------------------------
+    def crashed(self) -> None:
+        """The body hit something: the motors stop, and no arming, forced or not, brings a wreck back (a real
+        autopilot's crash check disarms too; the simulated wreck lies still, so arming it would only feign a
+        vehicle ready to fly)."""
+        self.armed = False
+        self.mission_running = False
+        self._altitude_goal = None
+        self.wrecked = True
+
     def arm(self, force: bool = False) -> int:
+        if self.wrecked:
+            self.say("Arm: vehicle crashed", mav.MAV_SEVERITY_CRITICAL)
+            return FAILED
         if self.armed:
             return ACCEPTED
         if not force and self.kind is Kind.COPTER and self.mode in ("RTL", "LAND"):

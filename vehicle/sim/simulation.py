@@ -181,7 +181,7 @@ class Simulation:
         pose.x, pose.y, pose.z = (float(v) for v in contact.point)
         self.body.stop()
         self.collision = contact
-        self.autopilot.armed = False
+        self.autopilot.crashed()
 
     @property
     def reading_due(self) -> bool:
