@@ -304,7 +304,8 @@ def cmd_rti_reconstruct(args: argparse.Namespace) -> int:
             print(f"warning: {warning}", file=sys.stderr)
     result = reconstruct(records, calibration, args.calibration_seconds, args.bounds, args.cell, args.window,
                          args.peaks, args.solver, args.model, span=args.smooth, measure=args.measure,
-                         variance=args.variance, reference=args.reference, prior=args.prior)
+                         variance=args.variance, reference=args.reference, prior=args.prior,
+                         empty_from=args.empty_from)
     Path(args.json).write_text(json.dumps(result.to_json(images=args.images)) + "\n", encoding="utf-8")
     if args.png:
         draw(result, args.png)
@@ -367,10 +368,16 @@ def _rti_commands(commands) -> None:
     rec.add_argument("--prior", choices=["exponential", "difference"], default="exponential",
                      help="the image prior: exponential covariance, or the Tikhonov gradient penalty of VRTI "
                           "(default %(default)s)")
-    rec.add_argument("--solver", choices=["ls", "tv"], default="ls",
-                     help="regularised least squares with a spatial prior, or total variation (default %(default)s)")
-    rec.add_argument("--model", choices=["ellipse", "exponential"], default="ellipse",
-                     help="weight model (default %(default)s)")
+    rec.add_argument("--solver", choices=["ls", "tv", "sparse"], default="ls",
+                     help="regularised least squares with a spatial prior, total variation, or the sparse "
+                          "non-negative solve for a few people standing still (default %(default)s)")
+    rec.add_argument("--model", choices=["ellipse", "exponential", "line"], default="ellipse",
+                     help="weight model: the ellipse of excess path length, its exponential fade, or a Gaussian "
+                          "of the distance from the link's line (default %(default)s)")
+    rec.add_argument("--empty-from", choices=["data", "model", "brief"], default="data",
+                     help="without a calibration, each link's empty-area level: its own robust level over the "
+                          "file, a path-loss model fitted across the links, or the model's for links heard only "
+                          "briefly (radios on vehicles; the station's live image) (default %(default)s)")
     rec.add_argument("--json", required=True, metavar="OUT.json", help="where the frames go")
     rec.add_argument("--images", action="store_true", help="put each frame's image (rows of values) in the JSON")
     rec.add_argument("--png", metavar="OUT.png", help="draw the image (the mean of the frames) with the radios")

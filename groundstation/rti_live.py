@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from PIL import Image
 
-from vehicle.tomography.imaging import reconstruct
+from vehicle.tomography.imaging import STANDING, reconstruct
 from vehicle.tomography.links import KEY_STEP, Records, factorize, link_keys, records_of
 from vehicle.tomography.picture import STOPS, colours
 
@@ -41,8 +41,6 @@ FORGET = 900.0  # s after which a path no longer heard leaves the image: a team'
 # one link at home was all the image had left
 CELL = 0.25  # m: the image's pixel (the experiments' choice: half the 0.5 m a target must be found within)
 PEAKS = 3
-MEASURE = "mean"  # attenuation below each link's empty-area level: a target that stood still for most of the
-# history looks like no change to the kernel distance and the variance
 EMPTY_FROM = "brief"  # a link heard only briefly gets the level a path-loss model fitted across the links predicts:
 # the station has no empty-area capture, and radios on vehicles measure a pair of spots only while they stand
 # there, so such a link's own level is the obstructed one (against it, the peak was 2 to 7 m off a standing
@@ -100,7 +98,7 @@ def frame_at(records: Records, end: float, window: float = WINDOW, history: floa
         used = used.select((np.bincount(link)[link] >= MIN_HEARD) & evenly(link, PER_LINK))
     if len(used) < 2:
         return None
-    result = reconstruct(used, bounds=bounds, cell=cell, peaks=peaks, measure=MEASURE, empty_from=EMPTY_FROM)
+    result = reconstruct(used, bounds=bounds, cell=cell, peaks=peaks, empty_from=EMPTY_FROM, **STANDING)
     grid, first = result.grid, result.frames[0]
     if "image" not in first:
         return None

@@ -163,3 +163,26 @@ def test_a_missions_image_outlives_the_mission():
     assert 640.0 - 240.0 < FORGET and frame.paths > 100
     best = frame.peaks[0]
     assert math.dist((best["x"], best["y"]), STANDING) < 0.5, frame.peaks
+
+
+def test_the_command_line_gives_the_live_image_from_the_same_records(rows, tmp_path, capsys):
+    """docs/rti.md: ``rti reconstruct`` with the station's options on a recording's exported links images what
+    the page showed (here every path has at most PER_LINK records, which the station would thin)."""
+    import json
+
+    from groundstation.cli import main
+
+    rows = [r for r in rows if r.t < 25.0]  # 50 sweeps, both ways: 100 records a path
+    log = LinkLog()
+    log.append(rows)
+    frame = frame_at(records_of(log.snapshot()), 25.0, window=1.0, history=60.0)
+    links = tmp_path / "links.csv"
+    links.write_text("t,tx,rx,tx_x,tx_y,rx_x,rx_y,rssi,channel\n" + "".join(
+        ",".join(str(float(v)) for v in (r.t, r.tx, r.rx, r.tx_x, r.tx_y, r.rx_x, r.rx_y, r.rssi, r.channel)) + "\n"
+        for r in rows))
+    out = tmp_path / "out.json"
+    assert main(["rti", "reconstruct", str(links), "--cell", "0.25", "--measure", "mean", "--solver", "sparse",
+                 "--model", "line", "--empty-from", "brief", "--images", "--json", str(out)]) == 0, capsys.readouterr()
+    imaged = json.loads(out.read_text())["frames"][0]
+    np.testing.assert_allclose(imaged["image"], np.round(frame.image, 4), atol=1e-4)
+    assert imaged["peaks"] == frame.peaks

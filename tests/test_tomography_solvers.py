@@ -3,8 +3,14 @@
 import numpy as np
 import scipy.sparse as sp
 
-from vehicle.tomography.solvers import RegularisedLS, gradient_operators, tv_objective, tv_solve
-from vehicle.tomography.weights import Grid, WeightCache, weight_rows
+from vehicle.tomography.solvers import (
+    RegularisedLS,
+    gradient_operators,
+    sparse_nonnegative,
+    tv_objective,
+    tv_solve,
+)
+from vehicle.tomography.weights import LINE_CUT, LINE_WIDTH, Grid, WeightCache, weight_rows
 
 
 def small_problem(seed=0, links=30):
@@ -103,3 +109,37 @@ def test_ellipse_weights_cover_the_line_and_the_cache_reuses_revisited_paths():
     first = cache.matrix(np.vstack([path, [[0.1, 0.1, 3.9, 3.9]]]))
     again = cache.matrix(np.vstack([[[0.1, 0.1, 3.9, 3.9]], path]))
     assert cache.built == 2 and (again[1] != first[0]).nnz == 0
+
+
+def test_line_weights_fade_with_the_distance_from_the_segment_whatever_its_length():
+    grid = Grid((0.0, 0.0, 8.0, 4.0), 0.1)
+    centres = grid.centres()
+    short, long = np.array([[3.0, 2.0, 5.0, 2.0]]), np.array([[0.05, 2.0, 7.95, 2.0]])
+    for path in (short, long):
+        row = weight_rows(grid, path, "line").toarray().ravel()
+        a, b = path[0, :2], path[0, 2:]
+        along = np.clip((centres - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+        distance = np.linalg.norm(centres - (a + along[:, None] * (b - a)), axis=1)
+        expected = np.where(distance < LINE_CUT * LINE_WIDTH, np.exp(-0.5 * (distance / LINE_WIDTH) ** 2), 0.0)
+        np.testing.assert_allclose(row, expected, atol=1e-12)  # past an end, the distance from that end
+    on_line = np.argmin(np.linalg.norm(centres - (4.05, 2.05), axis=1))
+    assert weight_rows(grid, short, "line")[0, on_line] == weight_rows(grid, long, "line")[0, on_line]
+
+
+def test_the_sparse_solve_puts_the_attenuation_on_the_few_pixels_that_hold_it():
+    rng = np.random.default_rng(2)
+    n = 400
+    W = sp.csr_matrix(rng.random((120, n)) * (rng.random((120, n)) < 0.3))
+    truth = np.zeros(n)
+    truth[[37, 211]] = (4.0, 2.5)
+    x = sparse_nonnegative(W, W @ truth, share=0.001)
+    assert x.min() >= 0
+    assert set(np.argsort(x)[-2:]) == {37, 211} and np.abs(x - truth).max() < 0.05
+    np.testing.assert_array_equal(x, sparse_nonnegative(W, W @ truth, share=0.001))  # the same image every time
+
+
+def test_the_sparse_image_is_empty_when_nothing_attenuates():
+    grid, W, rng = small_problem()
+    assert not sparse_nonnegative(W, np.zeros(W.shape[0])).any()
+    assert not sparse_nonnegative(W, -rng.random(W.shape[0])).any()  # gains only: no attenuation to place
+    assert not sparse_nonnegative(W, W @ np.ones(W.shape[1]), share=1.0).any()  # at mu_max and above, empty

@@ -6,8 +6,9 @@ link of its own, seen once: it says little and every one of them would grow the 
 come from a calibration capture of the same links with the targets away (``empty``): the plan does not depend
 on what the radios read, so a team that flies it once over the empty area stops at the same spots, and the
 simulation measures that capture beside the real one, at the same instants, with its own noise. The image is
-``vehicle.tomography.reconstruct`` over everything so far, at most one per ``every`` seconds, with as many peaks
-as there are targets: a target is found when a peak lies within ``FOUND_M`` of it.
+``vehicle.tomography.reconstruct`` over everything so far, by the method for people standing still (``STANDING``,
+as the station's live image), at most one per ``every`` seconds, with as many peaks as there are targets: a target
+is found when a peak lies within ``FOUND_M`` of it.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from vehicle.tomography.imaging import reconstruct
+from vehicle.tomography.imaging import STANDING, reconstruct
 from vehicle.tomography.links import records_of
 
 FOUND_M = 0.5  # m: a target this close to a peak is found
@@ -53,7 +54,7 @@ class Tomograph:
         if len(self.records) < 2:
             return None
         result = reconstruct(records_of(self.records, "run"), calibration=records_of(self.empty, "empty"),
-                             bounds=self.bounds, cell=CELL, peaks=len(self.targets))
+                             bounds=self.bounds, cell=CELL, peaks=len(self.targets), **STANDING)
         peaks = result.frames[0]["peaks"]
         distances = [min((math.dist(target, (p["x"], p["y"])) for p in peaks), default=math.inf)
                      for target in self.targets]
