@@ -6,7 +6,9 @@
    uncertainty-driven planner and the perimeter plan.
 2. Two targets 1.5 m apart at random in the same area: both found as two peaks, in how many of 10 runs.
 3. Through a building: two targets inside the Garage (x -18..-10, y -5..3, 5 m high), the radios on a ring
-   outside it at 4 m: what is found, beside the same targets with the scene's walls taken out of the radio model.
+   outside it at 4 m: what is found, beside the same targets with the scene's walls taken out of the radio model;
+   each with the empty-area capture and without it (each link's empty level from a path-loss model fitted
+   across the links, as the station's live image has it).
 
 Every run flies the whole mission (``rti_rounds`` pairs), headless, faster than real time, and ends there (the
 way home and the landing are not flown).
@@ -36,12 +38,13 @@ OPEN = (25.0, -35.0, 35.0, -25.0)
 GARAGE = (-18.0, -5.0, -10.0, 3.0)
 
 
-def run(scene, planner: str, bounds, targets, seed: int, rounds: int, model=None) -> dict:
+def run(scene, planner: str, bounds, targets, seed: int, rounds: int, model=None, calibrated: bool = True) -> dict:
     settings = Settings().updated({"rti_planner": planner, "rti_x0": bounds[0], "rti_y0": bounds[1],
                                    "rti_x1": bounds[2], "rti_y1": bounds[3], "rti_rounds": rounds,
                                    "time_limit": 400})
     experiment = Experiment(str(DEFAULT_SCENE), "rti", "copter", settings=settings, seed=seed)
-    return run_team_experiment(experiment, scene, 2, targets, model=model, until_mission_end=True)
+    return run_team_experiment(experiment, scene, 2, targets, model=model, until_mission_end=True,
+                               calibrated=calibrated)
 
 
 def inside(rng: random.Random, bounds, margin: float = 1.0) -> tuple[float, float]:
@@ -101,10 +104,13 @@ def building(scene, runs: int, rounds: int) -> list[list[object]]:
 
     rows = []
     targets = [(-15.5, -2.0), (-12.5, 1.0)]
-    for label, model in (("walls as the model says", None), ("no wall loss", RadioModel(wall_loss_db=0.0))):
+    for label, model, calibrated in (("walls as the model says", None, True),
+                                     ("no wall loss", RadioModel(wall_loss_db=0.0), True),
+                                     ("walls, no empty-area capture (the live image's levels)", None, False),
+                                     ("no wall loss, no capture", RadioModel(wall_loss_db=0.0), False)):
         found, distances = 0, []
         for k in range(runs):
-            rti = run(scene, "uncertainty", GARAGE, targets, 2000 + k, rounds, model)["rti"]
+            rti = run(scene, "uncertainty", GARAGE, targets, 2000 + k, rounds, model, calibrated)["rti"]
             found += rti["found"]
             distances.extend(d for d in rti["distances_m"] if d is not None)
         rows.append([label, f"{found} of {runs}", f"{statistics.median(distances):.2f} m" if distances else "-"])

@@ -34,14 +34,14 @@ def test_the_sweep_sweeps_the_team_size(tmp_path):
 REGION = {"rti_x0": 4.0, "rti_y0": 4.0, "rti_x1": 10.0, "rti_y1": 10.0, "rti_dwell": 2.0, "time_limit": 300}
 
 
-def rti_run(scene, targets, planner="perimeter", rounds=16, **settings):
+def rti_run(scene, targets, planner="perimeter", rounds=16, calibrated=True, **settings):
     from vehicle.agent.settings import Settings
     from vehicle.lab.experiment import Experiment
     from vehicle.lab.tomograph import run_team_experiment
 
     values = {**REGION, "rti_planner": planner, "rti_rounds": rounds, **settings}
     experiment = Experiment("flat.wrl", "rti", settings=Settings().updated(values), seed=3)
-    return run_team_experiment(experiment, scene, 2, targets)
+    return run_team_experiment(experiment, scene, 2, targets, calibrated=calibrated)
 
 
 def test_a_team_finds_a_target_and_says_when_and_from_how_many_links(flat_scene):
@@ -56,6 +56,19 @@ def test_a_team_finds_a_target_and_says_when_and_from_how_many_links(flat_scene)
     # only the links measured while both held their spots are imaged: one path a round
     assert 0 < rti["links_imaged"] < rti["links_heard"]
     assert rti["paths"] == 16
+
+
+def test_without_the_empty_area_capture_the_levels_come_from_a_path_loss_model(flat_scene, monkeypatch):
+    """As the station's live image: the empty twin is not read at all, and in the open the model's levels find
+    the target as well."""
+    from vehicle.lab import tomograph
+
+    seen = []
+    real = tomograph.reconstruct
+    monkeypatch.setattr(tomograph, "reconstruct", lambda *a, **k: seen.append(k) or real(*a, **k))
+    rti = rti_run(flat_scene, [(7.3, 6.4)], calibrated=False)["rti"]
+    assert rti["found"] and rti["distances_m"][0] <= 0.5
+    assert seen and all("calibration" not in k and k["empty_from"] == "brief" for k in seen)
 
 
 def test_without_a_target_no_peak_is_called_found(flat_scene):

@@ -115,3 +115,34 @@ def test_one_vehicle_with_fixed_radio_nodes_measures_its_links_to_them(flat_scen
     assert agent.outcome == "finished", agent.reason
     assert agent.reason == "3 rounds measured, 6 links"
     assert said(agent, "with vehicles 1 and 2 fixed radio nodes")
+
+
+def test_a_spot_its_map_blocks_is_moved_to_the_nearest_reachable_point_and_the_pair_measures_there(flat_scene):
+    """The demo's team ended its mission at round 20 when one copter's map held an obstacle within 0.35 m of its
+    spot ("no known path"), and its partner then lost it. Now it stops as near as it can, and both go on."""
+    stepper = team(flat_scene)
+    first, second = stepper.agents
+    spots, dwelt = [], []
+
+    def watch():
+        mission = getattr(first, "mission", None)
+        if getattr(mission, "rounds", None) == 0 and getattr(mission, "spots", None):
+            spots.append(mission.spot)
+            cell = first.map.cell_of(*mission.spot)  # an echo its map insists on, right at its first spot
+            first.map.grid[cell[0] - 1:cell[0] + 2, cell[1] - 1:cell[1] + 2] = first.map.LIMIT
+            first.map.occupied_version += 1
+            if all(getattr(a.mission, "phase", None) is Phase.DWELL for a in stepper.agents):
+                dwelt.append((first.fc.pose.x, first.fc.pose.y))
+
+    fly(stepper, 400, watch=watch)
+    assert [a.outcome for a in stepper.agents] == ["finished", "finished"], [a.reason for a in stepper.agents]
+    assert first.reason == second.reason == "3 rounds measured, 3 links"
+    (shifted,) = said(first, "cannot be reached")
+    spot = spots[0]
+    assert shifted.startswith(f"Rti: its spot ({spot[0]:.1f}, {spot[1]:.1f}) of round 1 cannot be reached (no known "
+                              "path to") and shifted.endswith(" m off")
+    point = tuple(float(v) for v in shifted.split("measuring from (")[1].split(")")[0].split(","))
+    assert 0.2 < math.dist(point, spot) <= 1.0 + 0.05
+    assert dwelt, "the pair never measured round 1"
+    assert max(math.dist(p, point) for p in dwelt) < 0.5  # it measured from the point it said
+    assert not said(second, "lost")

@@ -8,7 +8,8 @@ on what the radios read, so a team that flies it once over the empty area stops 
 simulation measures that capture beside the real one, at the same instants, with its own noise. The image is
 ``vehicle.tomography.reconstruct`` over everything so far, by the method for people standing still (``STANDING``,
 as the station's live image), at most one per ``every`` seconds, with as many peaks as there are targets: a target
-is found when a peak lies within ``FOUND_M`` of it.
+is found when a peak lies within ``FOUND_M`` of it. Not ``calibrated``: no capture, each link's empty level from
+a path-loss model fitted across the links, as the station's live image has it (``empty_from="brief"``).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ class Tomograph:
     targets: list[tuple[float, float]]
     bounds: tuple[float, float, float, float]
     every: float = EVERY
+    calibrated: bool = True
     records: list = field(default_factory=list)
     empty: list = field(default_factory=list)
     heard: int = 0  # every record received, moving or not
@@ -53,8 +55,9 @@ class Tomograph:
         self._last, self._new = t, False
         if len(self.records) < 2:
             return None
-        result = reconstruct(records_of(self.records, "run"), calibration=records_of(self.empty, "empty"),
-                             bounds=self.bounds, cell=CELL, peaks=len(self.targets), **STANDING)
+        empty = {"calibration": records_of(self.empty, "empty")} if self.calibrated else {"empty_from": "brief"}
+        result = reconstruct(records_of(self.records, "run"), bounds=self.bounds, cell=CELL, peaks=len(self.targets),
+                             **empty, **STANDING)
         peaks = result.frames[0]["peaks"]
         distances = [min((math.dist(target, (p["x"], p["y"])) for p in peaks), default=math.inf)
                      for target in self.targets]
@@ -126,7 +129,7 @@ def dwelling(agent) -> bool:
 def run_team_experiment(experiment, scene, count: int, targets: list[tuple[float, float]],
                         starts: list[tuple[float, ...]] | None = None, ids: list[int] | None = None,
                         nodes: list[tuple[float, ...]] | None = None, waypoints=None, model=None,
-                        until_mission_end: bool = False) -> dict:
+                        until_mission_end: bool = False, calibrated: bool = True) -> dict:
     """A team run (``run_team``), with radios measuring when the mission is rti or targets are given: the
     result then has ``rti`` (``Tomograph.result``). ``until_mission_end``: the run ends when every mission has
     (the vehicles then report ``timeout`` on their way home). Raises PlacementError (and ValueError) before
@@ -144,6 +147,7 @@ def run_team_experiment(experiment, scene, count: int, targets: list[tuple[float
         home = stepper.team.simulations[0].home
         radios = RadioRun(scene, targets, region(settings, scene, (home[0], home[1])), experiment.seed, nodes, model)
         radios.until_mission_end = until_mission_end
+        radios.tomograph.calibrated = calibrated
         for controller in stepper.controllers:
             controller.radio_nodes = [p[:2] for p in (nodes or [])]
     result = run_team(experiment, stepper, radios)

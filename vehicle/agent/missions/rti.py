@@ -8,6 +8,12 @@ the next round. A partner that is not at its spot ``rti_wait`` seconds after thi
 wrecked, or no longer heard) is lost: the mission says so and goes on with the rest of the team (or alone with
 fixed radio nodes), or, left without any link to measure, ends with that reason. A team of two or more, or one
 vehicle with fixed radio nodes (``radio_nodes`` of its flight controller).
+
+A spot the vehicle finds it cannot reach (its memory map holds an obstacle there, or no way to it) is moved to
+the nearest point within ``SHIFT`` that it can reach, and said: the radios measure wherever they stand (every
+record carries its positions), so a link half a metre off the plan is still a link, where giving up lost the
+partner too. Its partners take it as there when it has settled within ``SHIFT`` + ``THERE`` of its spot; the
+plan itself goes on from the planned spots, so every vehicle still holds the same one.
 """
 
 from __future__ import annotations
@@ -28,6 +34,9 @@ THERE = 0.5  # m: a vehicle this close to its spot (a partner: as its traffic te
 SPACING = 1.0  # m between two candidate spots on the ring round the region
 CLEAR_EXTRA = 1.0  # m kept between two spots of a round beyond the team's separation margin
 SETTLED = 0.3  # m/s: slower than this at its spot, a vehicle is there
+SHIFT = 1.0  # m: how far from an unreachable spot a vehicle looks for one it can reach (the ring's spacing)
+SHIFT_STEPS = (0.25, 0.5, 0.75, 1.0)  # m: the distances tried, nearest first, ...
+SHIFT_BEARINGS = 12  # ... each in this many directions
 
 
 class Phase(StrEnum):
@@ -107,12 +116,30 @@ class Rti(Mission):
         self.spots = dict(zip(self.team, self.planner.next_spots(self.previous, known=not first), strict=True))
         self.previous = [self.spots[k] for k in self.team]
         self.phase = Phase.TRAVEL
-        self.travel = Travel(self.ctx, self.spots[self.me], ARRIVED)
+        self.goal = self.spots[self.me]  # where it stops: its spot, or the nearest reachable point to it
+        self.travel = Travel(self.ctx, self.goal, ARRIVED)
         self.since = self.ctx.time
 
     @property
     def spot(self) -> tuple[float, float]:
         return self.spots[self.me]
+
+    def _shift(self) -> bool:
+        """Travel to the nearest point within SHIFT of the spot that the body fits at and a path reaches
+        instead, saying so; False when there is none."""
+        ctx, (x, y) = self.ctx, self.spot
+        for distance in SHIFT_STEPS:
+            for k in range(SHIFT_BEARINGS):
+                angle = 2 * math.pi * k / SHIFT_BEARINGS
+                point = (x + distance * math.cos(angle), y + distance * math.sin(angle))
+                if not ctx.is_clear(point) or ctx.plan(point)[0] is None:
+                    continue
+                ctx.say(f"Rti: its spot {_at(self.spot)} of round {self.rounds + 1} cannot be reached "
+                        f"({self.travel.reason}); measuring from {_at(point)}, {distance:g} m off")
+                self.goal = point
+                self.travel = Travel(ctx, point, ARRIVED)
+                return True
+        return False
 
     def step(self) -> Status:
         if self.planner is None:
@@ -120,13 +147,16 @@ class Rti(Mission):
         ctx = self.ctx
         if self.phase is Phase.TRAVEL:
             status = self.travel.step()
+            if status is Status.STOPPED and self.goal == self.spot and self._shift():
+                return Status.RUNNING
             if status is Status.STOPPED:
-                self.reason = (f"could not reach its spot {_at(self.spot)} of round {self.rounds + 1}: "
-                               f"{self.travel.reason}")
+                self.reason = (f"could not reach its spot {_at(self.spot)} of round {self.rounds + 1}"
+                               + (f" nor any point within {SHIFT:g} m of it" if self.goal != self.spot else "")
+                               + f": {self.travel.reason}")
                 return status
             if status is Status.DONE:
                 self.phase, self.since = Phase.WAIT, ctx.time
-                ctx.goto(self.spot)
+                ctx.goto(self.goal)
             return Status.RUNNING
         if self.phase is Phase.WAIT:
             return self._wait()
@@ -145,7 +175,7 @@ class Rti(Mission):
         heard = {o.vehicle: o for o in team_mates(ctx.fc)}
         late = [k for k in self.team if k != self.me and not self._there(k, heard.get(k))]
         if not late:
-            if ctx.distance_to(self.spot) <= THERE and ctx.fc.speed < SETTLED:  # itself settled there too
+            if ctx.distance_to(self.goal) <= THERE and ctx.fc.speed < SETTLED:  # itself settled there too
                 self.phase, self.since = Phase.DWELL, ctx.time
             return Status.RUNNING
         if ctx.time - self.since < ctx.settings.rti_wait:
@@ -168,20 +198,21 @@ class Rti(Mission):
         return Status.RUNNING
 
     def _there(self, vehicle: int, seen) -> bool:
-        return (seen is not None and math.dist((seen.x, seen.y), self.spots[vehicle]) <= THERE
+        """At its spot, or settled near it (where it may have had to move the spot: see ``SHIFT``)."""
+        return (seen is not None and math.dist((seen.x, seen.y), self.spots[vehicle]) <= SHIFT + THERE
                 and math.hypot(seen.vx, seen.vy) < SETTLED)
 
     def resume(self) -> None:
         if self.travel is not None and self.phase is Phase.TRAVEL:
             self.travel.resume()
         elif self.planner is not None:
-            self.ctx.goto(self.spot)
+            self.ctx.goto(self.goal)
 
     def too_close(self) -> Status:
         if self.phase is Phase.TRAVEL:
             status = self.travel.too_close()
             if status is Status.STOPPED:
-                self.reason = f"could not reach its spot {_at(self.spot)}: {self.travel.reason}"
+                self.reason = f"could not reach its spot {_at(self.goal)}: {self.travel.reason}"
             return status
         return Status.RUNNING  # holding at its spot: what came close is the partner or passing traffic
 
