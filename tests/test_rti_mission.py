@@ -146,3 +146,26 @@ def test_a_spot_its_map_blocks_is_moved_to_the_nearest_reachable_point_and_the_p
     assert dwelt, "the pair never measured round 1"
     assert max(math.dist(p, point) for p in dwelt) < 0.5  # it measured from the point it said
     assert not said(second, "lost")
+
+
+def test_a_partner_that_has_not_moved_this_round_is_not_taken_as_at_a_spot_a_metre_away(flat_scene):
+    """Settled within 1.5 m of its spot counts only after moving this round: the spots of one round are often a
+    metre from the last (neighbours on the ring), and a partner still there has not come."""
+    from types import SimpleNamespace
+
+    stepper = team(flat_scene)
+    first = stepper.agents[0]
+    while getattr(first.mission, "spots", None) is None:
+        stepper.step()
+    mission = first.mission
+    other = next(k for k in mission.spots if k != mission.me)
+    x, y = mission.spots[other]
+    standing = SimpleNamespace(x=x + 1.0, y=y, vx=0.0, vy=0.0)
+    mission.moved.discard(other)
+    assert not mission._there(other, standing)
+    mission.moved.add(other)
+    assert mission._there(other, standing)
+    assert not mission._there(other, SimpleNamespace(x=x + 1.6, y=y, vx=0.0, vy=0.0))  # beyond SHIFT + THERE
+    assert not mission._there(other, SimpleNamespace(x=x, y=y, vx=0.5, vy=0.0))  # not settled
+    mission.moved.discard(other)
+    assert mission._there(other, SimpleNamespace(x=x + 0.4, y=y, vx=0.0, vy=0.0))  # at its spot: no need to move

@@ -12,8 +12,8 @@ vehicle with fixed radio nodes (``radio_nodes`` of its flight controller).
 A spot the vehicle finds it cannot reach (its memory map holds an obstacle there, or no way to it) is moved to
 the nearest point within ``SHIFT`` that it can reach, and said: the radios measure wherever they stand (every
 record carries its positions), so a link half a metre off the plan is still a link, where giving up lost the
-partner too. Its partners take it as there when it has settled within ``SHIFT`` + ``THERE`` of its spot; the
-plan itself goes on from the planned spots, so every vehicle still holds the same one.
+partner too. Its partners take it as there when it has settled within ``SHIFT`` + ``THERE`` of its spot after
+moving in this round; the plan itself goes on from the planned spots, so every vehicle still holds the same one.
 """
 
 from __future__ import annotations
@@ -119,6 +119,7 @@ class Rti(Mission):
         self.goal = self.spots[self.me]  # where it stops: its spot, or the nearest reachable point to it
         self.travel = Travel(self.ctx, self.goal, ARRIVED)
         self.since = self.ctx.time
+        self.moved: set[int] = set()  # partners seen moving since the round began (see ``_there``)
 
     @property
     def spot(self) -> tuple[float, float]:
@@ -145,6 +146,7 @@ class Rti(Mission):
         if self.planner is None:
             return Status.STOPPED
         ctx = self.ctx
+        self.moved.update(o.vehicle for o in team_mates(ctx.fc) if math.hypot(o.vx, o.vy) >= SETTLED)
         if self.phase is Phase.TRAVEL:
             status = self.travel.step()
             if status is Status.STOPPED and self.goal == self.spot and self._shift():
@@ -198,9 +200,12 @@ class Rti(Mission):
         return Status.RUNNING
 
     def _there(self, vehicle: int, seen) -> bool:
-        """At its spot, or settled near it (where it may have had to move the spot: see ``SHIFT``)."""
-        return (seen is not None and math.dist((seen.x, seen.y), self.spots[vehicle]) <= SHIFT + THERE
-                and math.hypot(seen.vx, seen.vy) < SETTLED)
+        """Settled at its spot, or settled near it after moving this round (where it may have had to move the
+        spot: see ``SHIFT``; a partner still at its last spot, often a metre from this one, has not come)."""
+        if seen is None or math.hypot(seen.vx, seen.vy) >= SETTLED:
+            return False
+        off = math.dist((seen.x, seen.y), self.spots[vehicle])
+        return off <= THERE or (off <= SHIFT + THERE and vehicle in self.moved)
 
     def resume(self) -> None:
         if self.travel is not None and self.phase is Phase.TRAVEL:
