@@ -178,3 +178,29 @@ def test_a_copter_start_whose_column_passes_a_wall_top_is_refused(make_scene, bo
     else:
         with pytest.raises(PlacementError, match=words):
             simulate_team(scene, "search", 1, settings=settings, starts=[start])
+
+
+def test_a_team_of_one_reads_and_flies_as_a_lone_vehicle_and_keeps_its_gap_to_the_scene(make_scene, box):
+    """A team of one takes its own short way through a step (no pair, no other body): the same readings and
+    flight as the vehicle alone, and the team's scene-gap figure still measured."""
+    from tests.conftest import GROUND
+
+    scene = make_scene(GROUND, box(3, 0, 2, 0.2, 4, 4))  # a wall 2.9 m east
+
+    def fly(step_of):
+        sim = Simulation(scene, "copter", (0.0, 0.0), heading=90.0, sensors=sensor_suite("triple"))
+        step = step_of(sim)
+        sim.autopilot.set_mode("GUIDED")
+        assert sim.autopilot.arm() == 0 and sim.autopilot.takeoff(4.0) == 0
+        echoes = []
+        for k in range(400):
+            if k == 200:
+                sim.autopilot.goto(1.5, 0.0, 4.0)
+            echoes += [(r.time, r.sensor, r.distance) for r in step()]
+        return echoes, sim.pose.xyz()
+
+    alone = fly(lambda sim: sim.step)
+    teams = []
+    together = fly(lambda sim: teams.append(Team([sim])) or (lambda: teams[0].step()[0]))
+    assert together == alone and any(distance is not None for _, _, distance in alone[0])
+    assert teams[0].scene_gaps[0].gap == pytest.approx(2.9 - 0.3 - 1.5, abs=0.05)

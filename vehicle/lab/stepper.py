@@ -138,14 +138,15 @@ class TeamStepper:
 
     def step(self) -> list[list[Reading]]:
         readings = self.team.step()
-        due = self.monitor_due
+        steps = self.team.simulations[0].steps
+        due = steps % self.period == 0
         for simulation, controller, agent, taken in zip(self.team.simulations, self.controllers, self.agents,
                                                         readings, strict=True):
             if simulation.collision is None:
                 controller.collect(taken)
                 if due:
                     agent.step()
-        if self.share_maps and len(self.agents) > 1 and self.team.simulations[0].steps % self.share_every == 0:
+        if due and self.share_maps and len(self.agents) > 1 and steps % self.share_every == 0:
             self._share()
         return readings
 

@@ -106,7 +106,7 @@ class SimController:
         return readings
 
     def traffic(self) -> list[Traffic]:
-        if self.team is None:
+        if self.team is None or len(self.team) == 1:
             return []
         return [other for other in self.team.traffic() if other.vehicle != self.system_id]
 

@@ -78,9 +78,15 @@ class Team:
         """One step of every vehicle: move all, collide pairs, then read every sonar. Returns each vehicle's
         readings, in the team's order."""
         sims = self.simulations
+        if len(sims) == 1:  # a team of one: no pair to check, no other body to sense; as cheap as alone
+            (simulation,) = sims
+            simulation.move()
+            if not simulation.reading_due:
+                return [[]]
+            self.scene_gaps[0].note(simulation.body.pose.xyz())
+            return [simulation.sense(None)]
         moves = [s.move() for s in sims]
-        if len(sims) > 1:
-            self._collide(moves)
+        self._collide(moves)
         readings = []
         centres = None  # every body's centre, taken once a step when some sonar reads (all moved by then)
         for index, (gap, simulation) in enumerate(zip(self.scene_gaps, sims, strict=True)):
