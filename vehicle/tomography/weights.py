@@ -84,21 +84,10 @@ def weight_rows(grid: Grid, paths: np.ndarray, model: str = "ellipse", lam: floa
     if model not in MODELS:
         raise ValueError(f"unknown weight model {model!r} (one of {', '.join(MODELS)})")
     centres = grid.centres()
-    if model == "line":
-        return _line_rows(centres, paths, grid.nx * grid.ny)
-    reach = lam if model == "ellipse" else EXP_CUT * lam
     rows, cols, vals = [], [], []
     for start in range(0, len(paths), 64):  # a few MB at a time
         block = paths[start:start + 64]
-        a, b = block[:, None, :2], block[:, None, 2:]
-        length = np.hypot(*(b - a)[:, 0].T)
-        excess = (np.linalg.norm(centres[None] - a, axis=2) + np.linalg.norm(centres[None] - b, axis=2)
-                  - length[:, None])
-        r, c = np.nonzero(excess < reach)
-        if model == "ellipse":
-            v = 1.0 / np.sqrt(length[r])
-        else:
-            v = np.exp(-excess[r, c] / lam) / np.sqrt(length[r])
+        r, c, v = _block_weights(centres, block[:, None, :2], block[:, None, 2:], model, lam)
         rows.append(r + start)
         cols.append(c)
         vals.append(v)
@@ -108,21 +97,20 @@ def weight_rows(grid: Grid, paths: np.ndarray, model: str = "ellipse", lam: floa
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(len(paths), n))
 
 
-def _line_rows(centres: np.ndarray, paths: np.ndarray, n: int) -> sp.csr_matrix:
-    rows, cols, vals = [], [], []
-    for start in range(0, len(paths), 64):
-        block = paths[start:start + 64]
-        a, b = block[:, None, :2], block[:, None, 2:]
+def _block_weights(centres: np.ndarray, a: np.ndarray, b: np.ndarray, model: str, lam: float):
+    """(path, pixel, weight) of the nonzero weights of a block of paths from ``a`` to ``b`` ((P, 1, 2) each)."""
+    if model == "line":
         ab = b - a
         along = np.clip(((centres[None] - a) * ab).sum(axis=2) / np.maximum((ab ** 2).sum(axis=2), 1e-12), 0.0, 1.0)
         distance = np.linalg.norm(centres[None] - (a + along[..., None] * ab), axis=2)
         r, c = np.nonzero(distance < LINE_CUT * LINE_WIDTH)
-        rows.append(r + start)
-        cols.append(c)
-        vals.append(np.exp(-0.5 * (distance[r, c] / LINE_WIDTH) ** 2))
-    if not rows:
-        return sp.csr_matrix((0, n))
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(len(paths), n))
+        return r, c, np.exp(-0.5 * (distance[r, c] / LINE_WIDTH) ** 2)
+    length = np.hypot(*(b - a)[:, 0].T)
+    excess = np.linalg.norm(centres[None] - a, axis=2) + np.linalg.norm(centres[None] - b, axis=2) - length[:, None]
+    r, c = np.nonzero(excess < (lam if model == "ellipse" else EXP_CUT * lam))
+    if model == "ellipse":
+        return r, c, 1.0 / np.sqrt(length[r])
+    return r, c, np.exp(-excess[r, c] / lam) / np.sqrt(length[r])
 
 
 class WeightCache:
