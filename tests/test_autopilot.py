@@ -367,6 +367,21 @@ def test_goto_reaches_the_target_and_holds(kind, flat_scene):
         assert world.pose.z == pytest.approx(ALTITUDE, abs=0.2)
 
 
+def test_a_copter_holding_its_height_low_over_a_box_top_still_flies_on(make_scene, box):
+    """The box top is 0.38 m below the body's centre: where it rests there lies 3 cm below it, closer than
+    the 5 cm a take-off must climb to count as flying. Passing over it is no landing (it once stopped there
+    for good, deaf to its GUIDED targets)."""
+    top = ALTITUDE - REST_Z - 0.03
+    scene = make_scene(box(0, 0, -0.05, 80, 80, 0.1), box(5, 0, top / 2, 4, 4, top))
+    world = armed_copter(scene)
+    world.autopilot.avoidance = None  # its edge would hold it back: it came over one its sonars never saw
+    world.autopilot.goto(10.0, 0.0)
+    step_until(world, lambda: world.pose.x > 5.0, limit=20.0)
+    assert world.autopilot.flying  # over the box
+    step_until(world, lambda: math.hypot(world.pose.x - 10, world.pose.y) < 0.15, limit=20.0)
+    assert world.collision is None and world.autopilot.flying
+
+
 def test_goto_with_altitude_changes_height(flat_scene):
     world = armed_copter(flat_scene)
     world.autopilot.goto(0.0, 10.0, altitude=7.0)

@@ -162,6 +162,35 @@ def test_the_corridor_is_as_narrow_as_the_clearance_the_path_was_planned_with(cl
     assert mon.observe(1.0, 0.0, 0.0, NORTH, clearance=clearance).too_close is too_close
 
 
+@pytest.mark.parametrize(("path", "too_close"), [
+    (None, False),  # the target 0.5 m ahead is all it knows: the vehicle stops there
+    ([(0.0, 0.0), (0.0, 0.5), (0.1, 1.0), (0.1, 3.0)], True),  # the path runs on straight ahead
+    ([(0.0, 0.0), (0.0, 0.5), (2.0, 0.6)], False),  # it turns east at the target
+])
+def test_the_reach_runs_on_as_far_as_the_path_goes_straight_ahead(path, too_close):
+    """A path walked target by target (each half a metre ahead) runs on past each of them: an echo 1.5 m
+    ahead is in the way when the path goes on that way (a vehicle flew into a wall 1.2 m ahead that way, its
+    target 0.3 m ahead), and not when the path turns off before it."""
+    mon, _ = monitor(closeness=2.0, padding=0.5)
+    mon.collect([reading(0, 1, 1.5)])
+    assert mon.observe(1.0, 0.0, 0.0, NORTH, reach=0.5, path=path).too_close is too_close
+
+
+@pytest.mark.parametrize(("wall", "too_close"), [(None, True), (0.0, False), (0.25, True)])
+def test_beyond_the_target_a_wall_the_map_knows_a_cell_off_the_echo_was_planned_round(wall, too_close):
+    """The path runs on north past the target 0.5 m ahead, and an echo comes from 1.5 m ahead: a wall the
+    map holds a cell beyond the echo's arc is the one the path on was planned round (a wall along a corridor
+    whose cells the arc misses by one stopped a copter at every doorway), so only a new one is in the way;
+    a known cell further off (a frame beside a gap the path goes through) explains nothing."""
+    mon, memory = monitor(closeness=2.0, padding=0.5)
+    if wall is not None:
+        row, col = memory.cell_of(wall, 1.5)
+        memory.grid[row + 1, col] = MemoryMap.OCCUPIED_AT
+    mon.collect([reading(0, 1, 1.5)])
+    path = [(0.0, 0.0), (0.0, 0.5), (0.0, 3.0)]
+    assert mon.observe(1.0, 0.0, 0.0, NORTH, reach=0.5, path=path).too_close is too_close
+
+
 def test_leaving_the_allowed_space_is_reported():
     mon, _ = monitor()
     assert not observe(mon, [], x=19.0, y=-19.0).outside

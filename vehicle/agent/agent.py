@@ -301,7 +301,7 @@ class Agent:
         navigation = fc.navigation
         clearance = ctx.path_clearance if ctx.planned_path else math.inf  # less than the padding in a doorway
         observation = self.monitor.observe(now, pose.x, pose.y, navigation.heading, fc.speed, navigation.reach,
-                                           clearance)
+                                           clearance, ctx.planned_path)
         ctx.observation = observation
         if self.monitor.ground_sight is not None:
             self._limit_speed()

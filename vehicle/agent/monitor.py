@@ -85,21 +85,27 @@ class Monitor:
         return math.floor(10 * self.brake * (-2 * period + math.sqrt(4 * period * period + 2 * room / self.brake))) / 10
 
     def _nearest_ahead(self, x: float, y: float, travel: float, readings: list[Reading],
-                       reach: float, clearance: float = math.inf) -> float | None:
+                       reach: float, clearance: float = math.inf,
+                       path: list[tuple[float, float]] | None = None) -> float | None:
         """Distance ahead of the nearest echo inside the corridor the body sweeps along ``travel``,
-        as far as ``reach`` metres.
+        as far as ``reach`` metres (a new obstacle: as far as ``path`` runs on straight ahead, when that is
+        further).
 
         An echo comes from somewhere on its cone's arc at that range. Where the map already holds obstacles on
         the arc (a door frame at the cone's edge), they explain it, as the map itself takes them to
-        (``MemoryMap.add_readings``): the echo is ahead only if one of them lies in the corridor. Else it
-        counts where the beam's centre meets it. Call before the period's readings go into the map."""
+        (``MemoryMap.add_readings``): the echo is ahead only if one of them lies in the corridor, as far as
+        ``reach`` (beyond it, the path on was planned round them). Else it counts where the beam's centre
+        meets it, as far as ``path`` runs on (unless it lies a cell off what the map knows: a wall the path on
+        was planned round, whose cells the arc misses by one). Call before the period's readings go into the
+        map."""
         ux, uy = math.sin(travel), math.cos(travel)
         corridor = self.radius + min(self.settings.padding, clearance)
+        run = straight_run(x, y, travel, path, corridor) if path else 0.0
 
-        def in_corridor(px: float, py: float) -> float | None:
+        def in_corridor(px: float, py: float, limit: float = reach) -> float | None:
             dx, dy = px - x, py - y
             ahead = dx * ux + dy * uy
-            return ahead if 0 < ahead < reach + corridor and abs(dx * uy - dy * ux) < corridor else None
+            return ahead if 0 < ahead < limit + corridor and abs(dx * uy - dy * ux) < corridor else None
 
         nearest = None
         for reading in readings:  # a handful per period: plain floats beat a dozen numpy calls
@@ -110,19 +116,23 @@ class Monitor:
             hx, hy, hz = ox + rx * reading.distance, oy + ry * reading.distance, oz + rz * reading.distance
             if abs(hz - oz) > self.map.band:
                 continue  # ground or ceiling
-            ahead = in_corridor(hx, hy)
+            ahead = in_corridor(hx, hy, max(reach, run))
             if ahead is None:
                 continue
-            known = self._known_on_arc(ox, oy, rx, ry, reading.distance, math.radians(reading.beam_angle))
+            beam = math.radians(reading.beam_angle)
+            known = self._known_on_arc(ox, oy, rx, ry, reading.distance, beam)
             if known:  # the known obstacles explain it: ahead only where one of them is
                 ahead = min((a for a in (in_corridor(*point) for point in known) if a is not None), default=None)
+            elif in_corridor(hx, hy) is None and self._known_on_arc(ox, oy, rx, ry, reading.distance, beam, 1):
+                continue  # beyond the target, a cell off what the map knows: the path on was planned round it
             if ahead is not None:
                 nearest = ahead if nearest is None else min(nearest, ahead)
         return nearest
 
     def _known_on_arc(self, ox: float, oy: float, rx: float, ry: float, distance: float,
-                      beam: float) -> list[tuple[float, float]]:
-        """The centres of the occupied map cells on a cone's arc at ``distance`` (sampled every half cell)."""
+                      beam: float, slack: int = 0) -> list[tuple[float, float]]:
+        """The centres of the occupied map cells on a cone's arc at ``distance`` (sampled every half cell), or
+        within ``slack`` cells of it."""
         level = math.hypot(rx, ry)
         if level < 1e-9:
             return []
@@ -133,8 +143,16 @@ class Monitor:
             angle = beam * (2.0 * k / (samples - 1) - 1.0) if samples > 1 else 0.0
             c, s = math.cos(angle), math.sin(angle)
             cell = self.map.cell_of(ox + (rx * c - ry * s) * arc, oy + (ry * c + rx * s) * arc)
-            if cell is not None and grid[cell] >= self.map.OCCUPIED_AT:
-                cells[cell] = self.map.center_of(*cell)
+            if cell is None:
+                continue
+            if not slack:
+                if grid[cell] >= self.map.OCCUPIED_AT:
+                    cells[cell] = self.map.center_of(*cell)
+                continue
+            top, left = max(cell[0] - slack, 0), max(cell[1] - slack, 0)
+            near = grid[top:cell[0] + slack + 1, left:cell[1] + slack + 1]
+            for r, q in zip(*np.nonzero(near >= self.map.OCCUPIED_AT), strict=True):
+                cells[(top + r, left + q)] = self.map.center_of(top + r, left + q)
         return list(cells.values())
 
     def _ground_ahead(self, x: float, y: float, travel: float | None,
@@ -215,7 +233,8 @@ class Monitor:
         self._pending.extend(readings)
 
     def observe(self, time: float, x: float, y: float, travel: float | None, speed: float = 0.0,
-                reach: float = math.inf, clearance: float = math.inf) -> Observation:
+                reach: float = math.inf, clearance: float = math.inf,
+                path: list[tuple[float, float]] | None = None) -> Observation:
         """Run one monitor period on the readings collected since the last one.
 
         ``travel`` is the compass heading (rad) the vehicle wants to move in, None when it
@@ -223,9 +242,13 @@ class Monitor:
         body sweeps along that heading (body radius plus padding either side). It is
         too close when the vehicle, moving at ``speed``, could not stop within
         ``closeness`` of it: one more period of travel plus the braking distance.
-        Echoes beyond ``reach`` (where the vehicle will stop or turn) are not in the way. ``clearance``: what
-        the path being flown keeps beyond the body where it passes closest, when that is less than the padding
-        (through a doorway): the corridor is that narrow, or the frame it was planned past would stop it.
+        Echoes beyond ``reach`` (where the vehicle will stop or turn) are not in the way; ``path``, the rest
+        of the path being flown (from here), carries the reach on for new obstacles as far as it runs on
+        straight ahead (``straight_run``): a path walked target by target half a metre ahead runs on past each
+        of them (known obstacles beyond the target: the path on was planned round them).
+        ``clearance``: what the path being flown keeps beyond the body where it passes closest, when that is
+        less than the padding (through a doorway): the corridor is that narrow, or the frame it was planned
+        past would stop it.
         """
         observation = Observation(time)
         if self._last_xy is not None:
@@ -266,7 +289,7 @@ class Monitor:
             # free space from each level sensor's latest reading of the period: the earlier ones only repeat it
             free = np.zeros(count, dtype=bool)
             free[[i for i in latest.values() if readings[i].pitch < LOOKS_UP]] = True
-            level = None if travel is None else self._nearest_ahead(x, y, travel, readings, reach, clearance)
+            level = None if travel is None else self._nearest_ahead(x, y, travel, readings, reach, clearance, path)
             if level is not None and (observation.nearest_ahead is None or level < observation.nearest_ahead):
                 observation.nearest_ahead = level
             self.map.add_readings(origins, directions, distances, max_ranges, beams, free)
@@ -281,6 +304,20 @@ class Monitor:
         half = self.settings.space_size
         observation.outside = abs(x - self.home[0]) > half or abs(y - self.home[1]) > half
         return observation
+
+
+def straight_run(x: float, y: float, travel: float, path: list[tuple[float, float]], corridor: float) -> float:
+    """How far ahead along ``travel`` (compass radians) from (x, y) the polyline ``path`` goes before it
+    turns out of the corridor ``corridor`` m either side (the first point outside counts, so a turn's corner
+    does), or ends."""
+    ux, uy = math.sin(travel), math.cos(travel)
+    run = 0.0
+    for px, py in path:
+        dx, dy = px - x, py - y
+        run = max(run, dx * ux + dy * uy)
+        if abs(dx * uy - dy * ux) > corridor:
+            break
+    return run
 
 
 def sweep_profile(readings: list[Reading]) -> tuple[np.ndarray, np.ndarray]:

@@ -41,6 +41,8 @@ VELOCITY_TIMEOUT = 3.0  # s: GUIDED velocity commands expire, as in ArduPilot
 LANDING_SPEED = 0.7  # m/s
 RTL_ALTITUDE = 15.0  # m above home a copter climbs to before flying home (ArduPilot's RTL_ALT default, 1500 cm)
 AIRBORNE = 0.05  # m above its resting height from which a copter counts as flying
+TOUCHED = 0.005  # m above its resting height within which a flying copter counts as down again: as
+# ArduPilot's land detector, a copter holding its height a few centimetres over a box top still flies
 TAKEOFF_REACHED = 0.1  # m: a GUIDED take-off this close to its height is done
 STOPPED_FOR = 1.0  # s held back by an obstacle before the autopilot says so
 SAME_STOP = 0.5  # m: held back again this close to a stop already told, on the way to the same place, is that stop
@@ -97,6 +99,7 @@ class Autopilot:
         self.wanted = (0.0, 0.0)  # horizontal velocity navigation asked for, before avoidance
         self.destination: tuple[float, float] | None = None  # where navigation is taking the vehicle now
         self.blocked = False  # avoidance holds the vehicle back from an obstacle
+        self._airborne = False  # flying as of the last step (``flying``'s hysteresis)
         self.battery_critical = False  # the battery failsafe has acted: no arming again (as ArduPilot's)
         self.ground_now = home[2]  # ground height under the vehicle, set each step
         self.hold_here()
@@ -104,7 +107,12 @@ class Autopilot:
     # ---- state -------------------------------------------------------------------------------
     @property
     def flying(self) -> bool:
-        return self.kind is Kind.COPTER and self.body.pose.z > self.body.rest_height(self.ground_now) + AIRBORNE
+        """A copter leaves the ground AIRBORNE above where it rests, and is down again only once it rests on
+        something (within TOUCHED): passing low over a box top whose rest height is within AIRBORNE of its
+        own is no landing (it stopped obeying GUIDED targets there, for good)."""
+        if self.kind is not Kind.COPTER:
+            return False
+        return self.body.pose.z > self.body.rest_height(self.ground_now) + (TOUCHED if self._airborne else AIRBORNE)
 
     @property
     def taking_off(self) -> bool:
@@ -336,6 +344,7 @@ class Autopilot:
         if not self.armed:
             falling = self.kind is Kind.COPTER and self.body.pose.z > self.body.rest_height(ground) + 1e-6
             self.body.step(dt, 0.0, 0.0, 0.0, None, ground, ground_normal, falling=falling)
+            self._airborne = self.flying
             return
         self._descending = False
         self.destination = None
@@ -355,6 +364,7 @@ class Autopilot:
         self.body.step(dt, vx, vy, vz, yaw, ground, ground_normal)
         if self._descending and not self.flying:
             self._touchdown()
+        self._airborne = self.flying
 
     def _tell_if_stopped(self) -> None:
         """Say once, after STOPPED_FOR, that an obstacle holds the vehicle back from where it is going. A vehicle
