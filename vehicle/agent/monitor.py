@@ -123,16 +123,15 @@ class Monitor:
             known = self._known_on_arc(ox, oy, rx, ry, reading.distance, beam)
             if known:  # the known obstacles explain it: ahead only where one of them is
                 ahead = min((a for a in (in_corridor(*point) for point in known) if a is not None), default=None)
-            elif in_corridor(hx, hy) is None and self._known_on_arc(ox, oy, rx, ry, reading.distance, beam, 1):
+            elif in_corridor(hx, hy) is None and self._known_beside_arc(ox, oy, rx, ry, reading.distance, beam):
                 continue  # beyond the target, a cell off what the map knows: the path on was planned round it
             if ahead is not None:
                 nearest = ahead if nearest is None else min(nearest, ahead)
         return nearest
 
     def _known_on_arc(self, ox: float, oy: float, rx: float, ry: float, distance: float,
-                      beam: float, slack: int = 0) -> list[tuple[float, float]]:
-        """The centres of the occupied map cells on a cone's arc at ``distance`` (sampled every half cell), or
-        within ``slack`` cells of it."""
+                      beam: float) -> list[tuple[float, float]]:
+        """The centres of the occupied map cells on a cone's arc at ``distance`` (sampled every half cell)."""
         level = math.hypot(rx, ry)
         if level < 1e-9:
             return []
@@ -143,17 +142,23 @@ class Monitor:
             angle = beam * (2.0 * k / (samples - 1) - 1.0) if samples > 1 else 0.0
             c, s = math.cos(angle), math.sin(angle)
             cell = self.map.cell_of(ox + (rx * c - ry * s) * arc, oy + (ry * c + rx * s) * arc)
-            if cell is None:
-                continue
-            if not slack:
-                if grid[cell] >= self.map.OCCUPIED_AT:
-                    cells[cell] = self.map.center_of(*cell)
-                continue
-            top, left = max(cell[0] - slack, 0), max(cell[1] - slack, 0)
-            near = grid[top:cell[0] + slack + 1, left:cell[1] + slack + 1]
-            for r, q in zip(*np.nonzero(near >= self.map.OCCUPIED_AT), strict=True):
-                cells[(top + r, left + q)] = self.map.center_of(top + r, left + q)
+            if cell is not None and grid[cell] >= self.map.OCCUPIED_AT:
+                cells[cell] = self.map.center_of(*cell)
         return list(cells.values())
+
+    def _known_beside_arc(self, ox: float, oy: float, rx: float, ry: float, distance: float, beam: float) -> bool:
+        """Whether the map holds an obstacle within a cell of a cone's arc at ``distance`` (an arc that misses a
+        known wall by a cell still meets that wall)."""
+        level = math.hypot(rx, ry)
+        if level < 1e-9:
+            return False
+        m, arc = self.map, distance * level
+        angles = math.atan2(ry, rx) + np.linspace(-beam, beam, 1 + 2 * int(2.0 * beam * arc * m.resolution + 0.5))
+        cols = np.floor((ox + arc * np.cos(angles) - m.origin[0]) * m.resolution).astype(np.int64)
+        rows = np.floor((oy + arc * np.sin(angles) - m.origin[1]) * m.resolution).astype(np.int64)
+        rows, cols = np.clip(rows, 1, m.size - 2), np.clip(cols, 1, m.size - 2)
+        return any(bool((m.grid[rows + dr, cols + dc] >= m.OCCUPIED_AT).any())
+                   for dr in (-1, 0, 1) for dc in (-1, 0, 1))
 
     def _ground_ahead(self, x: float, y: float, travel: float | None,
                       readings: list[Reading]) -> tuple[float | None, str | None]:
