@@ -129,36 +129,37 @@ class Monitor:
                 nearest = ahead if nearest is None else min(nearest, ahead)
         return nearest
 
-    def _known_on_arc(self, ox: float, oy: float, rx: float, ry: float, distance: float,
-                      beam: float) -> list[tuple[float, float]]:
-        """The centres of the occupied map cells on a cone's arc at ``distance`` (sampled every half cell)."""
+    def _arc_cells(self, ox: float, oy: float, rx: float, ry: float, distance: float,
+                   beam: float) -> tuple[np.ndarray, np.ndarray]:
+        """Rows and columns of the map cells on a cone's arc at ``distance``, sampled every half cell as the
+        map's tracing samples it (those on the map only)."""
+        m = self.map
         level = math.hypot(rx, ry)
         if level < 1e-9:
-            return []
-        rx, ry, arc = rx / level, ry / level, distance * level
-        samples = 1 + 2 * int(2.0 * beam * arc * self.map.resolution + 0.5)  # as the map's tracing samples it
-        grid, cells = self.map.grid, {}
-        for k in range(samples):
-            angle = beam * (2.0 * k / (samples - 1) - 1.0) if samples > 1 else 0.0
-            c, s = math.cos(angle), math.sin(angle)
-            cell = self.map.cell_of(ox + (rx * c - ry * s) * arc, oy + (ry * c + rx * s) * arc)
-            if cell is not None and grid[cell] >= self.map.OCCUPIED_AT:
-                cells[cell] = self.map.center_of(*cell)
-        return list(cells.values())
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        arc = distance * level
+        samples = 1 + 2 * int(2.0 * beam * arc * m.resolution + 0.5)
+        angles = math.atan2(ry, rx) + (np.linspace(-beam, beam, samples) if samples > 1 else np.zeros(1))
+        cols = np.floor((ox + arc * np.cos(angles) - m.origin[0]) * m.resolution).astype(np.int64)
+        rows = np.floor((oy + arc * np.sin(angles) - m.origin[1]) * m.resolution).astype(np.int64)
+        inside = (rows >= 0) & (rows < m.size) & (cols >= 0) & (cols < m.size)
+        return rows[inside], cols[inside]
+
+    def _known_on_arc(self, ox: float, oy: float, rx: float, ry: float, distance: float,
+                      beam: float) -> list[tuple[float, float]]:
+        """The centres of the occupied map cells on a cone's arc at ``distance``."""
+        rows, cols = self._arc_cells(ox, oy, rx, ry, distance, beam)
+        known = self.map.grid[rows, cols] >= self.map.OCCUPIED_AT
+        cells = dict.fromkeys(zip(rows[known].tolist(), cols[known].tolist(), strict=True))
+        return [self.map.center_of(row, col) for row, col in cells]
 
     def _known_beside_arc(self, ox: float, oy: float, rx: float, ry: float, distance: float, beam: float) -> bool:
         """Whether the map holds an obstacle within a cell of a cone's arc at ``distance`` (an arc that misses a
         known wall by a cell still meets that wall)."""
-        level = math.hypot(rx, ry)
-        if level < 1e-9:
-            return False
-        m, arc = self.map, distance * level
-        angles = math.atan2(ry, rx) + np.linspace(-beam, beam, 1 + 2 * int(2.0 * beam * arc * m.resolution + 0.5))
-        cols = np.floor((ox + arc * np.cos(angles) - m.origin[0]) * m.resolution).astype(np.int64)
-        rows = np.floor((oy + arc * np.sin(angles) - m.origin[1]) * m.resolution).astype(np.int64)
-        rows, cols = np.clip(rows, 1, m.size - 2), np.clip(cols, 1, m.size - 2)
-        return any(bool((m.grid[rows + dr, cols + dc] >= m.OCCUPIED_AT).any())
-                   for dr in (-1, 0, 1) for dc in (-1, 0, 1))
+        rows, cols = self._arc_cells(ox, oy, rx, ry, distance, beam)
+        last = self.map.size - 1
+        return any(bool((self.map.grid[np.clip(rows + dr, 0, last), np.clip(cols + dc, 0, last)]
+                         >= self.map.OCCUPIED_AT).any()) for dr in (-1, 0, 1) for dc in (-1, 0, 1))
 
     def _ground_ahead(self, x: float, y: float, travel: float | None,
                       readings: list[Reading]) -> tuple[float | None, str | None]:
