@@ -1,7 +1,8 @@
 """Ground that drops away or rises too steeply (issue 32): a rover with the "ground" suite's sonar looking
 down and ahead stops before an edge it could have seen and goes no further, takes a step down shallower
 than ``drop_depth`` (the monitor alone: the simulated body cannot roll down a step), and refuses a ramp
-steeper than ``max_slope`` while it takes a gentle one.
+steeper than ``max_slope`` while it takes a gentle one, drives down a slope it can drive and onto the level
+top of a climb.
 
 Each scene is a plateau (top at z = 0) south of y = 8 with the rover at its middle facing north, and a
 Pathfind waypoint at (0, 16) past whatever lies at y = 8; simulated time throughout.
@@ -151,6 +152,71 @@ def test_ground_echoes_are_never_walls():
     mon.collect([ground_echo(0.0)])
     observation = mon.observe(1.0, 0.0, 0.0, 0.0, speed=1.5)
     assert observation.nearest_ahead is None and memory.detections == 0
+
+
+def downhill(degrees: float, length: float = 30.0, behind: float = 3.0) -> str:
+    """A slab whose top falls northwards at ``degrees``, through (y = 0, z = 0), ``behind`` m of it south of there."""
+    tilt = math.radians(degrees)
+    along = behind - length / 2  # where the origin lies along the slab, from its middle
+    cy, cz = -along * math.cos(tilt) - 0.5 * math.sin(tilt), along * math.sin(tilt) - 0.5 * math.cos(tilt)
+    return vrml_box(0, cy, cz, 60, length, 1.0, f"1 0 0 {-tilt}")
+
+
+@pytest.mark.parametrize("slope", [15.0, -15.0])
+def test_on_a_slope_it_can_drive_the_ground_ahead_is_no_drop(slope):
+    """A rover on a slope of 15 degrees (under its ``max_slope``), facing down it (or up it): its down sonar
+    meets the slope where it would meet level ground under a level rover. The ground ahead lies on in the plane
+    the rover stands on, so nothing drops away (measured from the level, the slope down was 0.41 m deep there,
+    and a rover stopped at every downhill)."""
+    mon, memory = ground_monitor()
+    pitch = math.radians(-10.0 - slope)  # the beam's centre, the mount's 10 degrees and the rover's own tilt
+    reading = ground_echo(0.0)
+    reading.direction = np.array([0.0, math.cos(pitch), math.sin(pitch)])
+    mon.collect([reading])
+    observation = mon.observe(1.0, 0.0, 0.0, 0.0, speed=1.5)
+    assert observation.ground is None and not observation.too_close
+    assert memory.detections == 0
+
+
+def test_at_the_top_of_a_climb_level_ground_ahead_is_no_drop():
+    """A rover pitched 8 degrees up a climb: its down sonar's lower edge meets the level top 5 m ahead, 0.69 m
+    below the plane the rover stands on but level with its own ground."""
+    mon, memory = ground_monitor()
+    pitch, lower = math.radians(-10.0 + 8.0), math.radians(-10.0 + 8.0 - 2.0)
+    reading = ground_echo(0.0)
+    reading.direction = np.array([0.0, math.cos(pitch), math.sin(pitch)])
+    reading.distance = HEIGHT / math.sin(-lower)
+    mon.collect([reading])
+    observation = mon.observe(1.0, 0.0, 0.0, 0.0, speed=1.5)
+    assert observation.ground is None and not observation.too_close
+    assert memory.detections == 0
+
+
+def test_a_rover_drives_down_a_long_slope_it_can_drive(make_scene):
+    stepper = simulate(make_scene(downhill(15.0)), "pathfind", "rover", Settings(**SETTINGS), start=(0.0, 0.0),
+                       heading=0.0, waypoints=[(0.0, 12.0)], sensors=sensor_suite("ground", "rover"))
+    assert stepper.run(60, until=lambda: stepper.agent.outcome is not None)
+    assert stepper.simulation.collision is None
+    assert stepper.agent.outcome == "finished", stepper.agent.messages
+    assert "drops away" not in " ".join(stepper.agent.messages)
+
+
+def test_a_rover_climbs_onto_the_level_top_of_a_ramp_it_can_drive(make_scene):
+    """At the top of a 10 degree climb the ground bends away from the plane the rover stands on, but no deeper
+    than the level: that is no drop (measured from the plane alone, it stopped there for good)."""
+    tilt, length = math.radians(10.0), 5.0
+    cy = EDGE + length / 2 * math.cos(tilt) + 0.5 * math.sin(tilt)
+    cz = length / 2 * math.sin(tilt) - 0.5 * math.cos(tilt)
+    top, end = length * math.sin(tilt), EDGE + length * math.cos(tilt)
+    climb = vrml_box(0, cy, cz, 60, length, 1.0, f"1 0 0 {tilt}")
+    mesa = vrml_box(0, end + 10, top - 1.0, 60, 20, 2.0)
+    scene = make_scene(PLATEAU, vrml_box(0, 30, -1.0, 60, 44, 2.0), climb, mesa)
+    stepper = simulate(scene, "pathfind", "rover", Settings(**SETTINGS), start=(0.0, 0.0), heading=0.0,
+                       waypoints=[(0.0, end + 4.0)], sensors=sensor_suite("ground", "rover"))
+    assert stepper.run(90, until=lambda: stepper.agent.outcome is not None)
+    assert stepper.simulation.collision is None
+    assert stepper.agent.outcome == "finished", stepper.agent.messages
+    assert "drops away" not in " ".join(stepper.agent.messages)
 
 
 def test_a_steep_ramp_is_refused(make_scene):

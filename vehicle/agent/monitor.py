@@ -174,24 +174,32 @@ class Monitor:
             ox, oy, oz = reading.origin.tolist()
             dx, dy, dz = reading.direction.tolist()
             level = math.hypot(dx, dy)
-            if dz > -1e-3 or level < 1e-6:
-                continue  # pitched level or up by the vehicle's own slope: it sees no ground
-            flat = self.height / -dz  # range of the beam's centre to ground level with the vehicle's
-            # the cone's lower edge meets that ground first: the edge lies no further than there
-            edge = self.height / math.tan(math.asin(-dz) + math.radians(reading.beam_angle))
+            down = math.radians(-reading.pitch)  # the beam's centre below the ground the vehicle stands on
+            if down <= 0 or level < 1e-6:
+                continue  # it looks level or up: it sees no ground
+            # depths are below the plane of the ground under the vehicle (its wheels lie on it): on a slope it
+            # can drive, the ground ahead goes on in that plane. Ground that bends away from the plane but
+            # lies no deeper than the level (a climb's top) is no drop either: the beam cannot tell it from
+            # a bank beyond the top, and the drop is only the depth below the level (as on level ground)
+            beam = math.radians(reading.beam_angle)
+            flat = self.height / math.sin(down)  # range of the beam's centre to that plane
+            # the cone's lower edge meets that plane first: the edge lies no further than there
+            edge = self.height / math.tan(down + beam)
             if reading.distance is None:
                 self._risen.pop(reading.sensor, None)
-                if flat > reading.max_range or reading.max_range * -dz - self.height <= self.settings.drop_depth:
+                deepest = reading.max_range * min(math.sin(down), -dz) - self.height  # below the plane, the level
+                if flat > reading.max_range or deepest <= self.settings.drop_depth:
                     continue  # it could not have seen the ground, or not deep enough to tell
                 reach, kind = edge, "drops away"
             else:
-                # below the ground under the vehicle, along the cone's lower edge (the first to meet the ground)
-                depth = reading.distance * math.sin(math.asin(-dz) + math.radians(reading.beam_angle)) - self.height
+                # below that plane, and below the level, along the cone's lower edge (the first to meet the ground)
+                depth = reading.distance * math.sin(down + beam) - self.height
+                below_level = reading.distance * math.sin(math.asin(max(-1.0, min(1.0, -dz))) + beam) - self.height
                 run = reading.distance * level
-                if depth > self.settings.drop_depth:
+                if depth > self.settings.drop_depth and below_level > self.settings.drop_depth:
                     reach, kind = edge, "drops away"
                 elif -depth <= RISE_NOISE:
-                    self._risen.pop(reading.sensor, None)  # level ground
+                    self._risen.pop(reading.sensor, None)  # the plane goes on, or a step down, or a climb's top
                     continue
                 elif self._too_steep(reading, -depth, max_slope):
                     reach, kind = run, "rises too steeply"
