@@ -446,6 +446,33 @@ def test_a_new_go_here_drops_the_path_to_the_last_one_at_once(scene_of):
     assert flight.run(30, until=lambda: flight.agent.ctx.planned_path[-1:] == [(-8.0, 0.0)])
 
 
+def test_go_here_beside_a_cell_the_map_holds_goes_as_near_as_the_body_fits_from_the_vehicles_side(scene_of):
+    """A far echo at a cone's edge can mark a cell in the open (the demo's rover had one 0.16 m from its
+    operator's target): Go here no longer refuses a target the body does not fit at beside such a cell, but
+    goes to the nearest spot on its side facing the vehicle where it fits, and says so."""
+    flight = Flight(scene_of(), "browse")
+    assert flight.run(60, until=lambda: flight.agent.phase is Phase.MISSION)
+    memory, target = flight.agent.map, (6.0, 0.0)
+    memory.grid[memory.cell_of(6.15, 0.05)] = memory.LIMIT  # west of the target is open ground: nothing there
+    assert not flight.agent.ctx.is_clear(target, padding=0.0)
+    assert flight.agent.go_to(target) is None
+    said = flight.agent.messages[-1]
+    assert said.startswith("Go here: the body does not fit at (6.0, 0.0) beside a known obstacle; on the way to ")
+    assert flight.run(40, until=lambda: flight.agent.pause_reason.startswith("holding at"))
+    assert 0.1 <= math.dist(flight.xy, target) <= 0.5 + 0.5  # as near as it fits, within the arrival tolerance
+    assert flight.xy[0] < target[0]  # on the side it came from (the west: home), not past the cell
+
+
+def test_go_here_behind_a_walls_face_is_refused_not_taken_round_it(scene_of):
+    """Behind a wall's face the body fits further in, where the map knows nothing: no spot on the near side."""
+    flight = Flight(scene_of(wall(0.0, 6.0, 8.0, 1.0)), "browse")
+    assert flight.run(60, until=lambda: flight.agent.phase is Phase.MISSION)
+    memory = flight.agent.map
+    for x in np.arange(-2.0, 2.05, 0.1):  # the wall's south face, as the sonars would have drawn it
+        memory.grid[memory.cell_of(x, 5.55)] = memory.LIMIT
+    assert flight.agent.go_to((0.0, 5.8)) == "(0.0, 5.8) is inside a known obstacle"
+
+
 def test_a_take_off_the_autopilot_refuses_pauses_the_agent_and_a_resume_asks_again(scene_of):
     """A copter bigger than the default rests higher, and its autopilot refuses a take-off to 0.5 m, which would
     not leave the ground. The agent waited for ever in silence; it now pauses, saying why, and asks again when

@@ -33,6 +33,10 @@ from vehicle.protocol.mav import ACCEPTED, mavlink, refusal
 from vehicle.protocol.modes import Kind
 
 HOME_TOLERANCE = 0.5  # m
+NEAR_SIDE = 0.5  # m: how far towards the vehicle Go here looks for a spot the body fits at, when not at the target
+NEAR_SIDE_STEP = 0.1  # m between the distances tried, nearest first, ...
+NEAR_SIDE_BEARINGS = 5  # ... each on this many bearings within NEAR_SIDE_ARC of the way to the vehicle
+NEAR_SIDE_ARC = math.radians(60.0)
 SETTLED = 0.1  # m/s: slower than this counts as at rest
 SETTLE_OVER_HOME = 10.0  # s a copter waits at most to come to rest over home before it lands (a gusty day)
 OVER_HOME = 0.15  # m from home within which a copter at rest counts as over it
@@ -235,20 +239,22 @@ class Agent:
         return True
 
     def go_to(self, point: tuple[float, float]) -> str | None:
-        """The operator's "Go here": pause the mission and fly to ``point`` around what the map knows.
+        """The operator's "Go here": pause the mission and fly to ``point`` around what the map knows (where the
+        body does not fit beside a known obstacle, to the nearest spot towards the vehicle where it does).
         Returns why it is refused, or None when the vehicle is on its way."""
         fc, ctx = self.fc, self.ctx
         where = place(point)
         if not ctx.inside(point, margin=0.5):
             return f"{where} is outside the allowed space around home"
-        if not ctx.is_clear(point, padding=0.0):
+        target = point if ctx.is_clear(point, padding=0.0) else self._near_side(point)
+        if target is None:
             return f"{where} is inside a known obstacle"
         if not fc.armed or (fc.kind is Kind.COPTER and not fc.flying):
             return "not flying: arm and take off first"
         if self.operator == "control":
             return "the operator has control: hand back to the agent first"
         self.operator = ""
-        self._errand = Travel(ctx, point, HOME_TOLERANCE)
+        self._errand = Travel(ctx, target, HOME_TOLERANCE)
         ctx.planned_path = []  # the way to where it was going is not the way there
         self._stop_clock()
         self.paused = True
@@ -257,7 +263,27 @@ class Agent:
         if fc.mode != "GUIDED":
             self._set_mode("GUIDED")
         fc.took_over()  # the operator's own command is no takeover
-        self.say(f"Go here: on the way to {where}")
+        if target == point:
+            self.say(f"Go here: on the way to {where}")
+        else:
+            self.say(f"Go here: the body does not fit at {where} beside a known obstacle; on the way to "
+                     f"{place(target)}, {math.dist(point, target):.1f} m towards here")
+        return None
+
+    def _near_side(self, point: tuple[float, float]) -> tuple[float, float] | None:
+        """The nearest spot within NEAR_SIDE of ``point`` and NEAR_SIDE_ARC of the way to the vehicle where the body
+        fits; None if there is none. A target beside what the map holds (a cell a far echo marked at its cone's
+        edge, a wall's face) is reached as near as the body goes, from the vehicle's side; one just behind a
+        wall's face has no such spot (they all lie as near the face), and is refused."""
+        x, y = self.ctx.position
+        towards = math.atan2(y - point[1], x - point[0])
+        turns = [NEAR_SIDE_ARC * (2 * b / (NEAR_SIDE_BEARINGS - 1) - 1) for b in range(NEAR_SIDE_BEARINGS)]
+        for k in range(1, round(NEAR_SIDE / NEAR_SIDE_STEP) + 1):
+            for turn in sorted(turns, key=abs):
+                reach, angle = k * NEAR_SIDE_STEP, towards + turn
+                spot = (point[0] + reach * math.cos(angle), point[1] + reach * math.sin(angle))
+                if self.ctx.is_clear(spot, padding=0.0) and self.ctx.inside(spot, margin=0.5):
+                    return spot
         return None
 
     def _run_errand(self) -> None:
