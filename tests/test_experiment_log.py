@@ -371,7 +371,9 @@ def test_a_failed_writer_is_sent_nothing_more(monkeypatch):
     # has, it hands over nothing more and notes no more steps
     assert batches > 20 and all(error is None for error in handed), handed
     assert log._steps <= (len(handed) + 1) * logs.BATCH_STEPS
-    assert log._writer.batches.qsize() <= 5  # close's end mark, and any handed over as the failure was heard
+    # left queued: close's end mark, and those handed over before the run heard (how many of them the sender had
+    # already put into the pipe depends on the machine's load: 5 was once 7)
+    assert log._writer.batches.qsize() <= len(handed) + 1
 
 
 @pytest.mark.parametrize(("where", "reason"), [
