@@ -277,14 +277,11 @@ class Agent:
         wall's face has no such spot (they all lie as near the face), and is refused."""
         x, y = self.ctx.position
         towards = math.atan2(y - point[1], x - point[0])
-        turns = [NEAR_SIDE_ARC * (2 * b / (NEAR_SIDE_BEARINGS - 1) - 1) for b in range(NEAR_SIDE_BEARINGS)]
-        for k in range(1, round(NEAR_SIDE / NEAR_SIDE_STEP) + 1):
-            for turn in sorted(turns, key=abs):
-                reach, angle = k * NEAR_SIDE_STEP, towards + turn
-                spot = (point[0] + reach * math.cos(angle), point[1] + reach * math.sin(angle))
-                if self.ctx.is_clear(spot, padding=0.0) and self.ctx.inside(spot, margin=0.5):
-                    return spot
-        return None
+        turns = sorted((NEAR_SIDE_ARC * (2 * b / (NEAR_SIDE_BEARINGS - 1) - 1) for b in range(NEAR_SIDE_BEARINGS)),
+                       key=abs)
+        distances = [k * NEAR_SIDE_STEP for k in range(1, round(NEAR_SIDE / NEAR_SIDE_STEP) + 1)]
+        found = self.ctx.nearest_clear(point, distances, [towards + turn for turn in turns], padding=0.0)
+        return None if found is None else found[0]
 
     def _run_errand(self) -> None:
         travel = self._errand

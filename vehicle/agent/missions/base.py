@@ -117,6 +117,20 @@ class Context:
         """Whether the body (plus padding, by default the setting) would fit at ``point``."""
         return self.planner.is_clear(point, self.settings.padding if padding is None else padding)
 
+    def nearest_clear(self, point: tuple[float, float], distances, bearings, padding: float | None = None,
+                      reachable: bool = False) -> tuple[tuple[float, float], float] | None:
+        """The first spot, ``distances`` (m) nearest first and at each the ``bearings`` (radians from east) in
+        order, where the body fits (``is_clear``) inside the allowed space, and (``reachable``) a path reaches
+        it; with its distance from ``point``. None if there is none: a spot a vehicle cannot take as given (an
+        rti spot, the operator's Go here) is taken as near it as the map allows."""
+        for distance in distances:
+            for angle in bearings:
+                spot = (point[0] + distance * math.cos(angle), point[1] + distance * math.sin(angle))
+                if (self.is_clear(spot, padding) and self.inside(spot, margin=0.5)
+                        and (not reachable or self.plan(spot)[0] is not None)):
+                    return spot, distance
+        return None
+
 
 class Mission:
     """Base class: subclasses set ``name`` (their module's, listed in ``MISSIONS``) and implement ``step``.

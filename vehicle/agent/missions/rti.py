@@ -128,19 +128,17 @@ class Rti(Mission):
     def _shift(self) -> bool:
         """Travel to the nearest point within SHIFT of the spot that the body fits at and a path reaches
         instead, saying so; False when there is none."""
-        ctx, (x, y) = self.ctx, self.spot
-        for distance in SHIFT_STEPS:
-            for k in range(SHIFT_BEARINGS):
-                angle = 2 * math.pi * k / SHIFT_BEARINGS
-                point = (x + distance * math.cos(angle), y + distance * math.sin(angle))
-                if not ctx.is_clear(point) or ctx.plan(point)[0] is None:
-                    continue
-                ctx.say(f"Rti: its spot {_at(self.spot)} of round {self.rounds + 1} cannot be reached "
-                        f"({self.travel.reason}); measuring from {_at(point)}, {distance:g} m off")
-                self.goal = point
-                self.travel = Travel(ctx, point, ARRIVED)
-                return True
-        return False
+        ctx = self.ctx
+        bearings = [2 * math.pi * k / SHIFT_BEARINGS for k in range(SHIFT_BEARINGS)]
+        found = ctx.nearest_clear(self.spot, SHIFT_STEPS, bearings, reachable=True)
+        if found is None:
+            return False
+        point, distance = found
+        ctx.say(f"Rti: its spot {_at(self.spot)} of round {self.rounds + 1} cannot be reached "
+                f"({self.travel.reason}); measuring from {_at(point)}, {distance:g} m off")
+        self.goal = point
+        self.travel = Travel(ctx, point, ARRIVED)
+        return True
 
     def step(self) -> Status:
         if self.planner is None:
