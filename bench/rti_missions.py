@@ -91,8 +91,11 @@ def two_targets(scene, runs: int, rounds: int, planners) -> list[list[object]]:
         rng = random.Random(2)
         both, times = 0, []
         for k in range(runs):
-            rti = run(scene, planner, OPEN, pair(rng, OPEN), 1000 + k, rounds)["rti"]
+            targets = pair(rng, OPEN)
+            rti = run(scene, planner, OPEN, targets, 1000 + k, rounds)["rti"]
             both += rti["found"]
+            print(f"{planner} two-target run {k + 1}: {targets} -> {rti['distances_m']} found at {rti['found_s']} s",
+                  file=sys.stderr, flush=True)
             if rti["found_s"] is not None:
                 times.append(rti["found_s"])
         rows.append([planner, f"{both} of {runs}", f"{statistics.median(times):.0f} s" if times else "-"])

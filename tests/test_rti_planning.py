@@ -10,7 +10,7 @@ import pytest
 from conftest import GROUND
 
 from vehicle.agent.missions.rti import clear_spots
-from vehicle.tomography.planning import Planner, nearest_object, ring
+from vehicle.tomography.planning import ALONG, Planner, nearest_object, ring
 
 REGION = (0.0, 0.0, 6.0, 6.0)
 BOX = """Transform { translation 8.5 3 2 children Shape { geometry Box { size 1 1 4 } } }"""
@@ -48,6 +48,19 @@ def test_each_step_lowers_the_uncertainty_most_where_it_was_highest():
     assert p.links == 1
 
 
+def test_the_greedy_step_measures_along_the_perimeter_plans_four_directions():
+    """Lines in a few directions leave a target crossed from two or three, and the image splits it between
+    their crossings: each link runs within ``ALONG`` degrees of 0, 45, 90 or 135."""
+    p = planner(dwell=3.0)
+    here = [(0.0, -1.0), (6.0, 7.0)]
+    off = []
+    for _ in range(16):
+        a, b = here = p.next_spots(here)
+        angle = math.degrees(math.atan2(b[1] - a[1], b[0] - a[0])) % 45.0
+        off.append(min(angle, 45.0 - angle))
+    assert max(off) <= ALONG + 1e-6, off
+
+
 def test_two_agents_with_the_same_history_make_the_same_plan():
     first, second = planner(dwell=3.0), planner(dwell=3.0)
     here_1 = here_2 = [(0.0, 0.0), (-4.0, -4.0)]
@@ -60,7 +73,7 @@ def test_two_agents_with_the_same_history_make_the_same_plan():
     assert len({tuple(step) for step in plan_1}) == 10  # it moves on: ten different pairs
     # another history (one link more) gives another plan
     other = planner(dwell=3.0)
-    other.measured((-1.0, 3.0), (7.0, 3.0))
+    other.measured(*plan_1[0])  # the first step's link, already measured
     here = [(0.0, 0.0), (-4.0, -4.0)]
     assert [here := other.next_spots(here) for _ in range(10)] != plan_1
 
