@@ -102,15 +102,21 @@ def brief_or_model_levels(records: Records, table: LinkTable, calibration: Recor
     model's (``model_levels``)."""
     data = empty_levels(records, table, calibration)
     model = model_levels(records, table)
+    brief = heard_briefly(records, table) & ~data.calibrated
+    empty = np.where(brief, model.empty, data.empty)
+    fade, path_loss = fade_levels(empty, table.lc_length)
+    return Levels(empty, data.calibrated, fade, path_loss)
+
+
+def heard_briefly(records: Records, table: LinkTable) -> np.ndarray:
+    """Per link-channel: heard over less than half the records' span (a pair of spots a team stood at once), too
+    briefly for a level of its own (``brief_or_model_levels``)."""
     first = np.full(len(table.lc_keys), np.inf)
     last = np.full(len(table.lc_keys), -np.inf)
     np.minimum.at(first, table.row_lc, records.t)
     np.maximum.at(last, table.row_lc, records.t)
     span = float(records.t.max() - records.t.min()) if len(records) else 0.0
-    brief = (last - first < 0.5 * span) & ~data.calibrated
-    empty = np.where(brief, model.empty, data.empty)
-    fade, path_loss = fade_levels(empty, table.lc_length)
-    return Levels(empty, data.calibrated, fade, path_loss)
+    return last - first < 0.5 * span
 
 
 def fade_levels(empty: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
