@@ -29,6 +29,7 @@ class Levels:
     calibrated: np.ndarray  # bool: from a calibration capture (else estimated from the file)
     fade: np.ndarray
     path_loss: tuple[float, float]  # (P0 at 1 m in dBm, exponent n) of the fitted log-distance model
+    modelled: np.ndarray  # bool: the fitted model's level (heard too briefly, or not at all, for one of its own)
 
 
 def group_mean(index: np.ndarray, values: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -68,7 +69,7 @@ def empty_levels(records: Records, table: LinkTable, calibration: Records | None
         calibrated = counts > 0
         empty[calibrated] = mean[calibrated]
     fade, model = fade_levels(empty, table.lc_length)
-    return Levels(empty, calibrated, fade, model)
+    return Levels(empty, calibrated, fade, model, np.zeros(len(empty), bool))
 
 
 def model_levels(records: Records, table: LinkTable) -> Levels:
@@ -85,14 +86,15 @@ def model_levels(records: Records, table: LinkTable) -> Levels:
     if len(np.unique(np.round(distance[keep], 2))) < 2:  # one length only: the exponent is not identifiable
         p0 = float(np.median(measured[keep])) if keep.any() else 0.0
         empty = np.full(len(measured), p0)
-        return Levels(empty, np.zeros(len(empty), bool), measured - empty, (p0, 0.0))
+        return Levels(empty, np.zeros(len(empty), bool), measured - empty, (p0, 0.0), np.ones(len(empty), bool))
     for _ in range(2):
         (p0, n), *_ = np.linalg.lstsq(A[keep], measured[keep], rcond=None)
         residual = measured - A @ (p0, n)
         spread = 1.4826 * float(np.median(np.abs(residual[keep])))
         keep = np.isfinite(measured) & (np.abs(residual) <= 2.5 * max(spread, 1.0))
     empty = A @ (p0, n)
-    return Levels(empty, np.zeros(len(empty), bool), measured - empty, (float(p0), float(n)))
+    return Levels(empty, np.zeros(len(empty), bool), measured - empty, (float(p0), float(n)),
+                  np.ones(len(empty), bool))
 
 
 def brief_or_model_levels(records: Records, table: LinkTable, calibration: Records | None) -> Levels:
@@ -105,7 +107,7 @@ def brief_or_model_levels(records: Records, table: LinkTable, calibration: Recor
     brief = heard_briefly(records, table) & ~data.calibrated
     empty = np.where(brief, model.empty, data.empty)
     fade, path_loss = fade_levels(empty, table.lc_length)
-    return Levels(empty, data.calibrated, fade, path_loss)
+    return Levels(empty, data.calibrated, fade, path_loss, brief)
 
 
 def heard_briefly(records: Records, table: LinkTable) -> np.ndarray:

@@ -33,7 +33,6 @@ from vehicle.tomography.calibration import (
     empty_levels,
     file_levels,
     group_mean,
-    heard_briefly,
     model_levels,
 )
 from vehicle.tomography.kernel import kernel_distances, kernel_width, reference_rows
@@ -302,10 +301,6 @@ def reconstruct(records: Records, calibration: Records | None = None, calibratio
     levels = (model_levels(records, table) if empty_from == "model" else
               brief_or_model_levels(records, table, calibration) if empty_from == "brief" else
               empty_levels(records, table, calibration))
-    modelled = (np.ones(len(table.lc_keys), bool) if empty_from == "model" else
-                heard_briefly(records, table) & ~levels.calibrated if empty_from == "brief" else
-                np.zeros(len(table.lc_keys), bool))
-    no_peak = near_radios(grid, table.paths[np.unique(table.lc_path[modelled])])
     weights = channel_weights(table, levels.fade)
     times, Y = window_measurements(records, table, levels, weights, start, window)
     sigma = np.ones(len(table.paths))  # paths weigh alike: see docs/rti.md on weighting by the empty-area noise
@@ -317,7 +312,9 @@ def reconstruct(records: Records, calibration: Records | None = None, calibratio
         if drifted.any():
             redo = drifted[table.lc_path]
             levels.empty[redo] = file_levels(records, table)[redo]
+            levels.modelled[redo] = False
             times, Y = window_measurements(records, table, levels, weights, start, window)
+    no_peak = near_radios(grid, table.paths[np.unique(table.lc_path[levels.modelled])])
     span = span if window else 1
     extra = {}
     if measure == "kernel":
