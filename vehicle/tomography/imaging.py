@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 from scipy.ndimage import maximum_filter
+from scipy.spatial import cKDTree
 
 from vehicle.tomography.calibration import (
     Levels,
@@ -146,14 +147,11 @@ def near_radios(grid: Grid, paths: np.ndarray) -> np.ndarray:
     and the sparse solve puts it on the pixels that only those links cross, beside the radio. Nothing tells
     that from a person standing there, and a team's ring of spots then held the strongest peak (a small region's
     image over the ring: the person found in 12 of 16 missions, in 16 without peaks beside the spots)."""
-    near = np.zeros(grid.shape, bool)
-    if len(paths):
-        ends = np.unique(np.vstack([paths[:, :2], paths[:, 2:]]), axis=0)
-        centres = grid.centres()
-        for start in range(0, len(ends), 256):  # a few hundred spots at most: bounded temporaries
-            gap = np.linalg.norm(centres[:, None, :] - ends[None, start:start + 256], axis=2).min(axis=1)
-            near |= (gap < NEAR_RADIO).reshape(grid.shape)
-    return near
+    if not len(paths):
+        return np.zeros(grid.shape, bool)
+    ends = cKDTree(np.unique(np.vstack([paths[:, :2], paths[:, 2:]]), axis=0))  # moving radios: many ends
+    gap, _ = ends.query(grid.centres(), distance_upper_bound=NEAR_RADIO)
+    return (gap < NEAR_RADIO).reshape(grid.shape)
 
 
 def find_peaks(image: np.ndarray, grid: Grid, count: int, separation: float) -> list[dict]:
