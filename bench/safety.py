@@ -5,7 +5,10 @@ Groups of runs (every mission: square, browse, search, pathfind):
 - copter in castle.wrl (start -40, 0, altitude 4; when ../shared is there) and in the
   project's scenes (default, trees, house, apartment: their own start and suggested settings);
 - copter in the apartment from a spot in each of five rooms (living room, kitchen, both
-  bedrooms, study; its scene's header names them);
+  bedrooms, study; its scene's header names them), and with ``--room-starts N`` from N - 1 more
+  starts within ``JITTER`` of each spot (the same draw every time): a mission indoors is chaotic,
+  a start a hand's width away can end in another room, so five runs say little of how often
+  Search covers a room or a vehicle gets home;
 - copter in ``--fields`` random obstacle fields (default 100);
 - rover in the first ``--rover-fields`` of those fields (default 20), and in the project's scenes.
 
@@ -22,7 +25,7 @@ Prints a Markdown table of outcomes per mission for each group and every collisi
 error with what reproduces it; saves a top view of each collision and timeout (scene, memory map,
 path) and the field's VRML into /tmp/bench-out (bench/out/ is not git-ignored). Exits
 with status 1 if any run collided.
-Run: python bench/safety.py [--fields N] [--rover-fields N] [--workers N]
+Run: python bench/safety.py [--fields N] [--rover-fields N] [--room-starts N] [--workers N]
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ MISSIONS = ["square", "browse", "search", "pathfind"]
 PROJECT_SCENES = [ROOT / "scenes" / name for name in ("default.wrl", "trees.wrl", "house.wrl", "apartment.wrl")]
 APARTMENT = ROOT / "scenes" / "apartment.wrl"
 APARTMENT_ROOMS = [(-4.8, -3.0), (1.8, -2.6), (-5.8, 2.9), (-1.0, 2.9), (3.2, 3.3)]  # clear spots, one per room
+JITTER = 0.4  # m either way of a room's spot that its further starts lie (each spot has 1.5 m clear round it)
 INDOOR = ("house.wrl", "apartment.wrl")  # closed scenes: their reachable floor is the measure of coverage
 BODY = 0.3 + DOORWAY_CLEARANCE  # the default copter's radius and the clearance planning keeps in a doorway
 OUT = Path("/tmp/bench-out")
@@ -205,6 +209,21 @@ def _picture(job: Job, scene: Scene, agent, route: list[tuple[float, float]], re
     return str(path)
 
 
+def indoor_summary(results: list[dict]) -> str:
+    """Per mission over a group's indoor runs: how many know 80 % of the reachable floor (the issue's target
+    for Search), the median share, and how many ended home (finished, or stopped with the vehicle home)."""
+    rows = []
+    for mission in ("search", "pathfind"):
+        runs = [r for r in results if r["job"].mission == mission and r.get("floor_known") is not None]
+        if not runs:
+            continue
+        shares = sorted(r["floor_known"] for r in runs)
+        home = sum(r["outcome"] in ("finished", "stopped") and "could not get home" not in r["reason"] for r in runs)
+        rows.append([mission, len(runs), f"{sum(s >= 0.8 for s in shares)} of {len(runs)}",
+                     _percent(shares[len(shares) // 2]), f"{home} of {len(runs)}"])
+    return table(["mission", "runs", "floor known >= 80 %", "median floor known", "ended home"], rows)
+
+
 def _percent(share: float | None) -> str:
     return "-" if share is None else f"{100 * share:.0f} %"
 
@@ -217,7 +236,18 @@ def _xy(position) -> str:
     return "-" if not position else "(" + ", ".join(f"{float(v):.2f}" for v in position) + ")"
 
 
-def jobs(fields: int, rover_fields: int) -> list[Job]:
+def room_starts(per_room: int) -> list[tuple[float, float]]:
+    """Each room's spot, and ``per_room - 1`` starts within ``JITTER`` of it (a fixed draw per room)."""
+    starts = []
+    for k, (x, y) in enumerate(APARTMENT_ROOMS):
+        draw = random.Random(f"room-{k}")
+        starts.append((x, y))
+        starts += [(round(x + draw.uniform(-JITTER, JITTER), 2), round(y + draw.uniform(-JITTER, JITTER), 2))
+                   for _ in range(per_room - 1)]
+    return starts
+
+
+def jobs(fields: int, rover_fields: int, per_room: int = 1) -> list[Job]:
     out: list[Job] = []
     known = []
     if CASTLE.exists():
@@ -225,8 +255,9 @@ def jobs(fields: int, rover_fields: int) -> list[Job]:
     known += [(str(path), None) for path in PROJECT_SCENES]
     for path, start in known:
         out += [Job("copter, castle and project scenes", path, m, "copter", start) for m in MISSIONS]
-    for start in APARTMENT_ROOMS:
-        out += [Job("copter, apartment from five rooms", str(APARTMENT), m, "copter", start) for m in MISSIONS]
+    rooms = "copter, apartment from five rooms" + (f", {per_room} starts each" if per_room > 1 else "")
+    for start in room_starts(per_room):
+        out += [Job(rooms, str(APARTMENT), m, "copter", start) for m in MISSIONS]
     for k in range(fields):
         out += [Job(f"copter, {fields} random fields", f"field-{k}", m) for m in MISSIONS]
     for k in range(rover_fields):
@@ -240,6 +271,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--fields", type=int, default=100, help="random fields for the copter (default 100)")
     parser.add_argument("--rover-fields", type=int, default=20, help="random fields for the rover (default 20)")
+    parser.add_argument("--room-starts", type=int, default=1, metavar="N",
+                        help="starts in each of the apartment's five rooms (default 1: the room's spot)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes (default: one per core)")
     parser.add_argument("--dump-field", type=int, metavar="K", help="print the VRML of random field K and exit")
     args = parser.parse_args()
@@ -248,7 +281,9 @@ def main() -> int:
         return 0
 
     state = code_state()
-    todo = jobs(args.fields, args.rover_fields)
+    if args.room_starts < 1:
+        parser.error("--room-starts must be at least 1")
+    todo = jobs(args.fields, args.rover_fields, args.room_starts)
     print(f"{len(todo)} runs on {args.workers} workers", file=sys.stderr)
     started = time.perf_counter()
     results: list[dict] = []
@@ -275,6 +310,9 @@ def main() -> int:
                          sum(d == 0 for d in detections), f"{sim / max(1, len(runs)):.0f}"])
         print(f"\n### {group}\n")
         print(table(["mission", "runs", *OUTCOMES, "median detections", "zero detections", "mean sim s"], rows))
+        if group.startswith("copter, apartment"):
+            print()
+            print(indoor_summary(mine))
         if group.startswith(("copter, castle", "copter, apartment", "rover, project")):
             print()
             print(table(["scene", "mission", "outcome", "reason", "detections", "floor known", "sim s"],

@@ -34,9 +34,9 @@ def monitor(**settings):
     return Monitor(s, memory, (0.0, 0.0), RADIUS), memory
 
 
-def observe(mon, readings, travel=NORTH, x=0.0, y=0.0, time=1.0):
+def observe(mon, readings, travel=NORTH, x=0.0, y=0.0, time=1.0, speed=0.0):
     mon.collect(readings)
-    return mon.observe(time, x, y, travel)
+    return mon.observe(time, x, y, travel, speed)
 
 
 def occupied_at(memory, x, y):
@@ -94,6 +94,20 @@ def test_an_echo_ahead_closer_than_closeness_is_too_close():
     observation = observe(mon, [reading(0, 1, 1.5)], travel=NORTH)
     assert observation.nearest_ahead == pytest.approx(1.5)
     assert observation.too_close
+
+
+def test_a_vehicle_speeding_up_is_too_close_for_the_speed_it_reaches_by_the_next_period():
+    """Up from 1.27 to 1.87 m/s in a period, on its way to 2.5 m/s, with an echo 2.08 m ahead: by the next
+    period it goes 2.47 m/s, from which it needs 1.84 m to stand, so it must stop now (stopped a period
+    later, it struck a wall met obliquely in the apartment). Holding 1.87 m/s, the same echo is no reason
+    to stop yet."""
+    echo = [reading(0, 1, 2.08)]
+    speeding, _ = monitor(closeness=0.8, speed=2.5)
+    assert not observe(speeding, [], travel=NORTH, speed=1.27).too_close
+    assert observe(speeding, echo, travel=NORTH, speed=1.87, time=2.0).too_close
+    steady, _ = monitor(closeness=0.8, speed=2.5)
+    assert not observe(steady, [], travel=NORTH, speed=1.87).too_close
+    assert not observe(steady, echo, travel=NORTH, speed=1.87, time=2.0).too_close
 
 
 def test_an_echo_ahead_beyond_closeness_is_not_too_close():
