@@ -82,14 +82,23 @@ def _dijkstra(passable, start_row, start_col, limit):
     is a binary heap in two arrays (a length, a cell), a cell pushed again whenever a shorter way to it is
     found. Equal lengths go in the cells' order, which a window cut from a bigger grid keeps: sums of 1 and
     sqrt 2 taken in another order can differ in the last bit, and the near and the whole map must give the
-    same goals."""
+    same goals. It runs on a copy of the grid with a closed border, so a step needs no bounds check (a
+    cell's row-major order is the same in both)."""
     rows, cols = passable.shape
-    lengths = np.full(rows * cols, np.inf)
-    parents = np.full(rows * cols, -1, dtype=np.int64)
-    settled = np.zeros(rows * cols, dtype=np.bool_)
+    width = cols + 2
+    cells_in = (rows + 2) * width
+    open_ = np.zeros(cells_in, dtype=np.bool_)
+    for r in range(rows):
+        for c in range(cols):
+            open_[(r + 1) * width + c + 1] = passable[r, c]
+    lengths = np.full(cells_in, np.inf)
+    parents = np.full(cells_in, -1, dtype=np.int64)
+    settled = np.zeros(cells_in, dtype=np.bool_)
+    steps = np.array([-width - 1, -width, -width + 1, -1, 1, width - 1, width, width + 1], dtype=np.int64)
+    sides = np.array([-width, -width, -width, 0, 0, width, width, width], dtype=np.int64)  # the step's row part
     room = 4 * (rows + cols) + 64  # about a wavefront's cells; doubled when full (a cell may be in it 8 times)
     keys, cells = np.empty(room), np.empty(room, dtype=np.int64)
-    first = start_row * cols + start_col
+    first = (start_row + 1) * width + start_col + 1
     lengths[first] = 0.0
     keys[0], cells[0], size = 0.0, first, 1
     while size > 0:
@@ -99,27 +108,32 @@ def _dijkstra(passable, start_row, start_col, limit):
         if settled[cell]:
             continue
         settled[cell] = True
-        row, col = cell // cols, cell % cols
-        for dr in range(-1, 2):
-            for dc in range(-1, 2):
-                r, c = row + dr, col + dc
-                if (dr == 0 and dc == 0) or r < 0 or r >= rows or c < 0 or c >= cols or not passable[r, c]:
-                    continue
-                if dr != 0 and dc != 0:
-                    if not (passable[row + dr, col] and passable[row, col + dc]):
-                        continue
-                    step = SQRT2
-                else:
-                    step = 1.0
-                there = r * cols + c
-                if length + step < lengths[there] and length + step <= limit:
-                    lengths[there] = length + step
-                    parents[there] = cell
-                    if size == len(keys):
-                        keys, cells = np.concatenate((keys, np.empty(size))), np.concatenate((cells, cells))
-                    _push(keys, cells, size, length + step, there)
-                    size += 1
-    return lengths, parents
+        for k in range(8):
+            there = cell + steps[k]
+            if not open_[there] or settled[there]:
+                continue
+            if k == 1 or k == 3 or k == 4 or k == 6:
+                step = 1.0
+            elif open_[cell + sides[k]] and open_[cell + steps[k] - sides[k]]:
+                step = SQRT2
+            else:
+                continue
+            if length + step < lengths[there] and length + step <= limit:
+                lengths[there] = length + step
+                parents[there] = cell
+                if size == len(keys):
+                    keys, cells = np.concatenate((keys, np.empty(size))), np.concatenate((cells, cells))
+                _push(keys, cells, size, length + step, there)
+                size += 1
+    out_lengths = np.empty(rows * cols)
+    out_parents = np.empty(rows * cols, dtype=np.int64)
+    for r in range(rows):
+        for c in range(cols):
+            padded = (r + 1) * width + c + 1
+            out_lengths[r * cols + c] = lengths[padded]
+            parent = parents[padded]
+            out_parents[r * cols + c] = -1 if parent < 0 else (parent // width - 1) * cols + parent % width - 1
+    return out_lengths, out_parents
 
 
 @numba.njit(cache=True)
@@ -182,14 +196,23 @@ def reachable_frontiers(free: np.ndarray, unknown: np.ndarray, passable: np.ndar
     labels = np.zeros(free.shape, dtype=np.int64)
     for k, cells in enumerate(groups, 1):
         labels[cells[:, 0], cells[:, 1]] = k
-    gap, (rows, cols) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
-    nearest = labels[rows, cols]  # the frontier each cell is nearest to
+    # goals lie on reached cells within ``reach`` of a frontier: the rest is measured only around those
+    # (a near search reaches a fraction of its window), which gives the same gaps and nearest frontiers there
+    reach = REACH * clearance + 1
+    rows, cols, (r0, c0) = _around(np.isfinite(lengths), math.ceil(reach) + 1)
+    box_labels = labels[rows, cols]
     roomy = ~inflate(unknown, clearance)  # further than the clearance from every unknown cell
-    fresh = np.isfinite(lengths) if looked is None else np.isfinite(lengths) & ~looked
-    within = gap <= REACH * clearance + 1
-    goal_of = _goals(fresh & roomy & within, nearest, lengths, len(groups))
+    goal_of, closer = {}, {}
+    if box_labels.any():
+        gap, (nearest_rows, nearest_cols) = ndimage.distance_transform_edt(box_labels == 0, return_indices=True)
+        nearest = box_labels[nearest_rows, nearest_cols]  # the frontier each cell is nearest to
+        box_lengths = lengths[rows, cols]
+        fresh = np.isfinite(box_lengths) if looked is None else np.isfinite(box_lengths) & ~looked[rows, cols]
+        within = gap <= reach
+        goal_of = _goals(fresh & roomy[rows, cols] & within, nearest, box_lengths, len(groups), (r0, c0))
+        closer = _goals(fresh & within, nearest, gap, len(groups), (r0, c0))  # the rest: as near the frontier
+        # as the body gets
     near = [Frontier(groups[k - 1], goal, float(lengths[goal])) for k, goal in goal_of.items()]
-    closer = _goals(fresh & within, nearest, gap, len(groups))  # the rest: as near the frontier as the body gets
     again = [Frontier(groups[k - 1], goal, float(lengths[goal])) for k, goal in closer.items() if k not in goal_of]
     yield from sorted(near, key=lambda f: f.distance)
     if math.isfinite(limit):
@@ -213,14 +236,26 @@ def reachable_frontiers(free: np.ndarray, unknown: np.ndarray, passable: np.ndar
     yield from sorted(far, key=lambda f: f.distance)
 
 
-def _goals(candidates: np.ndarray, nearest: np.ndarray, cost: np.ndarray, count: int) -> dict[int, tuple[int, int]]:
-    """For each frontier (1 ... count) with candidate cells nearest it, its candidate of least ``cost``."""
+def _goals(candidates: np.ndarray, nearest: np.ndarray, cost: np.ndarray, count: int,
+           offset: tuple[int, int] = (0, 0)) -> dict[int, tuple[int, int]]:
+    """For each frontier (1 ... count) with candidate cells nearest it, its candidate of least ``cost``
+    (its cell, ``offset`` added)."""
     best = np.full(count + 1, np.inf)
     np.minimum.at(best, nearest[candidates], cost[candidates])
     rows, cols = np.nonzero(candidates & (cost == best[nearest]))
     _, first = np.unique(nearest[rows, cols], return_index=True)  # each frontier's first cell in row order
     first.sort()  # the frontiers in that order too: equally near ones keep it when sorted by distance
-    return {int(nearest[rows[i], cols[i]]): (int(rows[i]), int(cols[i])) for i in first}
+    return {int(nearest[rows[i], cols[i]]): (int(rows[i]) + offset[0], int(cols[i]) + offset[1]) for i in first}
+
+
+def _around(mask: np.ndarray, pad: int) -> tuple[slice, slice, tuple[int, int]]:
+    """The rows and columns of the smallest box holding every true cell of ``mask``, widened by ``pad`` cells
+    (within the grid; empty when none is true), and its first cell."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if not len(rows):
+        return slice(0, 0), slice(0, 0), (0, 0)
+    r0, c0 = max(0, rows[0] - pad), max(0, cols[0] - pad)
+    return slice(r0, rows[-1] + pad + 1), slice(c0, cols[-1] + pad + 1), (int(r0), int(c0))
 
 
 def on_map(memory_map: MemoryMap, position: tuple[float, float], clearance: float, min_cells: int,

@@ -98,23 +98,30 @@ class Team:
                 continue
             if centres is None:
                 centres = [s.body.pose.xyz() for s in sims]
+                points, gaps = self._gaps(centres)
             gap.note(centres[index])
-            readings.append(simulation.sense(self.others(index, within=simulation.sonars.reach, centres=centres)))
+            readings.append(simulation.sense(self._near(index, simulation.sonars.reach, points, gaps)))
         return readings
 
-    def others(self, index: int, within: float = math.inf,
-               centres: list[tuple[float, float, float]] | None = None) -> Bodies | None:
+    def others(self, index: int, within: float = math.inf) -> Bodies | None:
         """Every body but vehicle ``index``'s (wrecks too: they still stand in the way) whose surface is
-        within ``within`` metres of its centre; None when there is none (then a read costs what it does alone).
-        ``centres``: every body's centre now, when the caller has them already."""
-        if centres is None:
-            centres = [s.body.pose.xyz() for s in self.simulations]
-        here = centres[index]
-        near = [k for k, (centre, radius) in enumerate(zip(centres, self._radii, strict=True))
-                if k != index and math.dist(here, centre) - radius <= within]
-        if not near:
+        within ``within`` metres of its centre; None when there is none (then a read costs what it does alone)."""
+        return self._near(index, within, *self._gaps([s.body.pose.xyz() for s in self.simulations]))
+
+    def _gaps(self, centres: list[tuple[float, float, float]]) -> tuple[np.ndarray, np.ndarray]:
+        """The centres as an array, and gaps[i, k]: metres from body i's centre to body k's surface (the
+        diagonal: never near). Once a step for every read: in plain floats per read, a team of 8 spent a
+        tenth of its world's time on it."""
+        points = np.array(centres, dtype=np.float64)
+        gaps = np.sqrt(((points[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)) - self.radii[None, :]
+        np.fill_diagonal(gaps, math.inf)
+        return points, gaps
+
+    def _near(self, index: int, within: float, points: np.ndarray, gaps: np.ndarray) -> Bodies | None:
+        near = np.flatnonzero(gaps[index] <= within)
+        if not len(near):
             return None
-        return Bodies(self._ids[near], np.array([centres[k] for k in near], dtype=np.float64), self.radii[near])
+        return Bodies(self._ids[near], points[near], self.radii[near])
 
     def traffic(self) -> list[Traffic]:
         """Every vehicle as its team-mates know it now, in the team's order: made once a step, however many

@@ -121,7 +121,10 @@ class Search(Mission):
 
     def nearest_frontier(self) -> tuple[float, float] | None:
         """The nearest point by path where known-free space meets unknown space (``vehicle.mapping.frontier``)
-        inside the allowed space and not in a team-mate's share, or None when no such frontier is left."""
+        inside the allowed space and not in a team-mate's share; when every one left is in a team-mate's
+        share, the nearest of those (a share is where each is now, and shares change as the team moves: a
+        vehicle that ended here would leave its team-mates the rest, as the one in the middle of a team of
+        eight did a quarter of a minute after take-off); None when no frontier is left at all."""
         ctx = self.ctx
         m = ctx.map
         half = ctx.settings.space_size - 1.0  # as ``ctx.inside``
@@ -136,13 +139,18 @@ class Search(Mission):
         # of the frontier), then the whole map: a team's shared map is the team's whole area, and the search
         # over it was half of a team's time. Near, only the frontiers whose roomy goal lies within that reach
         # are looked at; for any other (goals looked from, gaps) the whole map decides
+        nearest = None
         for area, within in ((near, NEAR_FRONTIER * m.resolution), (box, math.inf)):
             for found in frontier.on_map(m, ctx.position, ctx.planner.margin_cells(0.0), min_cells, area,
                                          self.looked, done, limit=within):
                 goal = m.center_of(*found.goal)
                 if not someone_elses(ctx, goal):
                     return goal
-        return None
+                nearest = nearest or goal
+        if nearest is not None:
+            self.ctx.say(f"Search: nothing left to search in this vehicle's share; helping at ({nearest[0]:.1f}, "
+                         f"{nearest[1]:.1f})")
+        return nearest
 
     def _unknown_around(self, point: tuple[float, float]) -> float:
         """Share of the cells within UNKNOWN_RADIUS of the point that are neither free nor occupied."""
