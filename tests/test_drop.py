@@ -231,3 +231,79 @@ def test_a_gentle_ramp_is_taken(make_scene):
     fall, northmost, arrived, stepper = drive(make_scene(PLATEAU, ramp(8.0)), max_slope=15)
     assert stepper.simulation.collision is None
     assert arrived, f"stopped at y = {northmost:.2f}: {stepper.agent.messages}"
+
+
+def slope_down_ahead(degrees: float, length: float = 10.0) -> str:
+    """From the plateau's edge a slab falls north at ``degrees`` for ``length`` m onto level ground below."""
+    tilt = math.radians(degrees)
+    cy = EDGE + length / 2 * math.cos(tilt) - 0.5 * math.sin(tilt)
+    cz = -length / 2 * math.sin(tilt) - 0.5 * math.cos(tilt)
+    low, end = -length * math.sin(tilt), EDGE + length * math.cos(tilt)
+    return vrml_box(0, cy, cz, 60, length, 1.0, f"1 0 0 {-tilt}") + vrml_box(0, end + 15, low - 1.0, 60, 30, 2.0)
+
+
+def test_a_rover_drives_down_a_slope_that_starts_ahead_of_it(make_scene):
+    """Level ground, then 15 degrees down for 2.6 m. The 10 degree sonar passes over the slope as over a bank
+    (the rover stopped there for good); the 30 degree one meets it and tells a slope it can drive: the rover
+    stops at the far sonar's first word, creeps while the near one looks, and drives down to its waypoint."""
+    fall, northmost, arrived, stepper = drive(make_scene(PLATEAU, slope_down_ahead(15.0)))
+    assert stepper.simulation.collision is None
+    assert arrived, f"it stopped at y = {northmost:.2f}: {stepper.agent.messages}"
+    said = list(stepper.agent.messages)
+    assert any(m.startswith("Speed limited to 0.4 m/s: the ground may drop away ahead; looking closer") for m in said)
+    assert any(m.startswith("Speed back to 1.5 m/s") for m in said), said
+
+
+@pytest.mark.parametrize("degrees", [25.0, 90.0])
+def test_a_slope_down_steeper_than_max_slope_or_a_bank_that_starts_ahead_is_refused(make_scene, degrees):
+    """25 degrees down (over ``max_slope``, 20) or a 2.6 m bank: the near sonar sees the ground fall more
+    steeply than 20 degrees by more than ``drop_depth``: an edge, marked, and the rover's centre stays behind
+    the rim (0.4 m behind a bank's; 0.2 m behind the 25 degree slope's, which it sees only once the slope has
+    fallen ``drop_depth``)."""
+    down = slope_down_ahead(degrees) if degrees < 90 else lower_ground(2.6)
+    fall, northmost, arrived, stepper = drive(make_scene(PLATEAU, down))
+    assert stepper.simulation.collision is None
+    assert fall < 0.05 and northmost < (EDGE - 0.1 if degrees < 90 else EDGE - 0.3), (fall, northmost)
+    assert not arrived
+    memory = stepper.agent.map
+    assert memory.occupied_in(*_around(memory, 0.0, EDGE, 0.3)).any()
+
+
+def near_echo(depth: float | None, y: float = 0.0) -> Reading:
+    """The near sonar (30 degrees down) of a level rover at (0, y) facing north, its echo off ground ``depth``
+    below its own along the cone's lower edge (None: no echo within its 3 m)."""
+    reading = ground_echo(depth, pitch=-30.0)
+    reading.sensor, reading.max_range = 4, 3.0
+    reading.origin = np.array([0.0, y, HEIGHT])
+    return reading
+
+
+def test_the_far_sonars_edge_stops_a_rover_once_then_it_creeps_while_the_near_one_looks():
+    mon, memory = ground_monitor()
+    mon.collect([ground_echo(None), near_echo(0.0)])
+    first = mon.observe(1.0, 0.0, 0.0, 0.0, speed=1.5)
+    assert first.too_close and first.ground.startswith("ground drops away")  # coming at 1.5 m/s: stop first
+    assert mon.creeping and mon.speed_limit == pytest.approx(0.4)
+    assert memory.detections == 0  # the near sonar decides what is an edge
+    mon.collect([ground_echo(None), near_echo(0.0, 0.1)])
+    creeping = mon.observe(1.25, 0.0, 0.1, 0.0, speed=0.4)
+    assert not creeping.too_close and creeping.ground is None and memory.detections == 0
+    mon.collect([ground_echo(None), near_echo(2.0, 0.2)])  # the near one meets the bank's foot: an edge
+    edge = mon.observe(1.5, 0.0, 0.2, 0.0, speed=0.4)
+    assert edge.too_close and edge.ground.startswith("ground drops away")
+    assert memory.occupied_in(*_around(memory, 0.0, 0.2 + HEIGHT / math.tan(math.radians(32.0)), 0.15)).any()
+    mon.collect([ground_echo(0.0), near_echo(0.0, 0.2)])  # turned away: level ground again
+    mon.observe(3.0, 0.0, 0.2, 0.0, speed=0.0)
+    assert not mon.creeping and mon.speed_limit > 1.5
+
+
+def test_without_a_recent_word_from_the_near_sonar_the_far_ones_edge_is_an_edge():
+    """A near sonar that fell silent vouches for nothing: the far one's edges stop the rover and are marked, as
+    for a vehicle without one."""
+    mon, memory = ground_monitor()
+    mon.collect([ground_echo(0.0), near_echo(0.0)])
+    mon.observe(1.0, 0.0, 0.0, 0.0, speed=0.4)
+    mon.collect([ground_echo(None)])
+    observation = mon.observe(2.5, 0.0, 0.0, 0.0, speed=0.4)
+    assert observation.too_close and not mon.creeping
+    assert memory.detections > 0

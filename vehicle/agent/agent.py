@@ -309,11 +309,19 @@ class Agent:
 
     def _limit_speed(self) -> None:
         """Once the sensors looking down have reported, slow down to what lets the vehicle stop short of an edge
-        they see (a rover's 10 degree sonar sees one about 1.6 m ahead: from 2.5 m/s it needs 2 m)."""
-        if self.ctx.speed < self._speed_sent:
-            self.say(f"Speed limited to {self.ctx.speed:.1f} m/s: the ground is seen "
-                     f"{self.monitor.ground_sight:.1f} m ahead")
-            self.set_speed()
+        they see (a rover's 10 degree sonar sees one about 1.6 m ahead: from 2.5 m/s it needs 2 m), and creep
+        while the near one looks at what may be an edge; speed up again once it has."""
+        speed, monitor = self.ctx.speed, self.monitor
+        if speed < self._speed_sent and monitor.creeping:
+            self.say(f"Speed limited to {speed:.1f} m/s: the ground may drop away ahead; looking closer "
+                     f"({monitor.near_sight:.1f} m ahead)")
+        elif speed < self._speed_sent:
+            self.say(f"Speed limited to {speed:.1f} m/s: the ground is seen {monitor.ground_sight:.1f} m ahead")
+        elif speed > self._speed_sent:
+            self.say(f"Speed back to {speed:.1f} m/s: the ground ahead is driven")
+        else:
+            return
+        self.set_speed()
 
     # ---- the step -----------------------------------------------------------------------------
     def step(self) -> None:

@@ -14,6 +14,19 @@ edge, and one from ground rising more steeply than ``max_slope`` is a slope the
 vehicle cannot drive. Either is an obstacle: marked in the map and reported
 ahead like a wall. Its echoes off the ground itself are never walls.
 
+Where level ground starts down a slope, a beam pitched less steeply than the
+slope passes over it as over a bank: any ground below its line gives the same
+echo. A vehicle that also carries a sensor pitched further down
+(``LOOKS_NEAR``: a rover's, 30 degrees, steeper than any slope it drives)
+traces the ground right in front of it, point by point in the scene's frame,
+and only that one decides: ground that falls below a traced point by more than
+``drop_depth``, and more steeply than ``max_slope`` from it, is an edge; ground
+that falls as a slope it can drive is driven onto. An edge the far sensor sees
+stops the vehicle the first time (it may be coming too fast to stop within the
+near sensor's sight), and then only slows it to the speed that stops it within
+that sight, till the near sensor has looked. Without a recent word from the near
+sensor the far one's edges are edges, as for a vehicle without one.
+
 A sensor pitched up (``vehicle.world.suites.LOOKS_UP``) watches for overhangs: its
 echo is an obstacle like a wall's while the beam's centre meets it within the
 map's band above the sensor (the sensor's last 1 m, up to 7 m ahead for the
@@ -24,6 +37,7 @@ it rises over what the level sensors see.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -32,12 +46,18 @@ from vehicle.agent.settings import Settings
 from vehicle.mapping.memory_map import MemoryMap
 from vehicle.protocol.geodesy import heading_of
 from vehicle.protocol.rangefinder import Reading
-from vehicle.world.suites import LOOKS_DOWN, LOOKS_UP
+from vehicle.world.suites import LOOKS_DOWN, LOOKS_NEAR, LOOKS_UP
 
 RIDE_HEIGHT = 0.05  # m: a rover's body above the ground (the simulator's ground clearance)
 MIN_RUN = 0.05  # m between two echoes off risen ground to measure a slope between them
 RISE_NOISE = 0.05  # m: ground this little above the vehicle's is flat (the cone's edge echoes a little short)
 EDGE_SPREAD, EDGE_STEP = 20, 5  # degrees either side of a ground sensor's beam an edge it sees is marked, and apart
+PROFILE_REACH = 2.0  # m around the vehicle the ground traced by the sensor looking down nearest is kept
+NEAR_FRESH = 1.0  # s: that sensor vouches for the ground only while it has reported this recently
+SUSPECT_FOR = 1.0  # s after the last word of a possible edge ahead the vehicle still creeps
+EDGE_WIDTH = 0.6  # m either side along the rim an edge the near sensor finds is marked (the far one's 20 degrees)
+EDGES_KEPT = 50  # edges the near sensor found, the latest, that make the far one's edges near them known ones
+TRACED_MAX = 200  # ground points kept: two seconds of the near sensor's readings at its 10 Hz, a dozen times over
 
 
 @dataclass
@@ -73,6 +93,13 @@ class Monitor:
         self._ground_said: str | None = None
         self._risen: dict[int, tuple[float, float, float]] = {}  # each ground sensor's last echo off risen ground
         self.ground_sight: float | None = None  # m ahead at which the sensors looking down first see an edge
+        self.near_sight: float | None = None  # the same for the sensor looking down nearest (``LOOKS_NEAR``)
+        self._near_at = -math.inf  # when that one last reported
+        self._suspect_at = -math.inf  # when the far sensors last saw what may be an edge or a slope down
+        self._traced: deque[tuple[float, float, float]] = deque()  # ground points the near sensor met that the
+        # vehicle can drive, in the scene's frame
+        self._edges: deque[tuple[float, float]] = deque(maxlen=EDGES_KEPT)  # edges the near sensor found
+        self._time = 0.0
 
     @property
     def speed_limit(self) -> float:
@@ -80,10 +107,21 @@ class Monitor:
         ``ground_sight`` ahead (inf while none has reported), to 0.1 m/s below: the body's front must stop
         before the edge, after up to two monitor periods (the reading's and the monitor's) at that speed and
         the braking distance."""
-        if self.ground_sight is None:
+        sight = self.near_sight if self.creeping else self.ground_sight
+        if sight is None:
             return math.inf
-        period, room = self.settings.monitor_period, max(self.ground_sight - self.radius, 0.0)
+        period, room = self.settings.monitor_period, max(sight - self.radius, 0.0)
         return math.floor(10 * self.brake * (-2 * period + math.sqrt(4 * period * period + 2 * room / self.brake))) / 10
+
+    @property
+    def creeping(self) -> bool:
+        """Whether the far sensor looking down saw what may be an edge ahead within ``SUSPECT_FOR``, and the near
+        one vouches for the ground: the vehicle goes no faster than stops it within the near one's sight."""
+        return self._vouched and self._time - self._suspect_at <= SUSPECT_FOR
+
+    @property
+    def _vouched(self) -> bool:
+        return self.near_sight is not None and self._time - self._near_at <= NEAR_FRESH
 
     def stopping(self, speed: float, before: float | None = None) -> float:
         """How far the vehicle goes before it stands, stopped at the next period: speeding up (from ``before``,
@@ -173,16 +211,22 @@ class Monitor:
         return any(bool((self.map.grid[np.clip(rows + dr, 0, last), np.clip(cols + dc, 0, last)]
                          >= self.map.OCCUPIED_AT).any()) for dr in (-1, 0, 1) for dc in (-1, 0, 1))
 
-    def _ground_ahead(self, x: float, y: float, travel: float | None,
+    def _ground_ahead(self, x: float, y: float, travel: float | None, speed: float, reach_to: float,
                       readings: list[Reading]) -> tuple[float | None, str | None]:
         """Edges and steep slopes seen by the sensors looking down: mark each in the map, and return the
         distance ahead of the nearest in the corridor along ``travel`` and what it is."""
         nearest, what = None, None
         corridor = self.radius + self.settings.padding
         max_slope = math.radians(self.settings.max_slope)
-        for reading in readings:
+        for reading in readings:  # first how far each sees (the far one's edge needs the near one's word)
             sight = self.height / math.tan(math.radians(reading.beam_angle - reading.pitch))  # on level ground
-            self.ground_sight = sight if self.ground_sight is None else min(self.ground_sight, sight)
+            if reading.pitch <= LOOKS_NEAR:
+                self.near_sight = sight if self.near_sight is None else min(self.near_sight, sight)
+                self._near_at = self._time
+            else:
+                self.ground_sight = sight if self.ground_sight is None else min(self.ground_sight, sight)
+        for reading in readings:
+            near = reading.pitch <= LOOKS_NEAR
             ox, oy, oz = reading.origin.tolist()
             dx, dy, dz = reading.direction.tolist()
             level = math.hypot(dx, dy)
@@ -208,33 +252,89 @@ class Monitor:
                 depth = reading.distance * math.sin(down + beam) - self.height
                 below_level = reading.distance * math.sin(math.asin(max(-1.0, min(1.0, -dz))) + beam) - self.height
                 run = reading.distance * level
-                if depth > self.settings.drop_depth and below_level > self.settings.drop_depth:
+                deep = depth > self.settings.drop_depth and below_level > self.settings.drop_depth
+                falls = self._falls(_lower_edge_hit(reading), max_slope, x, y) if near else None
+                if falls or (falls is None and deep):  # near: nothing traced yet, and deep below the plane
                     reach, kind = edge, "drops away"
                 elif -depth <= RISE_NOISE:
                     self._risen.pop(reading.sensor, None)  # the plane goes on, or a step down, or a climb's top
+                    if near:
+                        self._trace(_lower_edge_hit(reading))
                     continue
                 elif self._too_steep(reading, -depth, max_slope):
                     reach, kind = run, "rises too steeply"
                 else:
+                    if near:
+                        self._trace(_lower_edge_hit(reading))
                     continue
             ux, uy = dx / level, dy / level
-            # an edge is a line the narrow beam meets at one point: mark it either side too, as far as
-            # EDGE_SPREAD, so a way planned along it keeps off (a rover ran along a bank's rim it had seen
-            # only ahead, and its body touched the slope as it turned); a slope up is only climbed, not fallen
-            spread = EDGE_SPREAD if kind == "drops away" else 0
-            turns = np.radians(np.arange(-spread, spread + 1, EDGE_STEP))
-            directions = np.column_stack([ux * np.cos(turns) + uy * np.sin(turns),
-                                          uy * np.cos(turns) - ux * np.sin(turns), np.zeros(len(turns))])
-            self.map.add_readings(np.tile([ox, oy, oz], (len(turns), 1)), directions, np.full(len(turns), reach),
-                                  np.full(len(turns), reach + 1.0))
-            if travel is None:
-                continue
-            ex, ey = ox + ux * reach - x, oy + uy * reach - y
-            tx, ty = math.sin(travel), math.cos(travel)
-            ahead = ex * tx + ey * ty
-            if 0 < ahead and abs(ex * ty - ey * tx) < corridor and (nearest is None or ahead < nearest):
+            ahead = None  # how far ahead along ``travel`` it lies, if in the corridor the body sweeps
+            if travel is not None:
+                ex, ey = ox + ux * reach - x, oy + uy * reach - y
+                tx, ty = math.sin(travel), math.cos(travel)
+                along = ex * tx + ey * ty
+                ahead = along if 0 < along and abs(ex * ty - ey * tx) < corridor else None
+            known = not near and kind == "drops away" and self._on_known_edge(ox + ux * reach, oy + uy * reach)
+            beyond = ahead is not None and ahead > reach_to + self.radius  # past where it stops or turns
+            if not near and kind == "drops away" and self._vouched and not known and not beyond and (
+                    ahead is not None or travel is None):
+                # on the way: maybe a slope down that starts ahead, and the near sensor decides. Coming faster
+                # than stops the vehicle within its sight, it stops first (as at an edge); then it creeps on.
+                # Beside the way it is marked, as without the near sensor: creeping along every rim the far
+                # one sees aslant, rovers searched the castle at half the pace
+                first = not self.creeping
+                self._suspect_at = self._time
+                if not first or speed <= self.speed_limit or ahead is None:
+                    continue
+            else:
+                # an edge is a line the narrow beam meets at one point: mark it either side too, as far as
+                # EDGE_SPREAD, so a way planned along it keeps off (a rover ran along a bank's rim it had seen
+                # only ahead, and its body touched the slope as it turned); a slope up is only climbed, not fallen
+                # (the near sensor's: as wide along the rim as the far one's, and the far one's edges near it
+                # are known edges, not looked at again)
+                if near and kind == "drops away":
+                    self._edges.append((ox + ux * reach, oy + uy * reach))
+                    sides = np.linspace(-EDGE_WIDTH, EDGE_WIDTH, 2 * round(EDGE_WIDTH / 0.1) + 1)
+                    ends = np.column_stack([ux * reach - uy * sides, uy * reach + ux * sides])
+                    lengths = np.hypot(ends[:, 0], ends[:, 1])
+                    directions = np.column_stack([ends / lengths[:, None], np.zeros(len(sides))])
+                    ranges = lengths
+                else:
+                    spread = EDGE_SPREAD if kind == "drops away" else 0
+                    turns = np.radians(np.arange(-spread, spread + 1, EDGE_STEP))
+                    directions = np.column_stack([ux * np.cos(turns) + uy * np.sin(turns),
+                                                  uy * np.cos(turns) - ux * np.sin(turns), np.zeros(len(turns))])
+                    ranges = np.full(len(turns), reach)
+                self.map.add_readings(np.tile([ox, oy, oz], (len(ranges), 1)), directions, ranges, ranges + 1.0)
+            if ahead is not None and (nearest is None or ahead < nearest):
                 nearest, what = ahead, f"ground {kind} {ahead:.1f} m ahead"
         return nearest, what
+
+    def _on_known_edge(self, x: float, y: float) -> bool:
+        """Whether the near sensor found one of its latest edges within ``EDGE_WIDTH`` of (x, y)."""
+        return any(math.hypot(ex - x, ey - y) <= EDGE_WIDTH for ex, ey in self._edges)
+
+    def _falls(self, point: tuple[float, float, float], max_slope: float, x: float, y: float) -> bool | None:
+        """Whether ground at ``point`` lies more than ``drop_depth`` below ground the near sensor traced before,
+        and more steeply than ``max_slope`` below it: an edge, or a slope down steeper than the vehicle drives
+        (a slope it drives falls less steeply than that from every point before it; a step down shallower than
+        ``drop_depth`` is driven over). None when nothing is traced within ``PROFILE_REACH`` of the vehicle
+        (just started, or turned onto ground it has not traced): then only the plane under it can tell."""
+        traced = self._traced
+        while traced and math.hypot(traced[0][0] - x, traced[0][1] - y) > PROFILE_REACH:
+            traced.popleft()
+        if not traced:
+            return None
+        px, py, pz = point
+        drop_depth, steep = self.settings.drop_depth, math.tan(max_slope)
+        return any(qz - pz > drop_depth and qz - pz > steep * math.hypot(qx - px, qy - py)
+                   for qx, qy, qz in traced)
+
+    def _trace(self, point: tuple[float, float, float]) -> None:
+        """Ground the near sensor met that the vehicle can drive (the oldest go first when it stands turning)."""
+        self._traced.append(point)
+        if len(self._traced) > TRACED_MAX:
+            self._traced.popleft()
 
     def _too_steep(self, reading: Reading, rise: float, max_slope: float) -> bool:
         """Ground ``rise`` above the vehicle's: a step up higher than ``drop_depth``, or a slope steeper than
@@ -242,12 +342,7 @@ class Monitor:
         steep slope near from a gentle one further away; two points on it can)."""
         if rise > self.settings.drop_depth:
             return True
-        ox, oy, oz = reading.origin.tolist()
-        dx, dy, dz = reading.direction.tolist()
-        level = math.hypot(dx, dy)
-        lower = math.asin(-dz) + math.radians(reading.beam_angle)  # the cone's lower edge echoes first
-        run = reading.distance * math.cos(lower) / level
-        hit = (ox + dx * run, oy + dy * run, oz - reading.distance * math.sin(lower))
+        hit = _lower_edge_hit(reading)
         last, self._risen[reading.sensor] = self._risen.get(reading.sensor), hit
         if last is None:
             return False
@@ -298,7 +393,8 @@ class Monitor:
             readings = [r for r in readings if r.pitch > LOOKS_DOWN]
             count = len(readings)
             if self.height is not None:
-                ahead, observation.ground = self._ground_ahead(x, y, travel, ground)
+                self._time = time
+                ahead, observation.ground = self._ground_ahead(x, y, travel, speed, reach, ground)
                 observation.nearest_ahead = ahead
         if readings:
             # one pass into arrays (np.array of a list of small arrays is slow)
@@ -330,6 +426,16 @@ class Monitor:
         half = self.settings.space_size
         observation.outside = abs(x - self.home[0]) > half or abs(y - self.home[1]) > half
         return observation
+
+
+def _lower_edge_hit(reading: Reading) -> tuple[float, float, float]:
+    """Where a ground sensor's echo came from: on its cone's lower edge, which meets the ground first."""
+    ox, oy, oz = reading.origin.tolist()
+    dx, dy, dz = reading.direction.tolist()
+    level = math.hypot(dx, dy)
+    lower = math.asin(max(-1.0, min(1.0, -dz))) + math.radians(reading.beam_angle)
+    run = reading.distance * math.cos(lower) / level
+    return ox + dx * run, oy + dy * run, oz - reading.distance * math.sin(lower)
 
 
 def straight_run(x: float, y: float, travel: float, path: list[tuple[float, float]], corridor: float) -> float:
