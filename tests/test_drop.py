@@ -307,3 +307,18 @@ def test_without_a_recent_word_from_the_near_sonar_the_far_ones_edge_is_an_edge(
     observation = mon.observe(2.5, 0.0, 0.0, 0.0, speed=0.4)
     assert observation.too_close and not mon.creeping
     assert memory.detections > 0
+
+
+def test_the_way_home_is_timed_at_the_cruise_speed_not_at_the_creep_towards_a_rim(make_scene):
+    """Timed at the 0.4 m/s creep, the way home looked four times as long, and a rover's Search in the castle ended
+    a third early whenever it crept towards a rim."""
+    stepper = simulate(make_scene(PLATEAU, lower_ground(2.0)), "pathfind", "rover", Settings(**SETTINGS),
+                       start=(0.0, 0.0), heading=0.0, waypoints=[GOAL], sensors=sensor_suite("ground", "rover"))
+    agent = stepper.agent
+    assert stepper.run(30, until=lambda: agent.monitor.creeping)
+    assert agent.ctx.speed == pytest.approx(0.4)
+    home = agent.ctx.distance_to(agent.ctx.home)
+    assert home > 3.0
+    cruise = min(agent.settings.speed, agent.monitor.cruise_limit)
+    assert cruise == pytest.approx(1.5)  # the setting; the far sonar's sight would allow 1.6 m/s
+    assert agent._time_home() == pytest.approx(2.0 * home / cruise + min(60.0, agent.settings.time_limit / 6))

@@ -481,7 +481,8 @@ class Agent:
 
     def _time_home(self) -> float:
         reserve = min(RESERVE, self.settings.time_limit / 6)
-        return 2.0 * self.ctx.distance_to(self.ctx.home) / self.ctx.speed + reserve
+        speed = min(self.settings.speed, self.monitor.cruise_limit)  # not a creep towards a rim (``Context.speed``)
+        return 2.0 * self.ctx.distance_to(self.ctx.home) / speed + reserve
 
     def _end_mission(self, status: Status, reason: str) -> None:
         self.outcome = "finished" if status is Status.DONE else "stopped"

@@ -106,8 +106,16 @@ class Monitor:
         """The fastest the vehicle may go and still stop short of an edge its sensors looking down see only
         ``ground_sight`` ahead (inf while none has reported), to 0.1 m/s below: the body's front must stop
         before the edge, after up to two monitor periods (the reading's and the monitor's) at that speed and
-        the braking distance."""
-        sight = self.near_sight if self.creeping else self.ground_sight
+        the braking distance. While it creeps, within ``near_sight``."""
+        return self._stops_within(self.near_sight if self.creeping else self.ground_sight)
+
+    @property
+    def cruise_limit(self) -> float:
+        """The speed limit away from what may be an edge (within ``ground_sight``): a way home is timed at it,
+        not at a creep towards a rim (timed so, a rover's Search in the castle ended a third early)."""
+        return self._stops_within(self.ground_sight)
+
+    def _stops_within(self, sight: float | None) -> float:
         if sight is None:
             return math.inf
         period, room = self.settings.monitor_period, max(sight - self.radius, 0.0)
