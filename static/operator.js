@@ -114,6 +114,8 @@ function selected() {
   return vehicles.find((v) => v.sysid === window.selectedVehicle) || null;
 }
 
+const LOOKS_DOWN = -5;  // degrees: a sonar pitched further down watches the ground (vehicle.world.suites)
+
 /** A pitched sonar's mount beside its bearing (" up 8°", " down 10°"), so the overhead or ground sonar is not
  * taken for the level one at the same bearing; nothing for a level one. */
 function mountPitch(pitch) {
@@ -144,7 +146,9 @@ function renderInstruments() {
     ? `roll ${fmt(att.roll)}°, pitch ${fmt(att.pitch)}°` : "–";
   drawAttitude($("#attitude"), isNum(att.roll) ? att.roll : 0, isNum(att.pitch) ? att.pitch : 0);
   drawCompass($("#compass"), isNum(v.heading) ? v.heading : null, colourOf(v));
-  drawProximity($("#proximity"), sonars, colourOf(v), proximityRange(v.sysid, sonars));
+  const around = sonars.filter((s) => !isNum(s.pitch) || s.pitch > LOOKS_DOWN);  // a ground sonar's echo is the
+  // ground a metre or two ahead, at every step: in the ring it would look like an obstacle close ahead
+  drawProximity($("#proximity"), around, colourOf(v), proximityRange(v.sysid, around));
 }
 
 /** An instrument's drawing surface: its canvas as many pixels as it shows on this screen (the instruments
@@ -294,6 +298,7 @@ function drawProximity(canvas, sonars, colour, range) {
   const { ctx, w, r } = surface(canvas);
   const scale = (r - 6) / range;
   canvas.dataset.range = String(range);
+  canvas.dataset.sonars = String(sonars.length);  // how many sectors it shows
   ctx.clearRect(0, 0, w, w);
   ctx.fillStyle = "#0b0e11";
   ctx.beginPath();

@@ -443,3 +443,16 @@ def operator_page(browser, base: str, token: str, width: int = 1400, height: int
     finally:
         context.close()
     assert not errors, f"JavaScript errors or policy violations on the page: {errors}"
+
+
+def canvas_colours(page, selector: str) -> set[tuple[int, int, int]]:
+    """The distinct colours (4 bits a channel) a canvas shows."""
+    import base64
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    url = page.eval_on_selector(selector, "c => c.toDataURL('image/png')")
+    image = np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB")) >> 4
+    return {tuple(int(c) for c in row) for row in np.unique(image.reshape(-1, 3), axis=0)}

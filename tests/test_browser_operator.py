@@ -10,8 +10,6 @@ gets an empty page (see ``test_browser``): these tests are about the panel and t
 
 from __future__ import annotations
 
-import base64
-import io
 import json
 import os
 import re
@@ -20,10 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
-from harness import RunningStation, operator_page, skip_module_without_chromium, start_sim, wait_wall
-from PIL import Image
+from harness import RunningStation, canvas_colours, operator_page, skip_module_without_chromium, start_sim, wait_wall
 
 from vehicle.agent.settings import Settings
 from vehicle.protocol.mav import mavlink, mavutil
@@ -69,13 +65,6 @@ def pixel(page, selector: str, x: float, y: float) -> tuple[int, int, int, int]:
     return tuple(page.eval_on_selector(selector, """(c, [x, y]) =>
         Array.from(c.getContext("2d").getImageData(Math.floor(c.width * x), Math.floor(c.height * y), 1, 1).data)
     """, [x, y]))
-
-
-def canvas_colours(page, selector: str) -> set[tuple[int, int, int]]:
-    """The distinct colours (4 bits a channel) a canvas shows."""
-    url = page.eval_on_selector(selector, "c => c.toDataURL('image/png')")
-    image = np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB")) >> 4
-    return {tuple(int(c) for c in row) for row in np.unique(image.reshape(-1, 3), axis=0)}
 
 
 def rgb(hex_colour: str) -> str:
