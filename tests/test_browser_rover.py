@@ -36,14 +36,15 @@ def test_a_rovers_ground_sonars_are_listed_by_their_mounts_and_kept_out_of_the_p
         sonar = station.http.vehicle(ROVER)["sonar"] or []
         near = [s for s in sonar if s["pitch"] < -5 and s["distance"] is not None and s["distance"] < 3]
         level = [s for s in sonar if s["pitch"] > -5]
-        return len(near) == 2 and level and all(s["distance"] is None or s["distance"] > 6 for s in level)
-    wait_wall(ground_echoes, 30, "both ground sonars echo off the ground, the level ones see nothing near")
+        return len(near) == 4 and level and all(s["distance"] is None or s["distance"] > 6 for s in level)
+    wait_wall(ground_echoes, 30, "the four ground sonars echo off the ground, the level ones see nothing near")
     with operator_page(browser, station.base, TOKEN) as page:
         page.locator(f'#fleet-list .fleet-item[data-sysid="{ROVER}"]').click()
         expect(page.locator("#instruments-vehicle")).to_have_text(f"{ROVER} rover")
         readout = page.locator("#readout-sonar")
         expect(readout).to_contain_text(re.compile(r"0° down 10°: 1\.\d m"))
-        expect(readout).to_contain_text(re.compile(r"0° down 30°: 0\.\d m"))
-        expect(page.locator("#proximity")).to_have_attribute("data-sonars", "3")  # the level ones: not 5
+        expect(readout).to_contain_text(re.compile(r" 0° down 30°: 0\.\d m"))
+        expect(readout).to_contain_text(re.compile(r"330° down 30°: 0\.\d m"))
+        expect(page.locator("#proximity")).to_have_attribute("data-sonars", "3")  # the level ones: not 7
         colours = canvas_colours(page, "#proximity")
         assert RED not in colours and ORANGE not in colours, sorted(colours)
