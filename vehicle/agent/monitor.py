@@ -16,10 +16,10 @@ ahead like a wall. Its echoes off the ground itself are never walls.
 
 Where level ground starts down a slope, a beam pitched less steeply than the
 slope passes over it as over a bank: any ground below its line gives the same
-echo. A vehicle that also carries a sensor pitched further down
-(``LOOKS_NEAR``: a rover's, 30 degrees, steeper than any slope it drives)
+echo. A vehicle that also carries sensors pitched further down
+(``LOOKS_NEAR``: a rover's three, 30 degrees, steeper than any slope it drives)
 traces the ground right in front of it, point by point in the scene's frame,
-and only that one decides: ground that falls below a traced point by more than
+and only those decide: ground that falls below a traced point by more than
 ``drop_depth``, and more steeply than ``max_slope`` from it, is an edge; ground
 that falls as a slope it can drive is driven onto. An edge the far sensor sees
 stops the vehicle the first time (it may be coming too fast to stop within the
@@ -261,20 +261,18 @@ class Monitor:
                 below_level = reading.distance * math.sin(math.asin(max(-1.0, min(1.0, -dz))) + beam) - self.height
                 run = reading.distance * level
                 deep = depth > self.settings.drop_depth and below_level > self.settings.drop_depth
-                falls = self._falls(_lower_edge_hit(reading), max_slope, x, y) if near else None
+                hit = _lower_edge_hit(reading) if near else None
+                falls = self._falls(hit, max_slope, x, y) if near else None
                 if falls or (falls is None and deep):  # near: nothing traced yet, and deep below the plane
                     reach, kind = edge, "drops away"
-                elif -depth <= RISE_NOISE:
-                    self._risen.pop(reading.sensor, None)  # the plane goes on, or a step down, or a climb's top
+                elif -depth <= RISE_NOISE or not self._too_steep(reading, -depth, max_slope):
+                    if -depth <= RISE_NOISE:
+                        self._risen.pop(reading.sensor, None)  # the plane goes on, a step down, or a climb's top
                     if near:
-                        self._trace(_lower_edge_hit(reading))
+                        self._trace(hit)  # ground it can drive
                     continue
-                elif self._too_steep(reading, -depth, max_slope):
-                    reach, kind = run, "rises too steeply"
                 else:
-                    if near:
-                        self._trace(_lower_edge_hit(reading))
-                    continue
+                    reach, kind = run, "rises too steeply"
             ux, uy = dx / level, dy / level
             ahead = None  # how far ahead along ``travel`` it lies, if in the corridor the body sweeps
             if travel is not None:

@@ -103,11 +103,6 @@ class Team:
             readings.append(simulation.sense(self._near(index, simulation.sonars.reach, points, gaps)))
         return readings
 
-    def others(self, index: int, within: float = math.inf) -> Bodies | None:
-        """Every body but vehicle ``index``'s (wrecks too: they still stand in the way) whose surface is
-        within ``within`` metres of its centre; None when there is none (then a read costs what it does alone)."""
-        return self._near(index, within, *self._gaps([s.body.pose.xyz() for s in self.simulations]))
-
     def _gaps(self, centres: list[tuple[float, float, float]]) -> tuple[np.ndarray, np.ndarray]:
         """The centres as an array, and gaps[i, k]: metres from body i's centre to body k's surface (the
         diagonal: never near). Once a step for every read: in plain floats per read, a team of 8 spent a
@@ -118,6 +113,8 @@ class Team:
         return points, gaps
 
     def _near(self, index: int, within: float, points: np.ndarray, gaps: np.ndarray) -> Bodies | None:
+        """Every body but vehicle ``index``'s (wrecks too: they still stand in the way) whose surface is
+        within ``within`` metres of its centre; None when there is none (then a read costs what it does alone)."""
         near = np.flatnonzero(gaps[index] <= within)
         if not len(near):
             return None
