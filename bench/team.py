@@ -7,7 +7,10 @@
    costs no more than a lone one).
 2. Many team runs (2 to 8 copters, the project's scenes, random starts around
    the scene's start, Search and Pathfind): collisions between vehicles or with
-   the scene (goal: none) and the closest approach between vehicles.
+   the scene (goal: none) and the closest approach between vehicles; each
+   collision with the ``vehicle experiment`` command that flies that run again
+   (its starts to the last digit: a team's flight changes with a start's last
+   digits).
 3. Occupied cells found by a team of 4 and by one vehicle in the same simulated
    time in the default scene (goal: 2.5 times).
 
@@ -98,9 +101,13 @@ def many_runs(runs: int, seconds: float, seed: int = 1) -> tuple[list[list[objec
             totals["refused starts"] += 1
             continue
         result = run_team(Experiment(str(path), mission, settings=settings, seed=totals["runs"]), stepper)
-        totals["runs"] += 1
         crashes = [v for v in result["vehicles"] if v["outcome"] == "collision"]
         by_vehicle = sum("vehicles" in v["reason"] for v in crashes)
+        at = " ".join(f"--start={float(x)!r},{float(y)!r}" for x, y in starts)  # every digit: a flight turns on them
+        totals.setdefault("crashes", []).extend(
+            f"vehicle {v['sysid']}: {v['reason']}; reproduce: `vehicle experiment --scene {path} --mission {mission} "
+            f"--vehicles {count} {at} --seed {totals['runs']} --time-limit {seconds:g}`" for v in crashes)
+        totals["runs"] += 1
         totals["vehicle collisions"] += by_vehicle
         totals["scene collisions"] += len(crashes) - by_vehicle
         totals["closest"] = min(totals["closest"], result["closest_vehicles_m"])
@@ -167,6 +174,8 @@ def safety(runs: int, seconds: float, seed: int = 1) -> None:
     print(table(["scene", "runs", "vehicle collisions", "scene collisions", "closest approach"], rows))
     print(f"total: {totals['vehicle collisions']} collisions between vehicles, {totals['scene collisions']} with the "
           f"scene (goal 0); closest approach between two bodies {totals['closest']:.2f} m")
+    for crash in totals.get("crashes", []):
+        print(f"- {crash}")
 
 
 if __name__ == "__main__":
